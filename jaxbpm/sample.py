@@ -1,0 +1,501 @@
+"""The bonded sample: particles, bonds and their materials, as one validated JAX pytree.
+
+A :class:`Sample` is built once from plain arrays with :meth:`Sample.from_arrays`, which checks every input and
+computes the per-bond and per-particle quantities the solvers need (bond length, area, second moments of area;
+particle mass and moment of inertia). All quantities are in SI units (m, kg, Pa, N).
+
+The array leaves are NumPy ``float64``/``int32`` arrays, so a sample round-trips exactly through files whatever
+JAX's precision setting; solvers convert them with ``jnp.asarray`` when they start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping, NamedTuple
+
+import jax
+import numpy as np
+
+from jaxbpm.errors import SampleError
+
+__all__ = ["Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary"]
+
+_MAX_LISTED = 10  # how many offending indices an error message lists
+
+
+def _listed(idx) -> str:
+    idx = np.asarray(idx).tolist()
+    more = f" ... ({len(idx)} in all)" if len(idx) > _MAX_LISTED else ""
+    return f"{idx[:_MAX_LISTED]}{more}"
+
+
+class Domain(NamedTuple):
+    """The region a generated sample fills, used for its packing fraction.
+
+    kind: ``"box"`` (also used for beams) or ``"cylinder"`` (axis along z).
+    lo, hi: corners of the bounding box of the region [m].
+    """
+
+    kind: str
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+
+    @property
+    def volume(self) -> float:
+        size = np.subtract(self.hi, self.lo)
+        if self.kind == "cylinder":
+            return float(np.pi * size[0] * size[1] / 4.0 * size[2])
+        return float(np.prod(size))
+
+
+def _register(cls, data, meta=()):
+    return jax.tree_util.register_dataclass(cls, data_fields=list(data), meta_fields=list(meta))
+
+
+@dataclasses.dataclass(frozen=True)
+class BondMaterials:
+    """Material table, one entry per bond component (index = ``Sample.bond_material``).
+
+    E: Young's modulus of the bond material [Pa], shape ``[n_materials]``.
+    nu: Poisson ratio [-].
+    tensile_strength, shear_strength: bond strengths [Pa] (``inf`` = unbreakable).
+    """
+
+    E: Any
+    nu: Any
+    tensile_strength: Any
+    shear_strength: Any
+
+    @property
+    def n(self) -> int:
+        return int(np.shape(self.E)[0])
+
+    @classmethod
+    def create(cls, E, nu=0.25, tensile_strength=np.inf, shear_strength=np.inf) -> "BondMaterials":
+        """Build and check a table; scalars broadcast to the number of components given by ``E``."""
+        E = np.atleast_1d(np.asarray(E, dtype=np.float64))
+        if E.ndim != 1 or E.size == 0:
+            raise SampleError(f"materials: E must be a non-empty 1-D list of Young's moduli, got shape {E.shape}")
+        out = {}
+        for name, val in [("E", E), ("nu", nu), ("tensile_strength", tensile_strength),
+                          ("shear_strength", shear_strength)]:
+            arr = np.asarray(val, dtype=np.float64)
+            try:
+                arr = np.broadcast_to(arr, E.shape).copy()
+            except ValueError:
+                raise SampleError(
+                    f"materials: {name} has shape {arr.shape}, expected a scalar or {E.shape[0]} values") from None
+            if np.isnan(arr).any():
+                raise SampleError(f"materials: {name} is NaN for components {_listed(np.flatnonzero(np.isnan(arr)))}")
+            out[name] = arr
+        bad = np.flatnonzero(~np.isfinite(out["E"]) | (out["E"] <= 0))
+        if bad.size:
+            raise SampleError(f"materials: E must be finite and > 0; bad components {_listed(bad)}")
+        bad = np.flatnonzero(~((out["nu"] > -1.0) & (out["nu"] < 0.5)))
+        if bad.size:
+            raise SampleError(f"materials: nu must lie in (-1, 0.5); bad components {_listed(bad)}")
+        for name in ("tensile_strength", "shear_strength"):
+            bad = np.flatnonzero(out[name] <= 0)
+            if bad.size:
+                raise SampleError(f"materials: {name} must be > 0; bad components {_listed(bad)}")
+        return cls(**out)
+
+
+_register(BondMaterials, ["E", "nu", "tensile_strength", "shear_strength"])
+
+
+@dataclasses.dataclass(frozen=True)
+class ParticleMaterial:
+    """Properties of the particle material (used by contacts and for mass).
+
+    density [kg/m^3], E: Young's modulus for Hertz contacts [Pa], nu: Poisson ratio [-],
+    friction: Coulomb coefficient [-], restitution: coefficient of restitution for contact damping [-].
+    """
+
+    density: Any = 2500.0
+    E: Any = 1.0e9
+    nu: Any = 0.25
+    friction: Any = 0.5
+    restitution: Any = 0.5
+
+    @classmethod
+    def create(cls, **kw) -> "ParticleMaterial":
+        unknown = set(kw) - {f.name for f in dataclasses.fields(cls)}
+        if unknown:
+            raise SampleError(f"particle_material: unknown fields {sorted(unknown)}")
+        pm = cls(**{k: np.float64(v) for k, v in {**dataclasses.asdict(cls()), **kw}.items()})
+        checks = {
+            "density": pm.density > 0, "E": pm.E > 0, "nu": -1 < pm.nu < 0.5,
+            "friction": pm.friction >= 0, "restitution": 0 < pm.restitution <= 1,
+        }
+        for name, ok in checks.items():
+            if not (ok and np.isfinite(getattr(pm, name))):
+                raise SampleError(f"particle_material: {name}={getattr(pm, name)!r} is out of range")
+        return pm
+
+
+_register(ParticleMaterial, ["density", "E", "nu", "friction", "restitution"])
+
+
+@dataclasses.dataclass(frozen=True)
+class SampleSummary:
+    """What :meth:`Sample.summary` reports; ``str()`` gives a readable table."""
+
+    n_particles: int
+    n_bonds: int
+    n_materials: int
+    bonds_per_material: tuple[int, ...]
+    coordination_mean: float
+    coordination_min: int
+    coordination_max: int
+    n_unbonded: int
+    n_clusters: int
+    largest_cluster: int
+    packing_fraction: float
+    packing_basis: str
+    bbox_lo: tuple[float, float, float]
+    bbox_hi: tuple[float, float, float]
+    radius_min: float
+    radius_mean: float
+    radius_max: float
+    total_mass: float
+    bond_contact: str
+
+    def __str__(self) -> str:
+        lo = ", ".join(f"{v:.4g}" for v in self.bbox_lo)
+        hi = ", ".join(f"{v:.4g}" for v in self.bbox_hi)
+        lines = [
+            f"particles            {self.n_particles}",
+            f"bonds                {self.n_bonds}  (per material: {list(self.bonds_per_material)})",
+            f"coordination         mean {self.coordination_mean:.3f}  min {self.coordination_min}"
+            f"  max {self.coordination_max}",
+            f"unbonded particles   {self.n_unbonded}",
+            f"clusters             {self.n_clusters}  (largest {self.largest_cluster} particles)",
+            f"packing fraction     {self.packing_fraction:.4f}  ({self.packing_basis})",
+            f"radius [m]           min {self.radius_min:.4g}  mean {self.radius_mean:.4g}  max {self.radius_max:.4g}",
+            f"bounding box [m]     ({lo}) .. ({hi})",
+            f"total mass [kg]      {self.total_mass:.4g}",
+            f"bonded pairs         contact forces {self.bond_contact}d",
+        ]
+        return "\n".join(lines)
+
+
+_BOND_CONTACT = ("superimpose", "replace")
+
+
+@dataclasses.dataclass(frozen=True)
+class Sample:
+    """A bonded-particle sample (a JAX pytree).
+
+    Particles (``n``): ``positions [n, 3]`` m, ``radii [n]`` m, ``mass [n]`` kg, ``inertia [n]`` kg m^2
+    (solid sphere, 2/5 m r^2).
+    Bonds (``nb``): ``bonds [nb, 2]`` particle indices (i < j), ``bond_radius [nb]`` m, ``bond_material [nb]``
+    component index, ``bond_length [nb]`` initial length L m, ``bond_area [nb]`` A = pi r_b^2,
+    ``bond_I [nb]`` I = pi r_b^4 / 4, ``bond_J [nb]`` J = pi r_b^4 / 2.
+    ``materials``: :class:`BondMaterials` (per component). ``particle_material``: :class:`ParticleMaterial`.
+    Static: ``bond_contact`` (``"superimpose"``: bonded pairs also feel contact forces, or ``"replace"``: they do
+    not), ``domain`` (the generated region, or ``None``).
+
+    Build it with :meth:`from_arrays`; the plain constructor does no checking.
+    """
+
+    positions: Any
+    radii: Any
+    mass: Any
+    inertia: Any
+    bonds: Any
+    bond_radius: Any
+    bond_material: Any
+    bond_length: Any
+    bond_area: Any
+    bond_I: Any
+    bond_J: Any
+    materials: BondMaterials
+    particle_material: ParticleMaterial
+    bond_contact: str = "superimpose"
+    domain: Domain | None = None
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_arrays(
+        cls,
+        positions,
+        radii,
+        bonds,
+        bond_radius=None,
+        *,
+        bond_radius_ratio: float | None = None,
+        bond_material=None,
+        materials: Mapping[str, Any] | BondMaterials | None = None,
+        density: float | None = None,
+        particle_material: Mapping[str, Any] | ParticleMaterial | None = None,
+        bond_contact: str = "superimpose",
+        domain: Domain | None = None,
+    ) -> "Sample":
+        """Build and validate a sample from plain arrays.
+
+        Args:
+          positions: ``[n, 3]`` particle centres [m].
+          radii: ``[n]`` (or a scalar) particle radii [m].
+          bonds: ``[nb, 2]`` integer particle indices; the order within a pair does not matter.
+          bond_radius: ``[nb]`` or scalar bond radius [m]. Give this or ``bond_radius_ratio``.
+          bond_radius_ratio: bond radius as a fraction of the smaller particle's radius.
+          bond_material: ``[nb]`` component index per bond (default all 0).
+          materials: ``{"E": [...], "nu": [...], "tensile_strength": [...], "shear_strength": [...]}`` per
+            component, or a :class:`BondMaterials`. Default: one component, E = 1 GPa, nu = 0.25, unbreakable.
+          density: particle density [kg/m^3] (shortcut for ``particle_material={"density": ...}``).
+          particle_material: mapping or :class:`ParticleMaterial` (contact E, nu, friction, restitution).
+          bond_contact: ``"superimpose"`` or ``"replace"`` (do bonded pairs also feel contact forces?).
+          domain: the region the sample fills (used for its packing fraction), optional.
+
+        Raises:
+          SampleError: naming the problem and the offending indices.
+        """
+        pos = _float_array("positions", positions)
+        if pos.ndim != 2 or pos.shape[1] != 3:
+            raise SampleError(f"positions must have shape [n, 3], got {pos.shape}")
+        n = pos.shape[0]
+        if n == 0:
+            raise SampleError("positions: the sample has no particles")
+        _finite("positions", pos)
+
+        rad = _float_array("radii", radii)
+        if rad.ndim == 0:
+            rad = np.full(n, float(rad))
+        if rad.shape != (n,):
+            raise SampleError(f"radii must have shape [{n}] (one per particle), got {rad.shape}")
+        _finite("radii", rad)
+        bad = np.flatnonzero(rad <= 0)
+        if bad.size:
+            raise SampleError(f"radii must be > 0; non-positive radius at particles {_listed(bad)}")
+
+        b = np.asarray(bonds)
+        if b.size == 0:
+            b = np.zeros((0, 2), dtype=np.int32)
+        if b.ndim != 2 or b.shape[1] != 2:
+            raise SampleError(f"bonds must have shape [nb, 2], got {b.shape}")
+        if not np.issubdtype(b.dtype, np.integer):
+            if np.issubdtype(b.dtype, np.floating) and np.all(np.isfinite(b)) and np.all(b == np.round(b)):
+                b = b.astype(np.int64)
+            else:
+                raise SampleError(f"bonds must hold integer particle indices, got dtype {b.dtype}")
+        nb = b.shape[0]
+        bad = np.flatnonzero(((b < 0) | (b >= n)).any(axis=1))
+        if bad.size:
+            raise SampleError(
+                f"bonds reference missing particles (valid indices are 0..{n - 1}); bad bonds {_listed(bad)}, "
+                f"e.g. bond {bad[0]} = {b[bad[0]].tolist()}")
+        bad = np.flatnonzero(b[:, 0] == b[:, 1])
+        if bad.size:
+            raise SampleError(f"self-bonds (a particle bonded to itself) at bonds {_listed(bad)}")
+        b = np.sort(b, axis=1).astype(np.int32)
+        if nb:
+            key = b[:, 0].astype(np.int64) * n + b[:, 1]
+            order = np.argsort(key, kind="stable")
+            dup = order[1:][key[order][1:] == key[order][:-1]]
+            if dup.size:
+                first = order[np.searchsorted(key[order], key[dup[0]])]
+                raise SampleError(
+                    f"duplicate bonds ((i, j) and (j, i) count as the same) at bonds {_listed(np.sort(dup))}; "
+                    f"e.g. bond {dup[0]} repeats bond {first} = {b[dup[0]].tolist()}")
+
+        length = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1)
+        bad = np.flatnonzero(length <= 1e-9 * np.max(rad))
+        if bad.size:
+            raise SampleError(f"zero-length bonds (coincident particles) at bonds {_listed(bad)}")
+
+        if (bond_radius is None) == (bond_radius_ratio is None):
+            raise SampleError("give exactly one of bond_radius and bond_radius_ratio")
+        if bond_radius_ratio is not None:
+            ratio = float(bond_radius_ratio)
+            if not np.isfinite(ratio) or ratio <= 0:
+                raise SampleError(f"bond_radius_ratio must be finite and > 0, got {bond_radius_ratio!r}")
+            rb = ratio * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
+        else:
+            rb = _float_array("bond_radius", bond_radius)
+            if rb.ndim == 0:
+                rb = np.full(nb, float(rb))
+            if rb.shape != (nb,):
+                raise SampleError(f"bond_radius must be a scalar or have shape [{nb}], got {rb.shape}")
+            _finite("bond_radius", rb)
+            bad = np.flatnonzero(rb <= 0)
+            if bad.size:
+                raise SampleError(f"bond_radius must be > 0; non-positive at bonds {_listed(bad)}")
+
+        if materials is None:
+            mats = BondMaterials.create(E=1.0e9)
+        elif isinstance(materials, BondMaterials):
+            mats = BondMaterials.create(materials.E, materials.nu, materials.tensile_strength,
+                                        materials.shear_strength)
+        else:
+            unknown = set(materials) - {"E", "nu", "tensile_strength", "shear_strength"}
+            if unknown:
+                raise SampleError(f"materials: unknown fields {sorted(unknown)}")
+            if "E" not in materials:
+                raise SampleError("materials: missing field 'E' (bond Young's modulus per component)")
+            mats = BondMaterials.create(**materials)
+
+        if bond_material is None:
+            bm = np.zeros(nb, dtype=np.int32)
+        else:
+            bm = np.asarray(bond_material)
+            if bm.ndim == 0:
+                bm = np.full(nb, bm)
+            if bm.shape != (nb,):
+                raise SampleError(f"bond_material must have shape [{nb}], got {bm.shape}")
+            if not np.issubdtype(bm.dtype, np.integer):
+                raise SampleError(f"bond_material must hold integer component indices, got dtype {bm.dtype}")
+            bm = bm.astype(np.int32)
+        bad = np.flatnonzero((bm < 0) | (bm >= mats.n))
+        if bad.size:
+            raise SampleError(
+                f"unknown material index (the table has {mats.n} components, 0..{mats.n - 1}) at bonds "
+                f"{_listed(bad)}, e.g. index {bm[bad[0]]}")
+
+        if isinstance(particle_material, ParticleMaterial):
+            pm_kw = {f.name: getattr(particle_material, f.name) for f in dataclasses.fields(ParticleMaterial)}
+        else:
+            pm_kw = dict(particle_material or {})
+        if density is not None:
+            pm_kw["density"] = density
+        pm = ParticleMaterial.create(**pm_kw)
+
+        if bond_contact not in _BOND_CONTACT:
+            raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {bond_contact!r}")
+
+        mass = pm.density * 4.0 / 3.0 * np.pi * rad**3
+        return cls(
+            positions=pos,
+            radii=rad,
+            mass=mass,
+            inertia=0.4 * mass * rad**2,
+            bonds=b,
+            bond_radius=rb,
+            bond_material=bm,
+            bond_length=length,
+            bond_area=np.pi * rb**2,
+            bond_I=np.pi * rb**4 / 4.0,
+            bond_J=np.pi * rb**4 / 2.0,
+            materials=mats,
+            particle_material=pm,
+            bond_contact=bond_contact,
+            domain=domain,
+        )
+
+    def replace(self, **changes) -> "Sample":
+        """A new validated sample with some inputs of :meth:`from_arrays` changed.
+
+        Accepts the keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
+        ``bond_material``, ``materials``, ``particle_material``, ``bond_contact``, ``domain``); derived quantities
+        are recomputed.
+        """
+        kw = dict(positions=self.positions, radii=self.radii, bonds=self.bonds, bond_radius=self.bond_radius,
+                  bond_material=self.bond_material, materials=self.materials,
+                  particle_material=self.particle_material, bond_contact=self.bond_contact, domain=self.domain)
+        if "bond_radius_ratio" in changes:
+            kw.pop("bond_radius")
+        if "bonds" in changes and "bond_radius" not in changes and "bond_radius_ratio" not in changes:
+            raise SampleError("replace(bonds=...) also needs bond_radius or bond_radius_ratio for the new bonds")
+        if "bonds" in changes and "bond_material" not in changes:
+            kw.pop("bond_material")
+        unknown = set(changes) - set(kw) - {"bond_radius_ratio", "density"}
+        if unknown:
+            raise SampleError(f"replace: unknown fields {sorted(unknown)}")
+        kw.update(changes)
+        return Sample.from_arrays(**kw)
+
+    # ------------------------------------------------------------------ derived info
+    @property
+    def n_particles(self) -> int:
+        return int(np.shape(self.positions)[0])
+
+    @property
+    def n_bonds(self) -> int:
+        return int(np.shape(self.bonds)[0])
+
+    @property
+    def n_materials(self) -> int:
+        return self.materials.n
+
+    def coordination(self) -> np.ndarray:
+        """Number of bonds of each particle, ``[n]``."""
+        b = np.asarray(self.bonds)
+        return np.bincount(b.ravel(), minlength=self.n_particles)
+
+    def clusters(self) -> np.ndarray:
+        """Cluster label of each particle (particles joined by bonds share a label), ``[n]``."""
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        n, b = self.n_particles, np.asarray(self.bonds)
+        graph = coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(n, n))
+        return connected_components(graph, directed=False)[1]
+
+    def packing_fraction(self) -> tuple[float, str]:
+        """Solid volume over the sample's volume, and what that volume is.
+
+        Uses the generated ``domain`` when known, else the bounding box of the spheres.
+        """
+        rad, pos = np.asarray(self.radii), np.asarray(self.positions)
+        solid = float(np.sum(4.0 / 3.0 * np.pi * rad**3))
+        if self.domain is not None:
+            return solid / self.domain.volume, f"{self.domain.kind} domain"
+        size = (pos + rad[:, None]).max(axis=0) - (pos - rad[:, None]).min(axis=0)
+        return solid / float(np.prod(size)), "bounding box of the spheres"
+
+    def summary(self) -> SampleSummary:
+        """Counts, coordination, clusters, packing fraction and extent of the sample."""
+        coord = self.coordination()
+        labels = self.clusters()
+        sizes = np.bincount(labels)
+        pos, rad = np.asarray(self.positions), np.asarray(self.radii)
+        phi, basis = self.packing_fraction()
+        return SampleSummary(
+            n_particles=self.n_particles,
+            n_bonds=self.n_bonds,
+            n_materials=self.n_materials,
+            bonds_per_material=tuple(int(c) for c in np.bincount(np.asarray(self.bond_material),
+                                                                 minlength=self.n_materials)),
+            coordination_mean=float(coord.mean()),
+            coordination_min=int(coord.min()),
+            coordination_max=int(coord.max()),
+            n_unbonded=int(np.sum(coord == 0)),
+            n_clusters=int(sizes.size),
+            largest_cluster=int(sizes.max()),
+            packing_fraction=phi,
+            packing_basis=basis,
+            bbox_lo=tuple(float(v) for v in (pos - rad[:, None]).min(axis=0)),
+            bbox_hi=tuple(float(v) for v in (pos + rad[:, None]).max(axis=0)),
+            radius_min=float(rad.min()),
+            radius_mean=float(rad.mean()),
+            radius_max=float(rad.max()),
+            total_mass=float(np.sum(self.mass)),
+            bond_contact=self.bond_contact,
+        )
+
+    def __repr__(self) -> str:
+        return (f"Sample(n_particles={self.n_particles}, n_bonds={self.n_bonds}, "
+                f"n_materials={self.n_materials}, bond_contact={self.bond_contact!r})")
+
+
+_register(
+    Sample,
+    ["positions", "radii", "mass", "inertia", "bonds", "bond_radius", "bond_material", "bond_length",
+     "bond_area", "bond_I", "bond_J", "materials", "particle_material"],
+    ["bond_contact", "domain"],
+)
+
+
+def _float_array(name: str, x) -> np.ndarray:
+    arr = np.asarray(x)
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise SampleError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    return arr.astype(np.float64)
+
+
+def _finite(name: str, arr: np.ndarray) -> None:
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        rows = np.flatnonzero(bad.reshape(arr.shape[0], -1).any(axis=1)) if arr.ndim else np.array([0])
+        kind = "NaN" if np.isnan(arr).any() else "inf"
+        raise SampleError(f"{name} contains {kind} values at indices {_listed(rows)}")
