@@ -4,15 +4,17 @@ jaxbpm never changes JAX's global settings at import. Stiffness solves want floa
 ``jax.config.update("jax_enable_x64", True)`` before creating arrays (the ``jaxbpm`` command does this).
 """
 
-from jaxbpm import errors, generate, io
+from jaxbpm import errors, generate, io, scenes
 from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, SampleError, SampleFileError,
                            SceneError)
+from jaxbpm.result import Result
 from jaxbpm.sample import BondMaterials, Domain, ParticleMaterial, Sample, SampleSummary
+from jaxbpm.solve import solve
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary",
-    "generate", "io", "errors",
+    "generate", "io", "errors", "scenes", "solve", "Result",
     "JaxbpmError", "SampleError", "SampleFileError", "SceneError", "InstabilityError", "ConvergenceError",
 ]

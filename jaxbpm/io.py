@@ -1,0 +1,344 @@
+"""Sample files (HDF5) and VTK export for visualisation.
+
+:func:`save_sample` / :func:`load_sample` store a :class:`~jaxbpm.sample.Sample` in an HDF5 file (format
+``"jaxbpm-sample"``, version :data:`FORMAT_VERSION`) and read it back exactly: every array leaf round-trips
+bit for bit, and the loaded sample is rebuilt with :meth:`Sample.from_arrays`, so it is validated again.
+:func:`export_vtk` writes particles and bonds for ParaView (``.vtu`` XML or ``.vtk`` legacy) through meshio.
+
+Both writers are atomic: they write a temporary file in the target's directory and rename it onto the target
+only once it is complete, so an error or a crash never leaves a half-written file behind.
+
+File layout (all quantities SI; every dataset carries a ``units`` attribute):
+
+==============================  ===========  ==========  =============================================
+name                            shape        units       meaning
+==============================  ===========  ==========  =============================================
+``/positions``                  ``[n, 3]``   m           particle centres
+``/radii``                      ``[n]``      m           particle radii
+``/bonds``                      ``[nb, 2]``  1           particle indices of each bond (i < j), int32
+``/bond_radius``                ``[nb]``     m           bond radius
+``/bond_material``              ``[nb]``     1           material component of each bond, int32
+``/materials/E``                ``[nm]``     Pa          bond Young's modulus per component
+``/materials/nu``               ``[nm]``     1           bond Poisson ratio
+``/materials/tensile_strength`` ``[nm]``     Pa          (``inf`` = unbreakable)
+``/materials/shear_strength``   ``[nm]``     Pa          (``inf`` = unbreakable)
+``/particle_material/*``        scalars      see attr    density (kg/m^3), E (Pa), nu, friction,
+                                                         restitution (1)
+``/derived/*``                  ...          see attr    mass, inertia, bond_length, bond_area, bond_I,
+                                                         bond_J, coordination: for external readers
+                                                         only, recomputed on load
+==============================  ===========  ==========  =============================================
+
+Root attributes: ``format``, ``format_version``, ``jaxbpm_version``, ``units`` (a note), ``bond_contact``, and
+``domain_kind`` / ``domain_lo`` / ``domain_hi`` [m] when the sample has a domain (absent otherwise).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import pathlib
+import tempfile
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.sample import Domain, Sample
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk"]
+
+FORMAT = "jaxbpm-sample"
+"""Value of the ``format`` root attribute of a sample file."""
+
+FORMAT_VERSION = 1
+"""The (only) sample file format version this jaxbpm writes and reads."""
+
+_UNITS_NOTE = ("SI units: lengths m, masses kg, moduli and strengths Pa, density kg/m^3; "
+               "each dataset has a 'units' attribute ('1' = dimensionless or an index)")
+
+# (name, units) of the datasets Sample.from_arrays needs; bonds and bond_material are int32.
+_INPUTS = [("positions", "m"), ("radii", "m"), ("bonds", "1"), ("bond_radius", "m"), ("bond_material", "1")]
+_MATERIALS = [("E", "Pa"), ("nu", "1"), ("tensile_strength", "Pa"), ("shear_strength", "Pa")]
+_PARTICLE_MATERIAL = [("density", "kg/m^3"), ("E", "Pa"), ("nu", "1"), ("friction", "1"), ("restitution", "1")]
+_DERIVED = [("mass", "kg"), ("inertia", "kg m^2"), ("bond_length", "m"), ("bond_area", "m^2"), ("bond_I", "m^4"),
+            ("bond_J", "m^4")]
+
+_VTK_FORMATS = {".vtu": "vtu", ".vtk": "vtk"}
+
+
+# ---------------------------------------------------------------------------------------------- atomic writes
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
+    """Call ``write(tmp_name)`` on a fresh temporary file next to ``path``, then rename it onto ``path``.
+
+    On any exception (including KeyboardInterrupt) the temporary file is deleted and the exception re-raised;
+    ``path`` is then exactly as it was before.
+    """
+    target = pathlib.Path(path)
+    if not target.parent.is_dir():
+        raise FileNotFoundError(errno.ENOENT, f"cannot write {target}: no such directory", str(target.parent))
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        with open(tmp, "rb+") as fh:  # make the content durable before it replaces the target
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp creates 0600; give the usual permissions
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return target
+
+
+# ---------------------------------------------------------------------------------------------- HDF5 sample files
+def _dataset(group, name: str, data, units: str) -> None:
+    group.create_dataset(name, data=data).attrs["units"] = units
+
+
+def _write_inputs(f, sample: Sample) -> None:
+    """The fields :meth:`Sample.from_arrays` needs, plus the file's metadata."""
+    from jaxbpm import __version__
+
+    f.attrs["format"] = FORMAT
+    f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+    f.attrs["jaxbpm_version"] = __version__
+    f.attrs["units"] = _UNITS_NOTE
+    f.attrs["bond_contact"] = sample.bond_contact
+    if sample.domain is not None:
+        f.attrs["domain_kind"] = str(sample.domain.kind)
+        f.attrs["domain_lo"] = np.asarray(sample.domain.lo, dtype=np.float64)
+        f.attrs["domain_hi"] = np.asarray(sample.domain.hi, dtype=np.float64)
+    dtypes = {"bonds": np.int32, "bond_material": np.int32}
+    for name, units in _INPUTS:
+        _dataset(f, name, np.asarray(getattr(sample, name), dtype=dtypes.get(name, np.float64)), units)
+    mats = f.create_group("materials")
+    mats.attrs["description"] = "bond material table, one entry per component (index = /bond_material)"
+    for name, units in _MATERIALS:
+        _dataset(mats, name, np.asarray(getattr(sample.materials, name), dtype=np.float64), units)
+    pm = f.create_group("particle_material")
+    for name, units in _PARTICLE_MATERIAL:
+        _dataset(pm, name, np.float64(getattr(sample.particle_material, name)), units)
+
+
+def _write_derived(f, sample: Sample) -> None:
+    """Derived per-particle and per-bond quantities, for readers other than jaxbpm (ignored on load)."""
+    g = f.create_group("derived")
+    g.attrs["description"] = "computed from the other fields; jaxbpm recomputes these on load"
+    for name, units in _DERIVED:
+        _dataset(g, name, np.asarray(getattr(sample, name), dtype=np.float64), units)
+    _dataset(g, "coordination", np.asarray(sample.coordination(), dtype=np.int32), "1")
+
+
+def save_sample(path, sample: Sample) -> pathlib.Path:
+    """Write ``sample`` to the HDF5 file ``path`` atomically (see the module docstring for the layout).
+
+    Args:
+      path: the file to write (conventionally ``*.h5``); replaced if it exists. Its directory must exist.
+      sample: a :class:`~jaxbpm.sample.Sample`.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+
+    Raises:
+      TypeError: ``sample`` is not a :class:`Sample`.
+      OSError: the file cannot be written (the target is then left untouched).
+    """
+    import h5py
+
+    if not isinstance(sample, Sample):
+        raise TypeError(f"save_sample expects a jaxbpm Sample, got {type(sample).__name__}")
+
+    def write(tmp: str) -> None:
+        with h5py.File(tmp, "w") as f:
+            _write_inputs(f, sample)
+            _write_derived(f, sample)
+
+    return _atomic_write(path, write)
+
+
+def _attr_str(value) -> str:
+    if isinstance(value, bytes):
+        return value.decode("utf-8", errors="replace")
+    if isinstance(value, np.ndarray) and value.shape == ():
+        return _attr_str(value[()])
+    return str(value)
+
+
+def _check_header(f, path: pathlib.Path) -> None:
+    if "format" not in f.attrs:
+        raise SampleFileError(f"{path}: not a jaxbpm sample file (the HDF5 file has no 'format' attribute)")
+    fmt = _attr_str(f.attrs["format"])
+    if fmt != FORMAT:
+        raise SampleFileError(f"{path}: not a jaxbpm sample file (format is {fmt!r}, expected {FORMAT!r})")
+    if "format_version" not in f.attrs:
+        raise SampleFileError(f"{path}: missing field 'format_version' (root attribute)")
+    version = f.attrs["format_version"]
+    try:
+        ok = int(version) == version
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or int(version) != FORMAT_VERSION:
+        from jaxbpm import __version__
+
+        raise SampleFileError(
+            f"{path}: unsupported sample file format_version {_attr_str(version)} "
+            f"(this jaxbpm {__version__} reads format_version {FORMAT_VERSION})")
+
+
+def _read(group, name: str, path: pathlib.Path) -> np.ndarray:
+    where = f"{group.name.rstrip('/')}/{name}"
+    if name not in group:
+        raise SampleFileError(f"{path}: missing field '{where}'")
+    obj = group[name]
+    if not hasattr(obj, "shape") or not hasattr(obj, "dtype"):
+        raise SampleFileError(f"{path}: field '{where}' is not a dataset")
+    return np.asarray(obj[()])
+
+
+def _read_sample(f, path: pathlib.Path) -> Sample:
+    _check_header(f, path)
+    data = {name: _read(f, name, path) for name, _ in _INPUTS}
+    for group_name in ("materials", "particle_material"):
+        if group_name not in f:
+            raise SampleFileError(f"{path}: missing field '/{group_name}' (group)")
+    materials = {name: _read(f["materials"], name, path) for name, _ in _MATERIALS}
+    particle_material = {name: _read(f["particle_material"], name, path) for name, _ in _PARTICLE_MATERIAL}
+    bond_contact = _attr_str(f.attrs["bond_contact"]) if "bond_contact" in f.attrs else None
+    if bond_contact is None:
+        raise SampleFileError(f"{path}: missing field 'bond_contact' (root attribute)")
+    domain = None
+    domain_keys = [k for k in ("domain_kind", "domain_lo", "domain_hi") if k in f.attrs]
+    if domain_keys:
+        missing = sorted({"domain_kind", "domain_lo", "domain_hi"} - set(domain_keys))
+        if missing:
+            raise SampleFileError(f"{path}: missing field '{missing[0]}' (root attribute; the domain is partial)")
+        lo, hi = (np.asarray(f.attrs[k], dtype=np.float64) for k in ("domain_lo", "domain_hi"))
+        if lo.shape != (3,) or hi.shape != (3,):
+            raise SampleError(f"{path}: domain_lo and domain_hi must hold 3 values, got shapes {lo.shape}, {hi.shape}")
+        domain = Domain(_attr_str(f.attrs["domain_kind"]), tuple(float(v) for v in lo),
+                        tuple(float(v) for v in hi))
+    return Sample.from_arrays(
+        data["positions"], data["radii"], data["bonds"], data["bond_radius"],
+        bond_material=data["bond_material"], materials=materials, particle_material=particle_material,
+        bond_contact=bond_contact, domain=domain)
+
+
+def load_sample(path) -> Sample:
+    """Read a sample written by :func:`save_sample` and validate it with :meth:`Sample.from_arrays`.
+
+    Derived quantities (mass, bond length, ...) are recomputed, not read.
+
+    Raises:
+      SampleFileError: the file is missing, is not an HDF5 file (or is corrupt), is not a jaxbpm sample, has an
+        unsupported ``format_version``, or lacks a field (the message names the file and the problem).
+      SampleError: the content is read but does not make a valid sample.
+    """
+    import h5py
+
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise SampleFileError(f"{path}: no such sample file")
+    if path.is_dir():
+        raise SampleFileError(f"{path}: is a directory, not a sample file")
+    try:
+        with h5py.File(path, "r") as f:
+            return _read_sample(f, path)
+    except (SampleFileError, SampleError):
+        raise
+    except OSError as exc:  # h5py reports unreadable, truncated or non-HDF5 files as OSError
+        raise SampleFileError(f"{path}: not a readable HDF5 file, or corrupt ({exc})") from exc
+
+
+# ---------------------------------------------------------------------------------------------- VTK export
+def _user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
+               reserved: set[str]) -> dict[str, np.ndarray]:
+    out: dict[str, np.ndarray] = {}
+    for name, value in (data or {}).items():
+        if not isinstance(name, str) or not name:
+            raise SampleError(f"{kind}: field names must be non-empty strings, got {name!r}")
+        if name in reserved:
+            raise SampleError(f"{kind}[{name!r}]: the name is taken by a built-in field ({sorted(reserved)})")
+        arr = np.asarray(value)
+        if arr.dtype == bool:
+            arr = arr.astype(np.uint8)
+        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+            raise SampleError(f"{kind}[{name!r}]: must be a real numeric array, got dtype {arr.dtype}")
+        if arr.ndim not in (1, 2) or arr.shape[0] != count or (arr.ndim == 2 and arr.shape[1] < 1):
+            raise SampleError(
+                f"{kind}[{name!r}]: expected shape [{count}] or [{count}, k] (one row per {what}), got {arr.shape}")
+        out[name] = arr
+    return out
+
+
+def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = None,
+               bond_data: Mapping[str, Any] | None = None) -> pathlib.Path:
+    """Write particles and bonds to a VTK file for ParaView, atomically.
+
+    The points are the particle centres [m]. Two cell blocks: ``vertex`` (one cell per particle, in particle
+    order) and ``line`` (one cell per bond, in bond order; left out when the sample has no bonds, since legacy
+    VTK cannot hold an empty block).
+
+    Point data: ``radius`` [m], ``mass`` [kg], ``coordination`` (bonds per particle), then ``point_data``.
+    Cell data, per bond: ``bond_radius`` [m], ``material`` (component index), ``length`` [m] (initial bond
+    length), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
+    the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for ``material``.
+    In ParaView, glyph the points with spheres scaled by ``radius`` and show the lines as tubes.
+
+    Args:
+      path: ``*.vtu`` (VTK XML unstructured grid, preferred) or ``*.vtk`` (legacy); the suffix picks the format.
+      sample: the sample.
+      point_data: ``{name: [n] or [n, k]}`` extra per-particle fields (e.g. displacement ``[n, 3]``).
+      bond_data: ``{name: [nb] or [nb, k]}`` extra per-bond fields (e.g. bond force ``[nb]``).
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+
+    Raises:
+      SampleError: a user field has the wrong shape or type, or reuses a built-in name (the field is named).
+      SampleFileError: the suffix is neither ``.vtu`` nor ``.vtk``.
+      TypeError: ``sample`` is not a :class:`Sample`.
+    """
+    import meshio
+
+    if not isinstance(sample, Sample):
+        raise TypeError(f"export_vtk expects a jaxbpm Sample, got {type(sample).__name__}")
+    target = pathlib.Path(path)
+    file_format = _VTK_FORMATS.get(target.suffix.lower())
+    if file_format is None:
+        raise SampleFileError(
+            f"{target}: cannot tell the VTK format from the suffix {target.suffix!r}; use .vtu (XML) or .vtk (legacy)")
+
+    n, nb = sample.n_particles, sample.n_bonds
+    pdata = {
+        "radius": np.asarray(sample.radii, dtype=np.float64),
+        "mass": np.asarray(sample.mass, dtype=np.float64),
+        "coordination": np.asarray(sample.coordination(), dtype=np.int32),
+    }
+    pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
+    bdata = {
+        "bond_radius": np.asarray(sample.bond_radius, dtype=np.float64),
+        "material": np.asarray(sample.bond_material, dtype=np.int32),
+        "length": np.asarray(sample.bond_length, dtype=np.float64),
+    }
+    bdata.update({k: v.astype(np.float64) for k, v in
+                  _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
+
+    cells = [("vertex", np.arange(n, dtype=np.int64)[:, None])]
+    if nb:
+        cells.append(("line", np.asarray(sample.bonds, dtype=np.int64)))
+    cell_data = {}
+    for name, arr in bdata.items():
+        filler = np.full((n,) + arr.shape[1:], -1 if name == "material" else np.nan, dtype=arr.dtype)
+        cell_data[name] = [filler, arr] if nb else [filler]
+    mesh = meshio.Mesh(np.asarray(sample.positions, dtype=np.float64), cells, point_data=pdata,
+                       cell_data=cell_data)
+    return _atomic_write(target, lambda tmp: meshio.write(tmp, mesh, file_format=file_format))

@@ -1,0 +1,214 @@
+"""The ``jaxbpm`` command: generate, inspect and export bonded samples, and run the demo.
+
+Run ``jaxbpm --help`` (or ``python -m jaxbpm --help``) for the sub-commands. The command turns on JAX float64
+when it starts (library code never changes JAX settings). Errors about samples and files are printed as one
+``error: ...`` line on stderr with exit code 2; argparse usage errors also exit with 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+from typing import Any, Sequence
+
+from jaxbpm.errors import JaxbpmError
+
+__all__ = ["main", "build_parser", "run_demo"]
+
+_RANDOM_SHAPES = ("box", "cylinder", "beam")
+_LATTICE_SHAPES = ("sc", "fcc")
+# Defaults of the `generate` options (kept here so `--help` shows them and the command behaves the same whatever
+# the library defaults are); None = not passed, the generator decides.
+_GENERATE_DEFAULTS = {"mean_radius": None, "spread": 0.05, "packing_fraction": 0.6, "bond_radius_ratio": 0.5,
+                      "E": 1.0e9, "nu": 0.25}
+_DEMO_DIR = "jaxbpm-demo"
+
+
+# ---------------------------------------------------------------------------------------------- commands
+def _generate_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of ``jaxbpm.generate.from_shape`` that apply to ``args.shape``."""
+    opts = {k: (v if (v := getattr(args, k)) is not None else d) for k, d in _GENERATE_DEFAULTS.items()}
+    kw: dict[str, Any] = {"bond_radius_ratio": opts["bond_radius_ratio"],
+                          "materials": {"E": opts["E"], "nu": opts["nu"]}}
+    if args.shape in _LATTICE_SHAPES:
+        ignored = [f"--{k.replace('_', '-')}" for k in ("spread", "packing_fraction") if getattr(args, k) is not None]
+        if ignored:
+            print(f"note: {', '.join(ignored)} ignored for the {args.shape} lattice", file=sys.stderr)
+        if opts["mean_radius"] is not None:
+            kw["radius"] = opts["mean_radius"]
+    else:
+        kw.update(radius_spread=opts["spread"], packing_fraction=opts["packing_fraction"])
+        if opts["mean_radius"] is not None:
+            kw["mean_radius"] = opts["mean_radius"]
+    return kw
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from jaxbpm import generate
+    from jaxbpm.io import save_sample
+
+    start = time.perf_counter()
+    sample = generate.from_shape(args.shape, args.n, seed=args.seed, progress=not args.quiet,
+                                 **_generate_kwargs(args))
+    out = save_sample(args.out, sample)
+    print(sample.summary())
+    print(f"wrote {out}  ({time.perf_counter() - start:.2f} s)")
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from jaxbpm.io import load_sample
+
+    sample = load_sample(args.sample)
+    print(f"sample file          {args.sample}")
+    print(sample.summary())
+    return 0
+
+
+def _cmd_export_vtk(args: argparse.Namespace) -> int:
+    from jaxbpm.io import export_vtk, load_sample
+
+    sample = load_sample(args.sample)
+    out = export_vtk(args.out, sample)
+    print(f"wrote {out}  ({sample.n_particles} particles as vertices, {sample.n_bonds} bonds as lines)")
+    return 0
+
+
+def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False) -> dict[str, Any]:
+    """The demo: generate a random box sample of ``n`` particles and save it to ``out_dir/demo_sample.h5``.
+
+    Later versions grow this into a comparison of the solvers on that sample.
+
+    Returns:
+      ``{"out_dir": Path, "sample_path": Path, "sample": Sample}``.
+    """
+    from jaxbpm import generate
+    from jaxbpm.io import save_sample
+
+    out_dir = pathlib.Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    sample = generate.from_shape("box", n, seed=seed, progress=not quiet)
+    path = save_sample(out_dir / "demo_sample.h5", sample)
+    print(sample.summary())
+    print(f"wrote {path}  ({time.perf_counter() - start:.2f} s)")
+    return {"out_dir": out_dir, "sample_path": path, "sample": sample}
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    run_demo(args.out, n=args.n, seed=args.seed, quiet=args.quiet)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------- parser
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``jaxbpm`` argument parser (one sub-parser per command)."""
+    from jaxbpm import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="jaxbpm",
+        description="jaxbpm: bonded-particle models (bonded DEM) in JAX. Generate bonded samples, inspect them and "
+                    "export them to ParaView.",
+        epilog="Run 'jaxbpm COMMAND --help' for the options of a command. Units are SI (m, kg, Pa).")
+    parser.add_argument("--version", action="version", version=f"jaxbpm {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    d = _GENERATE_DEFAULTS
+    p = sub.add_parser(
+        "generate", help="generate a bonded sample and save it to an HDF5 file",
+        description="Generate a bonded sample and save it to an HDF5 sample file. 'box', 'cylinder' and 'beam' are "
+                    "random dense packings of polydisperse spheres; 'sc' and 'fcc' are regular lattices of equal "
+                    "spheres (packing options are ignored for them). Neighbours in contact are bonded.")
+    p.add_argument("--shape", required=True, choices=_RANDOM_SHAPES + _LATTICE_SHAPES,
+                   help="shape of the sample: random packings box, cylinder, beam; lattices sc, fcc")
+    p.add_argument("--n", required=True, type=_positive_int, help="number of particles (approximate for lattices)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default: 0)")
+    p.add_argument("--out", required=True, type=pathlib.Path, help="sample file to write, e.g. sample.h5")
+    p.add_argument("--mean-radius", type=_positive_float, default=None, dest="mean_radius", metavar="R",
+                   help="mean particle radius [m] (the lattice radius for sc/fcc; default: the generator's)")
+    p.add_argument("--spread", type=float, default=None, metavar="S",
+                   help="relative half-width of the uniform radius distribution, random shapes only "
+                        f"(default: {d['spread']})")
+    p.add_argument("--packing-fraction", type=_positive_float, default=None, dest="packing_fraction",
+                   metavar="PHI",
+                   help=f"target packing fraction, random shapes only (default: {d['packing_fraction']})")
+    p.add_argument("--bond-radius-ratio", type=_positive_float, default=None, dest="bond_radius_ratio",
+                   metavar="RATIO",
+                   help=f"bond radius / radius of the smaller particle (default: {d['bond_radius_ratio']})")
+    p.add_argument("--E", type=_positive_float, default=None, dest="E", metavar="PA",
+                   help=f"Young's modulus of the bonds [Pa] (default: {d['E']:g})")
+    p.add_argument("--nu", type=float, default=None, metavar="NU",
+                   help=f"Poisson ratio of the bonds (default: {d['nu']})")
+    p.add_argument("--quiet", action="store_true", help="no progress output while generating")
+    p.set_defaults(func=_cmd_generate)
+
+    p = sub.add_parser("info", help="print a summary of a sample file",
+                       description="Print a summary of a sample file: counts, coordination, clusters, packing "
+                                   "fraction, radii, extent and mass.")
+    p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("export-vtk", help="export a sample file to VTK for ParaView",
+                       description="Export a sample file to VTK: particles as points/vertices (radius, mass, "
+                                   "coordination) and bonds as lines (bond_radius, material, length). The suffix "
+                                   "of OUT picks the format: .vtu (XML, preferred) or .vtk (legacy).")
+    p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
+    p.add_argument("out", type=pathlib.Path, help="VTK file to write (.vtu or .vtk)")
+    p.set_defaults(func=_cmd_export_vtk)
+
+    p = sub.add_parser("demo", help="run the demo (generate and save a default sample)",
+                       description="Run the demo: generate a random box sample and save it to "
+                                   "OUT/demo_sample.h5.")
+    p.add_argument("--out", type=pathlib.Path, default=pathlib.Path(_DEMO_DIR),
+                   help=f"output directory (default: ./{_DEMO_DIR})")
+    p.add_argument("--n", type=_positive_int, default=2000, help="number of particles (default: 2000)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default: 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``jaxbpm`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+
+    Sample and file errors print ``error: <message>`` on stderr and return 2; argparse exits (``--help``,
+    ``--version``, usage errors) raise :class:`SystemExit` as usual.
+    """
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (JaxbpmError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

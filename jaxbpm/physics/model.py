@@ -1,0 +1,165 @@
+"""The Model: the interactions a scene needs, and one force function that every solver calls.
+
+A :class:`Model` holds the sample's arrays in JAX form and a few static switches:
+
+* ``rotations``: particles carry orientations (6 DOF each) or not (3 DOF: bonds then act on relative translation
+  only, as in the 3N direct stiffness method of seed 000). Default: on whenever the sample has bonds (they transmit
+  bending and twisting moments) or contacts with friction.
+* ``contacts``: Hertz-Mindlin particle contacts (with a neighbour list in the DEM) or none.
+* ``walls``: the wall law (``"hertz"``/``"linear"``) or ``None``.
+
+Parameters that calibrators change live in a small pytree ``params = {"bond_E": [n_materials],
+"bond_nu": [n_materials]}``, mapped onto bonds by the material index, so ``grad``/``vmap``/optax all see one thing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxbpm.physics import bond as bond_mod
+from jaxbpm.physics import contact as contact_mod
+from jaxbpm.physics import wall as wall_mod
+from jaxbpm.sample import Sample
+
+__all__ = ["Model", "build_model", "default_params"]
+
+
+def default_params(sample: Sample) -> dict:
+    """The calibratable parameters of ``sample`` at their current values: ``{"bond_E", "bond_nu"}``."""
+    return {"bond_E": jnp.asarray(sample.materials.E), "bond_nu": jnp.asarray(sample.materials.nu)}
+
+
+@dataclasses.dataclass(frozen=True)
+class Model:
+    """Arrays of the sample in JAX form plus static switches. Build it with :func:`build_model`."""
+
+    positions0: Any       # [n, 3] reference positions
+    radii: Any            # [n]
+    mass: Any             # [n]
+    inertia: Any          # [n]
+    bonds: Any            # [nb, 2]
+    r0: Any               # [nb, 3] reference bond vectors
+    bond_material: Any    # [nb]
+    bond_area: Any
+    bond_I: Any
+    bond_J: Any
+    bond_length: Any
+    bond_keys: Any        # [nb] sorted keys i * n + j of bonded pairs (to exclude them from contacts)
+    contact: contact_mod.ContactParams
+    wall_stiffness: Any   # E* of particle on rigid wall [Pa] (hertz) or k [N/m] (linear)
+    rotations: bool = True
+    contacts: bool = False
+    walls: str | None = None
+    bond_contact: str = "superimpose"
+
+    @property
+    def n(self) -> int:
+        return int(self.positions0.shape[0])
+
+    def stiffness(self, params) -> bond_mod.BondStiffness:
+        """Per-bond stiffnesses from the parameter pytree."""
+        E = jnp.asarray(params["bond_E"])[self.bond_material]
+        nu = jnp.asarray(params["bond_nu"])[self.bond_material]
+        return bond_mod.stiffness(E, nu, self.bond_area, self.bond_I, self.bond_J, self.bond_length)
+
+    def bonded(self, pairs):
+        """Whether each candidate pair ``[C, 2]`` (i < j) is bonded."""
+        if self.bond_keys.shape[0] == 0:
+            return jnp.zeros(pairs.shape[0], bool)
+        key_t = self.bond_keys.dtype
+        key = pairs[:, 0].astype(key_t) * self.n + pairs[:, 1].astype(key_t)
+        pos = jnp.clip(jnp.searchsorted(self.bond_keys, key), 0, self.bond_keys.shape[0] - 1)
+        return self.bond_keys[pos] == key
+
+    def forces(self, positions, orientations, params, intact=None, contacts=None, wall_points=None,
+               wall_normals=None):
+        """Forces ``[n, 3]`` and moments ``[n, 3]`` on every particle, and the parts they came from.
+
+        contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``.
+        wall_points, wall_normals: ``[W, 3]`` when the model has walls.
+        Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
+        "walls": [W, 3] reactions or None}``.
+        """
+        k = self.stiffness(params)
+        force, moment, bf = bond_mod.bond_forces(positions, orientations if self.rotations else None, self.bonds,
+                                                 self.r0, k, intact)
+        parts = {"bonds": bf, "contacts": None, "walls": None}
+        if self.contacts and contacts is not None:
+            pairs, valid, spring, dxi, v_rel = contacts
+            fc, mc, cf = contact_mod.pair_forces(positions, pairs, valid, self.radii, self.mass, spring, dxi, v_rel,
+                                                 self.contact)
+            force, moment = force + fc, moment + mc
+            parts["contacts"] = cf
+        if self.walls is not None:
+            fw, reaction = wall_mod.wall_forces(positions, self.radii, wall_points, wall_normals, self.walls,
+                                                self.wall_stiffness)
+            force = force + fw
+            parts["walls"] = reaction
+        return force, moment, parts
+
+
+jax.tree_util.register_dataclass(
+    Model,
+    data_fields=["positions0", "radii", "mass", "inertia", "bonds", "r0", "bond_material", "bond_area", "bond_I",
+                 "bond_J", "bond_length", "bond_keys", "contact", "wall_stiffness"],
+    meta_fields=["rotations", "contacts", "walls", "bond_contact"],
+)
+
+
+def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = None, rotations: bool | None = None,
+                contact_damping: bool = False, wall_stiffness: float | None = None) -> Model:
+    """A :class:`Model` of ``sample`` with just the interactions asked for.
+
+    rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
+    walls: ``"hertz"`` (default wall stiffness: the particle material on a rigid plane, E / (1 - nu^2)) or
+    ``"linear"`` (give ``wall_stiffness`` in N/m).
+    """
+    pm = sample.particle_material
+    if rotations is None:
+        rotations = sample.n_bonds > 0 or (contacts and float(pm.friction) > 0)
+    dtype = jnp.asarray(1.0).dtype
+    if dtype != jnp.float64:
+        warnings.warn("jaxbpm: JAX is running in float32; bonded-particle stiffness solves lose precision. "
+                      "Call jax.config.update('jax_enable_x64', True) first.", stacklevel=3)
+    pos = jnp.asarray(sample.positions, dtype)
+    bonds = np.asarray(sample.bonds)
+    n = sample.n_particles
+    keys = np.sort(bonds[:, 0].astype(np.int64) * n + bonds[:, 1])
+    if walls == "hertz":
+        ws = float(pm.E) / (1.0 - float(pm.nu) ** 2) if wall_stiffness is None else wall_stiffness
+    elif walls == "linear":
+        if wall_stiffness is None:
+            raise ValueError("walls='linear' needs wall_stiffness [N/m]")
+        ws = wall_stiffness
+    elif walls is None:
+        ws = 0.0
+    else:
+        raise ValueError(f"unknown wall law {walls!r}; use 'hertz', 'linear' or None")
+    return Model(
+        positions0=pos,
+        radii=jnp.asarray(sample.radii, dtype),
+        mass=jnp.asarray(sample.mass, dtype),
+        inertia=jnp.asarray(sample.inertia, dtype),
+        bonds=jnp.asarray(bonds, jnp.int32),
+        r0=pos[bonds[:, 1]] - pos[bonds[:, 0]],
+        bond_material=jnp.asarray(sample.bond_material, jnp.int32),
+        bond_area=jnp.asarray(sample.bond_area, dtype),
+        bond_I=jnp.asarray(sample.bond_I, dtype),
+        bond_J=jnp.asarray(sample.bond_J, dtype),
+        bond_length=jnp.asarray(sample.bond_length, dtype),
+        bond_keys=jnp.asarray(keys if jax.config.jax_enable_x64 else keys.astype(np.int32)),
+        contact=contact_mod.contact_params(jnp.asarray(pm.E, dtype), jnp.asarray(pm.nu, dtype),
+                                           jnp.asarray(pm.friction, dtype), jnp.asarray(pm.restitution, dtype),
+                                           damping=contact_damping),
+        wall_stiffness=jnp.asarray(ws, dtype),
+        rotations=bool(rotations),
+        contacts=bool(contacts),
+        walls=walls,
+        bond_contact=sample.bond_contact,
+    )

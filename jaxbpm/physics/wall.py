@@ -1,0 +1,34 @@
+"""Frictionless plane walls with a prescribed motion.
+
+A wall is a point ``p`` and a unit normal ``n`` pointing into the half-space where the particles are. A particle of
+radius r at x overlaps the wall by ``delta = r - (x - p) . n``; it is pushed along ``n`` by
+
+* ``"hertz"``: ``F = 4/3 E* sqrt(r) delta^(3/2)`` with ``E* = E / (1 - nu^2)`` (sphere on a rigid plane), or
+* ``"linear"``: ``F = k delta``.
+
+The reaction on each wall is minus the sum of the forces it exerts.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+__all__ = ["wall_forces"]
+
+
+def wall_forces(positions, radii, points, normals, law: str, stiffness):
+    """Forces on particles ``[n, 3]`` and reactions on the walls ``[W, 3]``.
+
+    points, normals: ``[W, 3]``. law: ``"hertz"`` (stiffness = E* of particle on rigid wall [Pa]) or ``"linear"``
+    (stiffness = k [N/m]).
+    """
+    gap = jnp.einsum("nk,wk->nw", positions, normals) - jnp.sum(points * normals, axis=1)[None, :]
+    delta = jnp.maximum(radii[:, None] - gap, 0.0)
+    if law == "hertz":
+        mag = 4.0 / 3.0 * stiffness * jnp.sqrt(radii)[:, None] * delta * jnp.sqrt(delta)
+    elif law == "linear":
+        mag = stiffness * delta
+    else:
+        raise ValueError(f"unknown wall law {law!r}; use 'hertz' or 'linear'")
+    per_pair = mag[:, :, None] * normals[None, :, :]
+    return per_pair.sum(axis=1), -per_pair.sum(axis=0)

@@ -1,0 +1,58 @@
+"""What a solve returns: the observables of a scene, what they cost, and how the solver got there."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Result"]
+
+
+@dataclasses.dataclass
+class Result:
+    """Outcome of :func:`jaxbpm.solve` on a scene.
+
+    stiffness: K = dF/d(displacement) over the linear range [N/m]. youngs_modulus: E = K l / A [Pa].
+    displacement, force: the loading curve [m], [N] (compression positive); strain, stress: the same over l and A.
+    gauge_length l [m], area A [m^2]. wall_time, compile_time, run_time [s]. stats: solver details (steps, time
+    step, critical time step, iterations, ...). state: the solver's final state (for restarts and inspection).
+    """
+
+    method: str
+    stiffness: float
+    youngs_modulus: float
+    gauge_length: float
+    area: float
+    displacement: np.ndarray
+    force: np.ndarray
+    wall_time: float
+    compile_time: float
+    run_time: float
+    stats: dict = dataclasses.field(default_factory=dict)
+    state: Any = None
+
+    @property
+    def strain(self) -> np.ndarray:
+        return self.displacement / self.gauge_length
+
+    @property
+    def stress(self) -> np.ndarray:
+        return self.force / self.area
+
+    def summary(self) -> str:
+        lines = [
+            f"method            {self.method}",
+            f"stiffness K       {self.stiffness:.6g} N/m",
+            f"Young's modulus   {self.youngs_modulus:.6g} Pa  (l = {self.gauge_length:.4g} m, A = {self.area:.4g} m^2)",
+            f"wall time         {self.wall_time:.3f} s  (compile {self.compile_time:.3f} s, run {self.run_time:.3f} s)",
+        ]
+        for k, v in self.stats.items():
+            if isinstance(v, (int, float, np.integer, np.floating, str, bool)):
+                lines.append(f"{k:<18}{v:.6g}" if isinstance(v, (float, np.floating)) else f"{k:<18}{v}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return (f"Result(method={self.method!r}, stiffness={self.stiffness:.6g}, "
+                f"youngs_modulus={self.youngs_modulus:.6g}, wall_time={self.wall_time:.3g})")

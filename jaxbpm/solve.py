@@ -1,0 +1,81 @@
+"""``jaxbpm.solve(sample, scene, method=...)``: one entry point for every solver."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from jaxbpm.errors import SceneError
+from jaxbpm.result import Result
+from jaxbpm.sample import Sample
+
+__all__ = ["solve", "METHODS"]
+
+METHODS = ("dem",)
+
+
+def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options) -> Result:
+    """Solve ``scene`` on ``sample`` with ``method`` and return a :class:`~jaxbpm.result.Result`.
+
+    params: ``{"bond_E": [...], "bond_nu": [...]}`` overriding the sample's material table (for calibration).
+    options for ``"dem"``: ``dt`` (time step [s], default ``safety`` x critical), ``safety`` (0.5), ``damping`` (local
+    damping coefficient alpha, 0.7), ``loading_time`` [s] (default ``transits`` x the time a wave needs to cross the
+    sample along the axis, estimated from the mean bond; ``transits`` = 20), ``chunk`` (steps per jitted chunk),
+    ``progress`` (print progress), ``neighbors`` (:class:`~jaxbpm.dem.NeighborSettings`), ``max_records`` (points
+    kept in the returned curve, 2000).
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
+    if not isinstance(sample, Sample):
+        raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    return _solve_dem(sample, scene, params, **options)
+
+
+def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=20.0,
+               chunk=None, progress=False, neighbors=None, max_records=2000) -> Result:
+    from jaxbpm import dem
+    from jaxbpm.physics.model import default_params
+
+    t0 = time.perf_counter()
+    model = scene.model(sample)
+    params = default_params(sample) if params is None else params
+    dt_crit = dem.critical_time_step(model, params)
+    if dt is None:
+        if not (0 < safety <= 1):
+            raise SceneError(f"safety must lie in (0, 1], got {safety!r}")
+        dt = safety * dt_crit
+    elif not (dt > 0 and np.isfinite(dt)):
+        raise SceneError(f"dt must be a positive time step in seconds, got {dt!r}")
+    length, area = scene.geometry(sample)
+    target = scene.strain * length
+    if loading_time is None:
+        loading_time = transits * _transit_time(model, params, length)
+    n_steps = int(np.ceil(loading_time / dt))
+    speed = target / (n_steps * dt)
+    chunk = chunk or int(np.clip(n_steps // 20, 50, 5000))
+    n_steps = -(-n_steps // chunk) * chunk
+    load = scene.loading(sample, speed)
+    state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping, chunk=chunk,
+                                     neighbors=neighbors, progress=progress, dt_crit=dt_crit)
+    disp = speed * rec["time"]
+    force = scene.compressive_force(rec["reaction"])
+    stiffness = scene.fit_stiffness(disp, force, target)
+    keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
+    stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
+                 damping=float(damping), rotations=model.rotations, contacts=model.contacts)
+    return Result(method="dem", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
+                  area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
+                  compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state)
+
+
+def _transit_time(model, params, length) -> float:
+    """Time for an elastic wave to cross ``length``, from the mean bond (or contact) stiffness and particle mass."""
+    m = float(np.mean(model.mass))
+    if model.bonds.shape[0]:
+        k = model.stiffness(params)
+        kn, spacing = float(np.mean(k.kn)), float(np.mean(model.bond_length))
+    else:
+        r = float(np.mean(model.radii))
+        kn, spacing = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r), 2.0 * r
+    return length / spacing * np.sqrt(m / kn)

@@ -1,0 +1,182 @@
+"""The ``jaxbpm`` command, end to end in a temporary directory."""
+
+import os
+import pathlib
+import subprocess
+import sys
+
+import meshio
+import numpy as np
+import pytest
+
+from jaxbpm import cli, generate, io
+from jaxbpm.sample import Domain, Sample
+
+
+def _run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _tiny(**kw):
+    return Sample.from_arrays(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0]]), 0.5, [[0, 1], [1, 2]],
+                              bond_radius_ratio=0.5, domain=Domain("box", (-0.5, -0.5, -0.5), (1.5, 1.5, 0.5)), **kw)
+
+
+def test_generate_info_export_sc(tmp_path, capsys):
+    out = tmp_path / "sc.h5"
+    code, stdout, err = _run(capsys, "generate", "--shape", "sc", "--n", 27, "--seed", 3, "--out", out,
+                             "--mean-radius", 2e-3, "--E", 5e9, "--nu", 0.2, "--quiet")
+    assert code == 0, err
+    assert "particles            27" in stdout and f"wrote {out}" in stdout and " s)" in stdout
+    sample = io.load_sample(out)
+    assert sample.n_particles == 27 and sample.n_bonds == 54
+    assert np.allclose(sample.radii, 2e-3) and np.allclose(sample.bond_radius, 1e-3)
+    assert np.array_equal(sample.materials.E, [5e9]) and np.array_equal(sample.materials.nu, [0.2])
+
+    code, stdout, _ = _run(capsys, "info", out)
+    assert code == 0 and str(sample.summary()) in stdout
+
+    for suffix in (".vtu", ".vtk"):
+        vtk = tmp_path / f"sc{suffix}"
+        code, stdout, err = _run(capsys, "export-vtk", out, vtk)
+        assert code == 0, err
+        assert str(vtk) in stdout
+        mesh = meshio.read(vtk)
+        assert mesh.points.shape == (27, 3)
+        assert {c.type: len(c.data) for c in mesh.cells} == {"vertex": 27, "line": 54}
+        assert np.allclose(mesh.point_data["radius"], 2e-3)
+
+
+def test_generate_forwards_only_applicable_options(tmp_path, capsys, monkeypatch):
+    calls = []
+
+    def fake_from_shape(shape, n, *, seed=0, progress=False, **kw):
+        calls.append(dict(shape=shape, n=n, seed=seed, progress=progress, **kw))
+        return _tiny()
+
+    monkeypatch.setattr(generate, "from_shape", fake_from_shape, raising=False)
+    code, _, err = _run(capsys, "generate", "--shape", "fcc", "--n", 50, "--out", tmp_path / "a.h5",
+                        "--spread", 0.1, "--bond-radius-ratio", 0.3)
+    assert code == 0 and "--spread ignored" in err
+    assert calls[-1] == dict(shape="fcc", n=50, seed=0, progress=True, bond_radius_ratio=0.3,
+                             materials={"E": 1e9, "nu": 0.25})
+    code, _, _ = _run(capsys, "generate", "--shape", "sc", "--n", 8, "--out", tmp_path / "b.h5", "--mean-radius", 0.01,
+                      "--quiet")
+    assert code == 0 and calls[-1]["radius"] == 0.01 and calls[-1]["progress"] is False
+    assert "mean_radius" not in calls[-1] and "packing_fraction" not in calls[-1]
+
+    code, _, _ = _run(capsys, "generate", "--shape", "cylinder", "--n", 100, "--seed", 7, "--out", tmp_path / "c.h5",
+                      "--mean-radius", 0.01, "--packing-fraction", 0.55, "--E", 2e9)
+    assert code == 0
+    assert calls[-1] == dict(shape="cylinder", n=100, seed=7, progress=True, mean_radius=0.01, radius_spread=0.05,
+                             packing_fraction=0.55, bond_radius_ratio=0.5, materials={"E": 2e9, "nu": 0.25})
+    assert "radius" not in calls[-1]
+    assert io.load_sample(tmp_path / "c.h5").n_particles == 3
+
+
+def test_generate_random_box(tmp_path, capsys):
+    out = tmp_path / "box.h5"
+    code, stdout, err = _run(capsys, "generate", "--shape", "box", "--n", 200, "--seed", 1, "--out", out,
+                             "--packing-fraction", 0.5, "--quiet")
+    assert code == 0, err
+    sample = io.load_sample(out)
+    assert sample.n_particles == 200 and sample.n_bonds > 0 and sample.domain is not None
+    assert str(sample.summary()) in stdout
+
+
+def _chain(n):
+    """n particles in a bonded chain: a stand-in for a random packing where only the plumbing is under test."""
+    pos = np.arange(n)[:, None] * np.array([2e-3, 0.0, 0.0])
+    return Sample.from_arrays(pos, 1e-3, np.stack([np.arange(n - 1), np.arange(1, n)], axis=1),
+                              bond_radius_ratio=0.5)
+
+
+def test_demo(tmp_path, capsys, monkeypatch):
+    # The random packing itself is covered by test_generate_random_box; a real 300-particle packing at the
+    # generator's default packing fraction takes tens of seconds, so the demo's plumbing runs on a stand-in.
+    calls = []
+
+    def fake_from_shape(shape, n, *, seed=0, progress=False, **kw):
+        calls.append(dict(shape=shape, n=n, seed=seed, progress=progress, **kw))
+        return _chain(n)
+
+    monkeypatch.setattr(generate, "from_shape", fake_from_shape, raising=False)
+    out_dir = tmp_path / "demo"
+    code, stdout, err = _run(capsys, "demo", "--out", out_dir, "--n", 300, "--seed", 2, "--quiet")
+    assert code == 0, err
+    assert calls == [dict(shape="box", n=300, seed=2, progress=False)]
+    sample = io.load_sample(out_dir / "demo_sample.h5")
+    assert sample.n_particles == 300 and str(sample.summary()) in stdout
+    assert "demo_sample.h5" in stdout
+
+
+def test_demo_defaults(tmp_path, monkeypatch, capsys):
+    calls = []
+    monkeypatch.setattr(generate, "from_shape", lambda shape, n, **kw: calls.append((shape, n, kw)) or _chain(5),
+                        raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["demo"]) == 0
+    assert calls == [("box", 2000, {"seed": 0, "progress": True})]
+    assert (tmp_path / "jaxbpm-demo" / "demo_sample.h5").is_file()
+    result = cli.run_demo(tmp_path / "again", n=7, seed=1, quiet=True)
+    assert result["sample_path"] == tmp_path / "again" / "demo_sample.h5" and result["sample"].n_particles == 5
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["generate", "--help"], ["info", "--help"], ["export-vtk", "--help"],
+                                  ["demo", "--help"], ["--version"]])
+def test_help_and_version(capsys, argv):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert ("jaxbpm 0.1.0" in out) if argv == ["--version"] else ("usage: jaxbpm" in out and len(out) > 200)
+
+
+@pytest.mark.parametrize("argv", [[], ["frobnicate"], ["generate", "--shape", "torus", "--n", "5", "--out", "x.h5"],
+                                  ["generate", "--shape", "sc", "--n", "-3", "--out", "x.h5"], ["info"]])
+def test_usage_errors_exit_2(capsys, argv):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    assert exc.value.code == 2
+    assert "usage:" in capsys.readouterr().err
+
+
+def test_errors_are_one_line_exit_2(tmp_path, capsys):
+    code, out, err = _run(capsys, "info", tmp_path / "missing.h5")
+    assert code == 2 and err.startswith("error: ") and "missing.h5" in err and "Traceback" not in err
+
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"not hdf5 at all" * 100)
+    code, _, err = _run(capsys, "export-vtk", junk, tmp_path / "j.vtu")
+    assert code == 2 and "error: " in err and "junk.h5" in err
+
+    good = io.save_sample(tmp_path / "good.h5", _tiny())
+    code, _, err = _run(capsys, "export-vtk", good, tmp_path / "out.txt")
+    assert code == 2 and ".vtu" in err
+    code, _, err = _run(capsys, "export-vtk", good, tmp_path / "no" / "dir" / "out.vtu")
+    assert code == 2 and err.startswith("error: ") and "no such directory" in err
+    code, _, err = _run(capsys, "generate", "--shape", "sc", "--n", 8, "--out", tmp_path / "nodir" / "x.h5", "--quiet")
+    assert code == 2 and err.startswith("error: ")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["good.h5", "junk.h5"]
+
+
+def _env():
+    env = dict(os.environ)
+    env["JAX_PLATFORMS"] = "cpu"
+    return env
+
+
+def test_console_script_help():
+    script = pathlib.Path(sys.executable).with_name("jaxbpm")
+    cmd = [str(script)] if script.exists() else [sys.executable, "-m", "jaxbpm"]
+    res = subprocess.run(cmd + ["--help"], capture_output=True, text=True, timeout=120, env=_env())
+    assert res.returncode == 0 and "usage: jaxbpm" in res.stdout and "export-vtk" in res.stdout
+
+
+def test_python_m_missing_file(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "jaxbpm", "info", "missing.h5"], capture_output=True, text=True,
+                         timeout=120, cwd=tmp_path, env=_env())
+    assert res.returncode == 2
+    assert "error:" in res.stderr and "missing.h5" in res.stderr and "Traceback" not in res.stderr

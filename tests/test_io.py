@@ -1,0 +1,271 @@
+"""Sample files (HDF5) and VTK export: exact round trip, atomic writes, clear errors."""
+
+import os
+
+import h5py
+import jax
+import meshio
+import numpy as np
+import pytest
+
+from jaxbpm import io
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.sample import Domain, Sample
+
+
+def _chain(n=6, seed=0, **kw):
+    """A small sample: a noisy chain of particles plus a few cross bonds."""
+    rng = np.random.default_rng(seed)
+    pos = np.arange(n)[:, None] * np.array([1.0, 0.0, 0.0]) + 0.1 * rng.standard_normal((n, 3))
+    radii = 0.45 + 0.05 * rng.random(n)
+    bonds = [[i, i + 1] for i in range(n - 1)] + [[0, 2], [3, 5]]
+    nb = len(bonds)
+    kw.setdefault("bond_radius", 0.1 + 0.1 * rng.random(nb))
+    return Sample.from_arrays(pos, radii, bonds, **kw)
+
+
+def _multi():
+    return _chain(
+        bond_material=np.array([0, 1, 2, 1, 0, 2, 1]),
+        materials={"E": [1e9, 2.5e9, 7e10], "nu": [0.2, 0.25, 0.3], "tensile_strength": [1e6, np.inf, 3e7],
+                   "shear_strength": [2e6, 5e6, np.inf]},
+        particle_material={"density": 2650.0, "E": 7e10, "nu": 0.17, "friction": 0.3, "restitution": 0.8},
+        bond_contact="replace",
+        domain=Domain("cylinder", (-0.5, -1.0, -1.0), (5.5, 1.0, 1.0)))
+
+
+def _assert_same(a: Sample, b: Sample):
+    la, ta = jax.tree_util.tree_flatten_with_path(a)
+    lb, tb = jax.tree_util.tree_flatten_with_path(b)
+    assert ta == tb  # same structure and same static fields (bond_contact, domain)
+    for (path, x), (_, y) in zip(la, lb):
+        assert np.asarray(x).dtype == np.asarray(y).dtype, path
+        assert np.array_equal(x, y), path
+    assert a.bond_contact == b.bond_contact
+    assert a.domain == b.domain
+
+
+@pytest.mark.parametrize("make", [_chain, _multi], ids=["default", "multi-material"])
+def test_round_trip_exact(tmp_path, make):
+    sample = make()
+    path = io.save_sample(tmp_path / "s.h5", sample)
+    assert path == tmp_path / "s.h5"
+    _assert_same(sample, io.load_sample(path))
+
+
+def test_round_trip_without_bonds_and_domain_variants(tmp_path):
+    no_bonds = Sample.from_arrays(np.eye(3), 0.2, np.zeros((0, 2), int), np.zeros(0))
+    _assert_same(no_bonds, io.load_sample(io.save_sample(tmp_path / "a.h5", no_bonds)))
+    boxed = _chain(domain=Domain("box", (0, 0, 0), (1, 2, 3)), bond_contact="replace")
+    loaded = io.load_sample(io.save_sample(tmp_path / "b.h5", boxed))
+    _assert_same(boxed, loaded)
+    assert loaded.domain == Domain("box", (0.0, 0.0, 0.0), (1.0, 2.0, 3.0))
+    assert _chain().domain is None and io.load_sample(io.save_sample(tmp_path / "c.h5", _chain())).domain is None
+
+
+def test_file_layout(tmp_path):
+    sample = _multi()
+    path = io.save_sample(tmp_path / "s.h5", sample)
+    with h5py.File(path, "r") as f:
+        assert f.attrs["format"] == io.FORMAT and f.attrs["format_version"] == io.FORMAT_VERSION
+        assert "jaxbpm_version" in f.attrs and "units" in f.attrs
+        assert f.attrs["bond_contact"] == "replace" and f.attrs["domain_kind"] == "cylinder"
+        assert f["positions"].attrs["units"] == "m" and f["materials/E"].attrs["units"] == "Pa"
+        assert f["particle_material/density"].attrs["units"] == "kg/m^3"
+        assert f["bonds"].dtype == np.int32
+        assert np.array_equal(f["derived/mass"][()], sample.mass)
+        assert np.array_equal(f["derived/bond_length"][()], sample.bond_length)
+        assert np.array_equal(f["derived/coordination"][()], sample.coordination())
+        for name in f:
+            if isinstance(f[name], h5py.Dataset):
+                assert "units" in f[name].attrs, name
+
+
+def _listing(d):
+    return sorted(os.listdir(d))
+
+
+@pytest.mark.parametrize("existing", [False, True], ids=["new", "existing"])
+def test_save_is_atomic(tmp_path, monkeypatch, existing):
+    target = tmp_path / "s.h5"
+    if existing:
+        io.save_sample(target, _chain())
+    before = target.read_bytes() if existing else None
+    listing = _listing(tmp_path)
+
+    def boom(f, sample):
+        f.create_dataset("partial", data=np.zeros(10))
+        raise RuntimeError("crash mid-write")
+
+    monkeypatch.setattr(io, "_write_derived", boom)
+    with pytest.raises(RuntimeError, match="crash mid-write"):
+        io.save_sample(target, _multi())
+    assert _listing(tmp_path) == listing  # no temp file left, no target created
+    if existing:
+        assert target.read_bytes() == before
+        _assert_same(io.load_sample(target), _chain())
+
+
+def test_save_atomic_when_rename_fails(tmp_path, monkeypatch):
+    target = tmp_path / "s.h5"
+    io.save_sample(target, _chain())
+    before = target.read_bytes()
+
+    def fail(src, dst):
+        raise OSError("disk gone")
+
+    monkeypatch.setattr(io.os, "replace", fail)
+    with pytest.raises(OSError, match="disk gone"):
+        io.save_sample(target, _multi())
+    assert _listing(tmp_path) == ["s.h5"] and target.read_bytes() == before
+
+
+def test_save_rejects_non_sample_and_missing_directory(tmp_path):
+    with pytest.raises(TypeError, match="Sample"):
+        io.save_sample(tmp_path / "s.h5", {"positions": np.zeros((1, 3))})
+    with pytest.raises(FileNotFoundError, match="no such directory"):
+        io.save_sample(tmp_path / "nope" / "s.h5", _chain())
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(SampleFileError, match="no such sample file") as info:
+        io.load_sample(tmp_path / "missing.h5")
+    assert "missing.h5" in str(info.value)
+
+
+def test_corrupt_file(tmp_path):
+    path = tmp_path / "junk.h5"
+    path.write_bytes(np.random.default_rng(0).bytes(4096))
+    with pytest.raises(SampleFileError, match="not a readable HDF5 file") as info:
+        io.load_sample(path)
+    assert "junk.h5" in str(info.value)
+
+
+def test_truncated_file(tmp_path):
+    path = io.save_sample(tmp_path / "s.h5", _multi())
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(SampleFileError, match="s.h5"):
+        io.load_sample(path)
+
+
+def test_not_a_jaxbpm_file(tmp_path):
+    path = tmp_path / "other.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("x", data=np.zeros(3))
+    with pytest.raises(SampleFileError, match="not a jaxbpm sample file"):
+        io.load_sample(path)
+    with h5py.File(path, "a") as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(SampleFileError, match="something-else"):
+        io.load_sample(path)
+
+
+def test_wrong_format_version(tmp_path):
+    path = io.save_sample(tmp_path / "s.h5", _chain())
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 99
+    with pytest.raises(SampleFileError, match=r"format_version 99.*reads format_version 1"):
+        io.load_sample(path)
+
+
+@pytest.mark.parametrize("field", ["positions", "bond_radius", "materials/E", "particle_material/friction",
+                                   "materials"])
+def test_missing_field(tmp_path, field):
+    path = io.save_sample(tmp_path / "s.h5", _multi())
+    with h5py.File(path, "a") as f:
+        del f[field]
+    with pytest.raises(SampleFileError, match=f"missing field '/{field}'"):
+        io.load_sample(path)
+
+
+def test_missing_attribute(tmp_path):
+    path = io.save_sample(tmp_path / "s.h5", _multi())
+    with h5py.File(path, "a") as f:
+        del f.attrs["domain_hi"]
+    with pytest.raises(SampleFileError, match="domain_hi"):
+        io.load_sample(path)
+
+
+def test_invalid_content_is_a_sample_error(tmp_path):
+    path = io.save_sample(tmp_path / "s.h5", _chain())
+    with h5py.File(path, "a") as f:
+        f["bonds"][0] = [0, 100]  # bond to a missing particle
+    with pytest.raises(SampleError, match="missing particles"):
+        io.load_sample(path)
+
+
+# ---------------------------------------------------------------------------------------------- VTK
+@pytest.mark.parametrize("suffix", [".vtu", ".vtk"])
+def test_export_vtk_readable(tmp_path, suffix):
+    sample = _multi()
+    n, nb = sample.n_particles, sample.n_bonds
+    disp = np.arange(3 * n, dtype=np.float64).reshape(n, 3)
+    force = np.linspace(-1.0, 1.0, nb)
+    path = io.export_vtk(tmp_path / f"s{suffix}", sample, point_data={"displacement": disp, "flag": np.arange(n) > 2},
+                         bond_data={"force": force})
+    assert path.suffix == suffix and _listing(tmp_path) == [path.name]
+    mesh = meshio.read(path)
+    assert mesh.points.shape == (n, 3) and np.allclose(mesh.points, sample.positions)
+    blocks = {c.type: c.data for c in mesh.cells}
+    assert blocks["vertex"].shape == (n, 1) and blocks["line"].shape == (nb, 2)
+    assert np.array_equal(blocks["line"], sample.bonds)
+    assert np.allclose(mesh.point_data["radius"], sample.radii)
+    assert np.allclose(mesh.point_data["mass"], sample.mass)
+    assert np.array_equal(mesh.point_data["coordination"], sample.coordination())
+    assert np.allclose(mesh.point_data["displacement"], disp)
+    assert np.array_equal(np.ravel(mesh.point_data["flag"]), np.arange(n) > 2)
+    line = [c.type for c in mesh.cells].index("line")
+    vert = 1 - line
+    assert np.allclose(mesh.cell_data["bond_radius"][line], sample.bond_radius)
+    assert np.array_equal(mesh.cell_data["material"][line], sample.bond_material)
+    assert np.allclose(mesh.cell_data["length"][line], sample.bond_length)
+    assert np.allclose(mesh.cell_data["force"][line], force)
+    assert np.isnan(mesh.cell_data["bond_radius"][vert]).all() and (mesh.cell_data["material"][vert] == -1).all()
+
+
+def test_export_vtk_without_bonds(tmp_path):
+    sample = Sample.from_arrays(np.eye(3), 0.2, np.zeros((0, 2), int), np.zeros(0))
+    for suffix in (".vtu", ".vtk"):
+        mesh = meshio.read(io.export_vtk(tmp_path / f"s{suffix}", sample))
+        assert [c.type for c in mesh.cells] == ["vertex"] and mesh.points.shape == (3, 3)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"point_data": {"temperature": np.zeros(3)}}, "point_data\\['temperature'\\].*\\[6\\]"),
+    ({"point_data": {"u": np.zeros((6, 3, 3))}}, "point_data\\['u'\\]"),
+    ({"point_data": {"radius": np.zeros(6)}}, "built-in"),
+    ({"point_data": {"s": np.array(["a"] * 6)}}, "point_data\\['s'\\].*real numeric"),
+    ({"bond_data": {"force": np.zeros(8)}}, "bond_data\\['force'\\].*\\[7\\]"),
+])
+def test_export_vtk_bad_user_data(tmp_path, kw, match):
+    with pytest.raises(SampleError, match=match):
+        io.export_vtk(tmp_path / "s.vtu", _multi(), **kw)
+    assert _listing(tmp_path) == []
+
+
+def test_export_vtk_bad_suffix(tmp_path):
+    with pytest.raises(SampleFileError, match=r"\.vtu"):
+        io.export_vtk(tmp_path / "s.txt", _chain())
+
+
+def test_export_vtk_is_atomic(tmp_path, monkeypatch):
+    target = tmp_path / "s.vtu"
+    io.export_vtk(target, _chain())
+    before = target.read_bytes()
+
+    def boom(filename, mesh, file_format=None, **kw):
+        with open(filename, "w") as fh:
+            fh.write("<VTKFile half written")
+        raise RuntimeError("crash mid-write")
+
+    monkeypatch.setattr(meshio, "write", boom)
+    with pytest.raises(RuntimeError, match="crash mid-write"):
+        io.export_vtk(target, _multi())
+    assert _listing(tmp_path) == ["s.vtu"] and target.read_bytes() == before
+
+
+def test_public_api_documented():
+    assert set(io.__all__) == {"FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk"}
+    for name in ("save_sample", "load_sample", "export_vtk"):
+        assert getattr(io, name).__doc__

@@ -1,0 +1,110 @@
+"""Sample construction, derived quantities and every validation error."""
+
+import jax
+import numpy as np
+import pytest
+
+from jaxbpm import BondMaterials, Domain, Sample, SampleError
+
+R = 1e-3
+
+
+def chain(n=4, **kw):
+    pos = np.zeros((n, 3))
+    pos[:, 0] = 2 * R * np.arange(n)
+    bonds = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
+    kw.setdefault("bond_radius", 0.5 * R)
+    return Sample.from_arrays(pos, R, bonds, **kw)
+
+
+def test_derived_quantities():
+    rb = 0.4e-3
+    s = chain(3, bond_radius=rb, density=2000.0)
+    np.testing.assert_allclose(s.bond_length, 2 * R)
+    np.testing.assert_allclose(s.bond_area, np.pi * rb**2)
+    np.testing.assert_allclose(s.bond_I, np.pi * rb**4 / 4)
+    np.testing.assert_allclose(s.bond_J, np.pi * rb**4 / 2)
+    m = 2000.0 * 4 / 3 * np.pi * R**3
+    np.testing.assert_allclose(s.mass, m)
+    np.testing.assert_allclose(s.inertia, 0.4 * m * R**2)
+    assert s.positions.dtype == np.float64 and s.bonds.dtype == np.int32
+
+
+def test_bond_radius_ratio_uses_smaller_particle():
+    pos = np.array([[0, 0, 0], [3e-3, 0, 0]])
+    s = Sample.from_arrays(pos, [1e-3, 2e-3], [[1, 0]], bond_radius_ratio=0.5)
+    np.testing.assert_allclose(s.bond_radius, [0.5e-3])
+    np.testing.assert_array_equal(s.bonds, [[0, 1]])  # stored with i < j
+
+
+def test_is_a_pytree_and_jittable():
+    s = chain(3)
+    leaves, tree = jax.tree_util.tree_flatten(s)
+    assert len(leaves) == 11 + 4 + 5
+    s2 = jax.tree_util.tree_unflatten(tree, leaves)
+    assert s2.bond_contact == s.bond_contact
+    total = jax.jit(lambda smp: smp.mass.sum() + smp.materials.E.sum())(s)
+    np.testing.assert_allclose(total, s.mass.sum() + 1e9)
+
+
+def test_materials_table_and_replace():
+    s = chain(4, materials={"E": [1e9, 2e9], "nu": 0.3}, bond_material=[0, 1, 1])
+    assert s.n_materials == 2
+    np.testing.assert_allclose(s.materials.nu, [0.3, 0.3])
+    assert np.all(np.isinf(s.materials.tensile_strength))
+    s2 = s.replace(materials=BondMaterials.create(E=[5e9, 6e9], nu=[0.2, 0.1]))
+    np.testing.assert_allclose(s2.materials.E, [5e9, 6e9])
+    np.testing.assert_array_equal(s2.bond_material, s.bond_material)
+
+
+def test_summary_reports_clusters_and_unbonded():
+    pos = np.array([[0, 0, 0], [2e-3, 0, 0], [10e-3, 0, 0], [12e-3, 0, 0], [20e-3, 0, 0]], float)
+    s = Sample.from_arrays(pos, R, [[0, 1], [2, 3]], bond_radius=0.5e-3,
+                           domain=Domain("box", (-1e-3, -1e-3, -1e-3), (21e-3, 1e-3, 1e-3)))
+    summ = s.summary()
+    assert summ.n_clusters == 3 and summ.largest_cluster == 2 and summ.n_unbonded == 1
+    assert summ.coordination_min == 0 and summ.coordination_max == 1
+    np.testing.assert_allclose(summ.coordination_mean, 4 / 5)
+    np.testing.assert_allclose(summ.packing_fraction, 5 * 4 / 3 * np.pi * R**3 / (22e-3 * 2e-3 * 2e-3))
+    text = str(summ)
+    assert "clusters" in text and "packing fraction" in text
+
+
+GOOD = dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [4e-3, 0, 0]], float), radii=R,
+            bonds=np.array([[0, 1], [1, 2]]), bond_radius=0.5e-3)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(positions=np.zeros((3, 2))), r"positions must have shape \[n, 3\]"),
+    (dict(positions=np.array([[0, 0, 0], [np.nan, 0, 0], [4e-3, 0, 0]])), r"positions contains NaN .*\[1\]"),
+    (dict(positions=np.array([[0, 0, 0], [np.inf, 0, 0], [4e-3, 0, 0]])), r"positions contains inf"),
+    (dict(positions=np.array([["a", "b", "c"]] * 3)), r"positions must be a real numeric array"),
+    (dict(radii=[1e-3, -1e-3, 1e-3]), r"non-positive radius at particles \[1\]"),
+    (dict(radii=[1e-3, 1e-3]), r"radii must have shape \[3\]"),
+    (dict(bonds=np.array([0, 1, 2])), r"bonds must have shape \[nb, 2\]"),
+    (dict(bonds=np.array([[0, 1], [1, 3]])), r"bonds reference missing particles .* bad bonds \[1\]"),
+    (dict(bonds=np.array([[0, 1], [-1, 2]])), r"bonds reference missing particles"),
+    (dict(bonds=np.array([[0.5, 1.0], [1, 2]])), r"integer particle indices"),
+    (dict(bonds=np.array([[0, 1], [2, 2]])), r"self-bonds .* \[1\]"),
+    (dict(bonds=np.array([[0, 1], [1, 2], [1, 0]])), r"duplicate bonds .* \[2\].*repeats bond 0"),
+    (dict(positions=np.array([[0, 0, 0], [0, 0, 0], [4e-3, 0, 0]], float)), r"zero-length bonds .* \[0\]"),
+    (dict(bond_radius=[0.5e-3, 0.0]), r"bond_radius must be > 0; non-positive at bonds \[1\]"),
+    (dict(bond_radius=[0.5e-3, np.nan]), r"bond_radius contains NaN"),
+    (dict(bond_radius=None), r"exactly one of bond_radius and bond_radius_ratio"),
+    (dict(bond_material=[0, 1]), r"unknown material index .* bonds \[1\]"),
+    (dict(bond_material=[0, 0, 0]), r"bond_material must have shape \[2\]"),
+    (dict(materials={"E": [-1.0]}), r"E must be finite and > 0"),
+    (dict(materials={"E": [1e9], "nu": 0.7}), r"nu must lie in"),
+    (dict(materials={"nu": 0.2}), r"missing field 'E'"),
+    (dict(materials={"E": 1e9, "G": 1.0}), r"unknown fields \['G'\]"),
+    (dict(density=-5.0), r"density=.* out of range"),
+    (dict(bond_contact="sum"), r"bond_contact must be one of"),
+])
+def test_validation_errors(change, message):
+    with pytest.raises(SampleError, match=message):
+        Sample.from_arrays(**{**GOOD, **change})
+
+
+def test_unconnected_particles_are_allowed():
+    s = Sample.from_arrays(GOOD["positions"], R, np.zeros((0, 2), int), bond_radius=np.zeros(0))
+    assert s.n_bonds == 0 and s.summary().n_unbonded == 3
