@@ -1,8 +1,16 @@
-"""Unit quaternions ``[w, x, y, z]`` for particle orientations (pure functions of one quaternion, vmap them)."""
+"""Unit quaternions ``[w, x, y, z]`` for particle orientations (pure functions of one quaternion, vmap them).
 
+:func:`multiply`, :func:`conjugate`, :func:`rotate` and :func:`small_angle_vector` also take component tuples,
+``(w, x, y, z)`` and ``(x, y, z)`` of scalars or equal-shape arrays (one entry per bond, say), and return tuples: XLA
+on CPU runs elementwise algebra on such ``[nb]`` arrays several times faster than on ``[nb, 4]`` rows, where every
+cross product becomes slices and a concatenation along the minor axis.
+"""
+
+import jax
 import jax.numpy as jnp
 
-__all__ = ["identity", "multiply", "conjugate", "rotate", "from_rotation_vector", "small_angle_vector"]
+__all__ = ["identity", "multiply", "conjugate", "rotate", "from_rotation_vector", "small_angle_vector",
+           "integrate"]
 
 
 def identity(n: int, dtype=None):
@@ -12,6 +20,10 @@ def identity(n: int, dtype=None):
 
 def multiply(p, q):
     """Hamilton product ``p * q`` of ``[..., 4]`` quaternions (rotate by q, then by p)."""
+    if isinstance(p, tuple):
+        pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
+        c = _cross(pv, qv)
+        return (pw * qw - _dot(pv, qv),) + tuple(pw * qv[k] + qw * pv[k] + c[k] for k in range(3))
     pw, pv = p[..., :1], p[..., 1:]
     qw, qv = q[..., :1], q[..., 1:]
     w = pw * qw - jnp.sum(pv * qv, axis=-1, keepdims=True)
@@ -20,14 +32,29 @@ def multiply(p, q):
 
 
 def conjugate(q):
+    if isinstance(q, tuple):
+        return (q[0], -q[1], -q[2], -q[3])
     return q * jnp.array([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
 
 
 def rotate(q, v):
     """Rotate ``[..., 3]`` vectors ``v`` by unit quaternions ``q``."""
+    if isinstance(q, tuple):
+        w, u = q[0], q[1:]
+        t = tuple(2.0 * c for c in _cross(u, v))
+        c = _cross(u, t)
+        return tuple(v[k] + w * t[k] + c[k] for k in range(3))
     w, u = q[..., :1], q[..., 1:]
     t = 2.0 * jnp.cross(u, v)
     return v + w * t + jnp.cross(u, t)
+
+
+def _cross(a, b):
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def from_rotation_vector(theta):
@@ -46,5 +73,39 @@ def small_angle_vector(q):
 
     Exact for the identity (so rigid motions give exactly zero), error below 0.05 % for angles under 0.1 rad.
     """
+    if isinstance(q, tuple):
+        sign = jnp.where(q[0] < 0, -1.0, 1.0)
+        return tuple(2.0 * sign * c for c in q[1:])
     sign = jnp.where(q[..., :1] < 0, -1.0, 1.0).astype(q.dtype)
     return 2.0 * sign * q[..., 1:]
+
+
+def integrate(q, theta):
+    """``exp(theta) q`` renormalised, for ``[n, 4]`` quaternions and ``[n, 3]`` rotation increments.
+
+    Written on component arrays (structure of arrays): XLA on CPU runs this several times faster than the same
+    algebra on ``[n, 4]`` rows.
+    """
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    tx, ty, tz = theta[:, 0], theta[:, 1], theta[:, 2]
+    a2 = tx * tx + ty * ty + tz * tz
+    small = a2 < 1e-12
+
+    def series():  # sin(a/2)/a and cos(a/2) to double precision below the threshold
+        return 0.5 - a2 / 48.0, 1.0 - a2 / 8.0
+
+    def exact():
+        a = jnp.sqrt(jnp.where(small, 1.0, a2))
+        series_s, series_c = series()
+        return jnp.where(small, series_s, jnp.sin(0.5 * a) / a), jnp.where(small, series_c, jnp.cos(0.5 * a))
+
+    # explicit time steps turn particles by tiny angles: skip the trigonometry (the slowest part here) when every
+    # particle is below the threshold; both branches give bit-identical results there
+    s, c = jax.lax.cond(jnp.all(small), series, exact)
+    px, py, pz = s * tx, s * ty, s * tz
+    nw = c * w - px * x - py * y - pz * z
+    nx = c * x + px * w + py * z - pz * y
+    ny = c * y + py * w + pz * x - px * z
+    nz = c * z + pz * w + px * y - py * x
+    inv = 1.0 / jnp.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
+    return jnp.stack([nw * inv, nx * inv, ny * inv, nz * inv], axis=1)
