@@ -213,8 +213,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
     if model.rotations:
         w = state.omegas + 0.5 * dt * _damped(state.moment, state.omegas, alpha) * inv_i
         w = jnp.where(clamped, 0.0, w)
-        q = rotation.multiply(rotation.from_rotation_vector(dt * w), state.orientations)
-        q = q / jnp.linalg.norm(q, axis=1, keepdims=True)
+        q = rotation.integrate(state.orientations, dt * w)
     else:
         w, q = state.omegas, state.orientations
 
@@ -255,6 +254,8 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
 
 @functools.partial(jax.jit, static_argnames=("n_steps",))
 def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps):
+    params = model.stiffness(params)  # once per chunk, not per step
+
     def body(s, _):
         return step(model, params, load, s, dt, alpha, origin)
 

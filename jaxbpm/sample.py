@@ -404,6 +404,27 @@ class Sample:
         kw.update(changes)
         return Sample.from_arrays(**kw)
 
+    def subset(self, keep) -> "Sample":
+        """The sample restricted to the particles where ``keep [n]`` is True (bonds between kept particles only)."""
+        keep = np.asarray(keep, bool)
+        if keep.shape != (self.n_particles,):
+            raise SampleError(f"subset: keep must have shape [{self.n_particles}], got {keep.shape}")
+        if not keep.any():
+            raise SampleError("subset: no particle kept")
+        new_index = np.cumsum(keep) - 1
+        b = np.asarray(self.bonds)
+        kb = keep[b[:, 0]] & keep[b[:, 1]]
+        return Sample.from_arrays(np.asarray(self.positions)[keep], np.asarray(self.radii)[keep],
+                                  new_index[b[kb]], np.asarray(self.bond_radius)[kb],
+                                  bond_material=np.asarray(self.bond_material)[kb], materials=self.materials,
+                                  particle_material=self.particle_material, bond_contact=self.bond_contact,
+                                  domain=self.domain)
+
+    def largest_cluster(self) -> "Sample":
+        """The sample without the particles outside its largest bonded cluster (loose particles and fragments)."""
+        labels = self.clusters()
+        return self.subset(labels == np.argmax(np.bincount(labels)))
+
     # ------------------------------------------------------------------ derived info
     @property
     def n_particles(self) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
@@ -12,7 +13,7 @@ from jaxbpm.sample import Sample
 
 __all__ = ["solve", "METHODS"]
 
-METHODS = ("dem",)
+METHODS = ("dem", "dsm")
 
 
 def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options) -> Result:
@@ -21,18 +22,27 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     params: ``{"bond_E": [...], "bond_nu": [...]}`` overriding the sample's material table (for calibration).
     options for ``"dem"``: ``dt`` (time step [s], default ``safety`` x critical), ``safety`` (0.5), ``damping`` (local
     damping coefficient alpha, 0.7), ``loading_time`` [s] (default ``transits`` x the time a wave needs to cross the
-    sample along the axis, estimated from the mean bond; ``transits`` = 20), ``chunk`` (steps per jitted chunk),
+    sample along the axis, estimated from the mean bond; ``transits`` = 40), ``chunk`` (steps per jitted chunk),
     ``progress`` (print progress), ``neighbors`` (:class:`~jaxbpm.dem.NeighborSettings`), ``max_records`` (points
     kept in the returned curve, 2000).
+    options for ``"dsm"``: ``dofs`` (3 or 6 per particle; default: the Model's choice, 6 with bonds), ``nonlinear``
+    (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
+    ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
+    Newton when the reaction changes less than this, relative), ``contact_skin`` [m], ``throw`` (raise
+    :class:`ConvergenceError` instead of warning when a solve misses its tolerance).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    if method == "dsm":
+        from jaxbpm import dsm
+
+        return dsm.solve_scene(sample, scene, params, **options)
     return _solve_dem(sample, scene, params, **options)
 
 
-def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=20.0,
+def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
                chunk=None, progress=False, neighbors=None, max_records=2000) -> Result:
     from jaxbpm import dem
     from jaxbpm.physics.model import default_params
@@ -56,6 +66,8 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     chunk = chunk or int(np.clip(n_steps // 20, 50, 5000))
     n_steps = -(-n_steps // chunk) * chunk
     load = scene.loading(sample, speed)
+    if progress is True:
+        progress = _strain_progress(speed * dt / length)
     state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping, chunk=chunk,
                                      neighbors=neighbors, progress=progress, dt_crit=dt_crit)
     disp = speed * rec["time"]
@@ -67,6 +79,19 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     return Result(method="dem", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
                   area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
                   compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state)
+
+
+def _strain_progress(strain_per_step):
+    """A progress printer showing steps, simulated strain and elapsed time, at most every 2 s."""
+    last = [-1e9]
+
+    def report(done, total, elapsed):
+        if elapsed - last[0] >= 2.0 or done == total:
+            last[0] = elapsed
+            print(f"  DEM step {done}/{total}  strain {100 * strain_per_step * done:.4f} %  elapsed {elapsed:.1f} s",
+                  file=sys.stderr, flush=True)
+
+    return report
 
 
 def _transit_time(model, params, length) -> float:

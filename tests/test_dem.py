@@ -166,7 +166,7 @@ def test_time_step_above_critical_raises():
 
 
 def test_neighbor_overflow_is_reallocated_and_matches_big_buffer():
-    s = jaxbpm.generate.box(60, seed=1, mean_radius=R, packing_fraction=0.5)
+    s = jaxbpm.generate.box(80, seed=1, mean_radius=R, packing_fraction=0.45)
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.05, contacts=True)
     tight = jaxbpm.solve(s, scene, neighbors=dem.NeighborSettings(skin=0.1 * R, capacity_multiplier=1.0),
                          transits=10)

@@ -57,7 +57,13 @@ def contact_params(E, nu, friction, restitution, damping: bool = False) -> Conta
 def hertz_normal_force(overlap, r_star, E_star):
     """Hertz normal force ``4/3 E* sqrt(R*) delta^1.5`` (zero without overlap)."""
     delta = jnp.maximum(overlap, 0.0)
-    return 4.0 / 3.0 * E_star * jnp.sqrt(r_star) * delta * jnp.sqrt(delta)
+    return 4.0 / 3.0 * E_star * jnp.sqrt(r_star) * delta * _safe_sqrt(delta)
+
+
+def _safe_sqrt(x):
+    """sqrt with a zero (not NaN) derivative at 0: 0 * inf in a jvp would poison Newton solves."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
 def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -> ContactForces:
@@ -76,21 +82,21 @@ def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -
     delta = jnp.where(active, overlap, 0.0)
     r_star = r_i * r_j / (r_i + r_j)
     m_star = m_i * m_j / (m_i + m_j)
-    sqrt_rd = jnp.sqrt(r_star * delta)
+    sqrt_rd = _safe_sqrt(r_star * delta)
     damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta
     v_n = jnp.dot(v_rel, n)
-    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * jnp.sqrt(2.0 * p.E_star * sqrt_rd * m_star) * v_n
+    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * _safe_sqrt(2.0 * p.E_star * sqrt_rd * m_star) * v_n
     fn = jnp.where(active, jnp.maximum(fn, 0.0), 0.0)
 
     # tangential spring: keep it in the current tangent plane (same length), then add this step's slip
     old = spring - jnp.dot(spring, n) * n
-    old_len, proj_len = jnp.linalg.norm(spring), jnp.linalg.norm(old)
+    old_len, proj_len = _safe_sqrt(jnp.dot(spring, spring)), _safe_sqrt(jnp.dot(old, old))
     old = old * jnp.where(proj_len > 0, old_len / jnp.where(proj_len > 0, proj_len, 1.0), 0.0)
     xi = old + dxi - jnp.dot(dxi, n) * n
     kt = 8.0 * p.G_star * sqrt_rd
     v_t = v_rel - v_n * n
-    ft_j = -kt * xi - damp * jnp.sqrt(kt * m_star) * v_t
-    ft_len = jnp.linalg.norm(ft_j)
+    ft_j = -kt * xi - damp * _safe_sqrt(kt * m_star) * v_t
+    ft_len = _safe_sqrt(jnp.dot(ft_j, ft_j))
     limit = p.friction * fn
     sliding = ft_len > limit
     scale = jnp.where(sliding, limit / jnp.where(ft_len > 0, ft_len, 1.0), 1.0)

@@ -63,7 +63,10 @@ class Model:
         return int(self.positions0.shape[0])
 
     def stiffness(self, params) -> bond_mod.BondStiffness:
-        """Per-bond stiffnesses from the parameter pytree."""
+        """Per-bond stiffnesses from the parameter pytree (a :class:`BondStiffness` passes through unchanged, so
+        loops can compute it once)."""
+        if isinstance(params, bond_mod.BondStiffness):
+            return params
         E = jnp.asarray(params["bond_E"])[self.bond_material]
         nu = jnp.asarray(params["bond_nu"])[self.bond_material]
         return bond_mod.stiffness(E, nu, self.bond_area, self.bond_I, self.bond_J, self.bond_length)

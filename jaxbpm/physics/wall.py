@@ -25,7 +25,9 @@ def wall_forces(positions, radii, points, normals, law: str, stiffness):
     gap = jnp.einsum("nk,wk->nw", positions, normals) - jnp.sum(points * normals, axis=1)[None, :]
     delta = jnp.maximum(radii[:, None] - gap, 0.0)
     if law == "hertz":
-        mag = 4.0 / 3.0 * stiffness * jnp.sqrt(radii)[:, None] * delta * jnp.sqrt(delta)
+        # sqrt of a safe argument: the derivative of sqrt at 0 is infinite, and 0 * inf would make jvps NaN
+        root = jnp.where(delta > 0, jnp.sqrt(jnp.where(delta > 0, delta, 1.0)), 0.0)
+        mag = 4.0 / 3.0 * stiffness * jnp.sqrt(radii)[:, None] * delta * root
     elif law == "linear":
         mag = stiffness * delta
     else:
