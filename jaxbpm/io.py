@@ -47,7 +47,7 @@ import numpy as np
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk", "write_json"]
 
 FORMAT = "jaxbpm-sample"
 """Value of the ``format`` root attribute of a sample file."""
@@ -97,6 +97,31 @@ def _atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
             os.unlink(tmp)
         raise
     return target
+
+
+def write_json(path, data) -> pathlib.Path:
+    """Write ``data`` as indented JSON to ``path`` atomically, creating missing parent directories.
+
+    NumPy scalars and arrays are converted; anything else unknown is written as its ``float``.
+    """
+    import json
+
+    def convert(obj):
+        if isinstance(obj, np.ndarray):
+            return obj.tolist()
+        if isinstance(obj, (np.integer, np.bool_)):
+            return obj.item()
+        return float(obj)
+
+    target = pathlib.Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+
+    def write(tmp):
+        with open(tmp, "w") as fh:
+            json.dump(data, fh, indent=2, default=convert)
+            fh.write("\n")
+
+    return _atomic_write(target, write)
 
 
 # ---------------------------------------------------------------------------------------------- HDF5 sample files

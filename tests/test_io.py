@@ -266,6 +266,23 @@ def test_export_vtk_is_atomic(tmp_path, monkeypatch):
 
 
 def test_public_api_documented():
-    assert set(io.__all__) == {"FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk"}
-    for name in ("save_sample", "load_sample", "export_vtk"):
+    assert set(io.__all__) == {"FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk", "write_json"}
+    for name in ("save_sample", "load_sample", "export_vtk", "write_json"):
         assert getattr(io, name).__doc__
+
+
+def test_write_json_round_trip_and_atomic(tmp_path, monkeypatch):
+    import json
+
+    target = tmp_path / "deep" / "r.json"
+    io.write_json(target, {"a": np.float64(1.5), "b": np.arange(3), "c": np.int32(4), "d": True})
+    assert json.loads(target.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": 4, "d": True}
+    before = target.read_bytes()
+
+    def boom(*a, **k):
+        raise RuntimeError("crash mid-write")
+
+    monkeypatch.setattr(json, "dump", boom)
+    with pytest.raises(RuntimeError, match="crash mid-write"):
+        io.write_json(target, {"a": 2})
+    assert target.read_bytes() == before and sorted(p.name for p in target.parent.iterdir()) == ["r.json"]

@@ -1,0 +1,58 @@
+"""Shared helpers of the benchmark scripts: thread pinning, x64, atomic JSON output, a results table."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+
+
+def pin_threads(threads: int | None) -> None:
+    """Restrict this process (and XLA) to ``threads`` CPU cores; call before importing jax."""
+    if not threads:
+        return
+    if hasattr(os, "sched_setaffinity"):
+        cores = sorted(os.sched_getaffinity(0))[:threads]
+        os.sched_setaffinity(0, cores)
+    flags = os.environ.get("XLA_FLAGS", "")
+    if threads == 1 and "multi_thread_eigen" not in flags:
+        os.environ["XLA_FLAGS"] = (flags + " --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1").strip()
+    os.environ.setdefault("OMP_NUM_THREADS", str(threads))
+
+
+def enable_x64():
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    return jax
+
+
+def machine_info() -> dict:
+    import jax
+
+    dev = jax.devices()[0]
+    return {"python": platform.python_version(), "jax": jax.__version__, "platform": dev.platform,
+            "device": getattr(dev, "device_kind", str(dev)), "cpu_count": os.cpu_count(),
+            "affinity": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
+            "xla_flags": os.environ.get("XLA_FLAGS", "")}
+
+
+def write_json(path, data):
+    """Write ``data`` as JSON atomically (temporary file, then rename): never a half-written result."""
+    from jaxbpm.io import write_json as _write
+
+    return _write(path, data)
+
+
+def table(rows: list[dict], columns: list[str], file=sys.stdout) -> None:
+    """Print rows as an aligned text table."""
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v)
+
+    cells = [[fmt(r.get(c, "")) for c in columns] for r in rows]
+    widths = [max(len(c), *(len(row[k]) for row in cells)) for k, c in enumerate(columns)]
+    print("  ".join(c.rjust(w) for c, w in zip(columns, widths)), file=file)
+    for row in cells:
+        print("  ".join(v.rjust(w) for v, w in zip(row, widths)), file=file)
