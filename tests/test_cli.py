@@ -1,5 +1,6 @@
 """The ``jaxbpm`` command, end to end in a temporary directory."""
 
+import json
 import os
 import pathlib
 import subprocess
@@ -100,7 +101,7 @@ def test_demo(tmp_path, capsys, monkeypatch):
 
     def fake_from_shape(shape, n, *, seed=0, progress=False, **kw):
         calls.append(dict(shape=shape, n=n, seed=seed, progress=progress, **kw))
-        return _chain(n)
+        return generate.lattice("sc", (2, 2, 4), 1e-3)  # small and exact: the solvers agree on it
 
     monkeypatch.setattr(generate, "from_shape", fake_from_shape, raising=False)
     out_dir = tmp_path / "demo"
@@ -108,8 +109,14 @@ def test_demo(tmp_path, capsys, monkeypatch):
     assert code == 0, err
     assert calls == [dict(shape="box", n=300, seed=2, progress=False)]
     sample = io.load_sample(out_dir / "demo_sample.h5")
-    assert sample.n_particles == 300 and str(sample.summary()) in stdout
+    assert sample.n_particles == 16 and str(sample.summary()) in stdout
     assert "demo_sample.h5" in stdout
+    # the comparison table: both methods, DSM within 1 % of the DEM on this lattice
+    report = json.loads((out_dir / "demo_results.json").read_text())
+    methods = {row["method"]: row for row in report["results"]}
+    assert set(methods) == {"dem", "dsm"}
+    assert abs(methods["dsm"]["difference_to_dem"]) < 1e-2
+    assert "vs DEM" in stdout
 
 
 def test_demo_defaults(tmp_path, monkeypatch, capsys):
@@ -117,10 +124,10 @@ def test_demo_defaults(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(generate, "from_shape", lambda shape, n, **kw: calls.append((shape, n, kw)) or _chain(5),
                         raising=False)
     monkeypatch.chdir(tmp_path)
-    assert cli.main(["demo"]) == 0
+    assert cli.main(["demo", "--no-solve"]) == 0
     assert calls == [("box", 2000, {"seed": 0, "progress": True})]
     assert (tmp_path / "jaxbpm-demo" / "demo_sample.h5").is_file()
-    result = cli.run_demo(tmp_path / "again", n=7, seed=1, quiet=True)
+    result = cli.run_demo(tmp_path / "again", n=7, seed=1, quiet=True, solve=False)
     assert result["sample_path"] == tmp_path / "again" / "demo_sample.h5" and result["sample"].n_particles == 5
 
 
