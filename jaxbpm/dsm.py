@@ -113,7 +113,7 @@ def _preconditioner(model: Model, params, free):
     inv = jnp.linalg.inv(blocks)
 
     def apply(v):
-        return jnp.where(free, jnp.einsum("nij,nj->ni", inv, v), 0.0)
+        return jnp.where(free, jnp.einsum("nij,nj->ni", inv, v), v)
 
     return apply
 
@@ -132,7 +132,9 @@ def linear_solve(model: Model, params, free, u_prescribed, *, tol=1e-6, maxiter=
         return _internal_forces(model, params, u, walls=walls)[0]
 
     def matvec(v):
-        return -jnp.where(free, jax.jvp(f, (u0,), (jnp.where(free, v, 0.0),))[1], 0.0)
+        # identity on the prescribed DOFs keeps the operator regular, so that the adjoint (transpose) solve of
+        # reverse-mode differentiation stays consistent whatever cotangent reaches those DOFs
+        return jnp.where(free, -jax.jvp(f, (u0,), (jnp.where(free, v, 0.0),))[1], v)
 
     rhs = jnp.where(free, jax.jvp(f, (u0,), (u_prescribed,))[1], 0.0)
     precond = _preconditioner(model, params, free)
@@ -206,7 +208,7 @@ def _contact_candidates(sample, model, skin):
 
 
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
-                newton_maxiter=30, stiffness_tol=None, contact_skin=None, throw=False):
+                newton_maxiter=30, stiffness_tol=None, contact_skin=None, load_steps=4, throw=False):
     """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`."""
     from jaxbpm.physics.model import default_params
     from jaxbpm.result import Result
@@ -263,9 +265,9 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         parts = _internal_forces(model, params, u)[1]
     else:
         tol = 1e-3 if tol is None else tol
-        u, reaction, parts, info, compile_time, run_time = _newton(
+        u, disps, forces, parts, info, compile_time, run_time = _newton(
             model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxiter, newton_maxiter, stiffness_tol,
-            driven, delta)
+            driven, delta, load_steps)
         converged = info["converged"]
         stats.update(info)
     if not converged:
@@ -274,10 +276,16 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         if throw:
             raise ConvergenceError(msg)
         warnings.warn(msg, stacklevel=3)
-    stiffness = reaction / delta
+    if nonlinear:
+        # the same measure as the DEM: least-squares slope of the load steps within the scene's fit range
+        stiffness = scene.fit_stiffness(disps, forces, delta) if load_steps > 1 else float(forces[-1] / delta)
+        disps, forces = np.concatenate([[0.0], disps]), np.concatenate([[0.0], forces])
+    else:
+        stiffness = reaction / delta
+        disps, forces = np.array([0.0, delta]), np.array([0.0, reaction])
     stats.update(bond_forces=parts["bonds"])
     return Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
-                  area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, reaction]),
+                  area=area, displacement=disps, force=forces,
                   wall_time=time.perf_counter() - t0, compile_time=compile_time, run_time=run_time, stats=stats,
                   state=u)
 
@@ -298,8 +306,11 @@ def _linear_jit(model, params, free, u_p, tol, maxiter):
 
 
 def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxiter, newton_maxiter, stiffness_tol,
-            driven, delta):
-    """Newton-Krylov with backtracking line search. Returns u, reaction, parts, info, compile and run time."""
+            driven, delta, load_steps):
+    """Newton-Krylov with backtracking line search, over ``load_steps`` equal load increments.
+
+    Returns displacement field, per-step displacements and reactions, parts, info, compile and run time.
+    """
     import dataclasses
 
     model_c = dataclasses.replace(model, contacts=pairs is not None and len(pairs) > 0)
@@ -315,9 +326,11 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
     clamped = ~np.asarray(free).any(axis=1)
     moving = jnp.asarray(driven) if not uses_walls else None
     resting = jnp.asarray(clamped & ~np.asarray(driven)) if not uses_walls else None
+    normals = walls[1] if uses_walls else None
+    wall_base = walls[0] if uses_walls else None
 
-    def residual(u):
-        gen, parts = _internal_forces(model_c, params, u, con, walls)
+    def residual(u, wall_points):
+        gen, parts = _internal_forces(model_c, params, u, con, (wall_points, normals) if uses_walls else None)
         return jnp.where(free, gen, 0.0), gen, parts
 
     def reaction_of(gen, parts):
@@ -328,8 +341,8 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
         return 0.5 * (jnp.sum(jnp.where(moving, comp, 0.0)) - jnp.sum(jnp.where(resting, comp, 0.0)))
 
     @jax.jit
-    def evaluate(u):
-        r, gen, parts = residual(u)
+    def evaluate(u, wall_points):
+        r, gen, parts = residual(u, wall_points)
         # the residual is measured against the external forces: reactions of clamped DOFs and of the walls
         scale = jnp.linalg.norm(jnp.where(free, 0.0, gen))
         if uses_walls:
@@ -338,11 +351,12 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
         return jnp.linalg.norm(r), scale, reaction_of(gen, parts)
 
     @jax.jit
-    def newton_step(u, krylov_tol):
-        r = residual(u)[0]
+    def newton_step(u, wall_points, krylov_tol):
+        r = residual(u, wall_points)[0]
 
         def matvec(v):
-            return -jnp.where(free, jax.jvp(lambda w: residual(w)[0], (u,), (jnp.where(free, v, 0.0),))[1], 0.0)
+            return jnp.where(free, -jax.jvp(lambda w: residual(w, wall_points)[0], (u,),
+                                            (jnp.where(free, v, 0.0),))[1], v)
 
         # right preconditioning (A M y = r, du = M y): jax's gmres measures a left-preconditioned residual against
         # the unpreconditioned right-hand side, which stops it at once when M carries units (1 / stiffness)
@@ -351,9 +365,17 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
         return jnp.where(free, precond(y), 0.0)
 
     precond = _preconditioner(model, params, free)
+    fractions = np.arange(1, load_steps + 1) / load_steps
+
+    def walls_at(frac):
+        # the top wall (index 1) moves by frac * delta against the axis; wall_base holds it at the full delta
+        if not uses_walls:
+            return jnp.zeros((0, 3), u_p.dtype)
+        shift = jnp.zeros_like(wall_base).at[1, ax].set((1.0 - frac) * delta)
+        return wall_base + shift
+
     tc = time.perf_counter()
-    # start: the linear bond solution; between walls, a homogeneous compression that leaves a small overlap at
-    # both walls (a start without overlap has no axial contact stiffness, so the Newton system would be singular)
+    frac0 = fractions[0]
     if uses_walls:
         # start from the bond system with the wall-touching particles moved axially so that each wall overlaps them
         # a little (seed 000 starts Newton from the pure bond solution; without overlap the walls add no stiffness
@@ -364,43 +386,113 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
         beta = 0.1
         bottom, top = (z - rad) <= lo + reach, (z + rad) >= hi - reach
         guess = np.zeros(u_p.shape)
-        guess[bottom, ax] = -0.5 * beta * delta
-        guess[top, ax] = -(1.0 - 0.5 * beta) * delta
+        guess[bottom, ax] = -0.5 * beta * frac0 * delta
+        guess[top, ax] = -(1.0 - 0.5 * beta) * frac0 * delta
         free_lin = np.asarray(free).copy()
         free_lin[bottom | top, ax] = False
         bonds_only = dataclasses.replace(model, walls=None)
         u, _ = jax.jit(lambda p: linear_solve(bonds_only, p, jnp.asarray(free_lin), jnp.asarray(guess, u_p.dtype),
                                               tol=linear_tol))(params)
     else:
-        u, _ = jax.jit(lambda p: linear_solve(model, p, free, u_p, tol=linear_tol))(params)
-    norm, scale, react = evaluate(u)
-    jax.block_until_ready(newton_step(u, 1e-3))
+        u, _ = jax.jit(lambda p: linear_solve(model, p, free, frac0 * u_p, tol=linear_tol))(params)
+    jax.block_until_ready(evaluate(u, walls_at(frac0)))
+    jax.block_until_ready(newton_step(u, walls_at(frac0), 1e-3))
     compile_time = time.perf_counter() - tc
     tr = time.perf_counter()
-    history, reactions = [float(norm / scale)], [float(react)]
-    converged = False
-    for it in range(newton_maxiter):
-        rel = float(norm / scale)
-        if rel <= tol or (stiffness_tol is not None and len(reactions) > 1 and
-                          abs(reactions[-1] - reactions[-2]) <= stiffness_tol * abs(reactions[-1])):
-            converged = True
-            break
-        du = newton_step(u, min(0.1, max(rel * 0.1, 1e-8)))
-        alpha = 1.0
-        for _ in range(12):
-            trial = u + alpha * du
-            t_norm, t_scale, t_react = evaluate(trial)
-            if np.isfinite(float(t_norm)) and float(t_norm) < (1 - 1e-4 * alpha) * float(norm):
-                break
-            alpha *= 0.5
-        u, norm, scale, react = trial, t_norm, t_scale, t_react
+    history, step_reactions, converged_all, iterations = [], [], True, 0
+    prev = None
+    for frac in fractions:
+        wp = walls_at(frac)
+        if prev is not None:
+            u = u * (frac / prev)  # proportional extrapolation; prescribed DOFs land exactly on frac * u_p
+        prev = frac
+        norm, scale, react = evaluate(u, wp)
         history.append(float(norm / scale))
-        reactions.append(float(react))
-    else:
-        converged = float(norm / scale) <= tol
+        reactions = [float(react)]
+        converged = False
+        for _ in range(newton_maxiter):
+            rel = float(norm / scale)
+            if rel <= tol or (stiffness_tol is not None and len(reactions) > 1 and
+                              abs(reactions[-1] - reactions[-2]) <= stiffness_tol * abs(reactions[-1])):
+                converged = True
+                break
+            du = newton_step(u, wp, min(0.1, max(rel * 0.1, 1e-8)))
+            alpha = 1.0
+            for _ in range(12):
+                trial = u + alpha * du
+                t_norm, t_scale, t_react = evaluate(trial, wp)
+                if np.isfinite(float(t_norm)) and float(t_norm) < (1 - 1e-4 * alpha) * float(norm):
+                    break
+                alpha *= 0.5
+            u, norm, scale, react = trial, t_norm, t_scale, t_react
+            history.append(float(norm / scale))
+            reactions.append(float(react))
+            iterations += 1
+        else:
+            converged = float(norm / scale) <= tol
+        converged_all &= converged
+        step_reactions.append(float(react))
     jax.block_until_ready(u)
     run_time = time.perf_counter() - tr
-    parts = residual(u)[2]
-    info = {"residual": float(norm / scale), "residual_history": history, "iterations": len(history) - 1,
-            "converged": bool(converged), "contacts": int(0 if pairs is None else len(pairs))}
-    return u, float(react), parts, info, compile_time, run_time
+    parts = residual(u, walls_at(1.0))[2]
+    info = {"residual": float(norm / scale), "residual_history": history, "iterations": iterations,
+            "converged": bool(converged_all), "contacts": int(0 if pairs is None else len(pairs)),
+            "load_steps": int(load_steps)}
+    return u, fractions * delta, np.asarray(step_reactions), parts, info, compile_time, run_time
+
+
+# ---------------------------------------------------------------------------------------------------- pure functions
+def stiffness_function(sample, scene, *, dofs=None, tol=1e-8, maxiter=None):
+    """A pure function ``params -> K`` [N/m] of the linear DSM on ``scene`` (clamped layers, bonds only).
+
+    It can be ``jit``-ed, differentiated (``jax.grad``: implicit differentiation through the CG solve) and
+    ``vmap``-ped over parameter sets, e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``.
+    """
+    if scene.uses_walls or scene.contacts:
+        raise SceneError("stiffness_function covers the linear DSM (clamped layers, bonds only)")
+    rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]
+    model = scene.model(sample, rotations=rotations, contacts=False)
+    free_np, fixed, driven = _free_mask(model, scene, sample)
+    _check_held(sample, model, free_np, fixed | driven)
+    length, _ = scene.geometry(sample)
+    delta = scene.strain * length
+    u_p = np.zeros(free_np.shape)
+    u_p[driven, scene.axis] = -delta
+    free, u_p = jnp.asarray(free_np), jnp.asarray(u_p, model.positions0.dtype)
+
+    def stiffness(params):
+        return _linear_jit(model, params, free, u_p, tol, maxiter)[1] / delta
+
+    return stiffness
+
+
+def load_cases(sample, scene, directions, params=None, *, dofs=None, tol=1e-8):
+    """Reactions of several load cases on the same operator: the driven layer moved by ``strain * l`` along each
+    unit vector in ``directions [L, 3]`` (e.g. the three axes: compression and two shears), all solved at once with
+    ``vmap``. Returns the ``[L, 3]`` matrix of reaction forces per unit displacement [N/m] (row: load case)."""
+    from jaxbpm.physics.model import default_params
+
+    rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]
+    model = scene.model(sample, rotations=rotations, contacts=False)
+    params = default_params(sample) if params is None else params
+    free_np, fixed, driven = _free_mask(model, scene, sample)
+    _check_held(sample, model, free_np, fixed | driven)
+    length, _ = scene.geometry(sample)
+    delta = scene.strain * length
+    dirs = np.asarray(directions, float).reshape(-1, 3)
+    u_p = np.zeros((len(dirs),) + free_np.shape)
+    u_p[:, driven, :3] = delta * dirs[:, None, :]
+    free = jnp.asarray(free_np)
+
+    @jax.jit
+    def reactions(u_p):
+        def one(up):
+            u, _ = linear_solve(model, params, free, up, tol=tol)
+            f = lambda w: _internal_forces(model, params, w)[0]  # noqa: E731
+            gen = jax.jvp(f, (jnp.zeros_like(u),), (u,))[1]
+            # force the machine applies to the driven layer = minus the internal force on it
+            return -jnp.sum(jnp.where(jnp.asarray(driven)[:, None], gen[:, :3], 0.0), axis=0)
+
+        return jax.vmap(one)(u_p)
+
+    return np.asarray(reactions(jnp.asarray(u_p, model.positions0.dtype))) / delta

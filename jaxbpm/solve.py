@@ -28,8 +28,9 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     options for ``"dsm"``: ``dofs`` (3 or 6 per particle; default: the Model's choice, 6 with bonds), ``nonlinear``
     (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
-    Newton when the reaction changes less than this, relative), ``contact_skin`` [m], ``throw`` (raise
-    :class:`ConvergenceError` instead of warning when a solve misses its tolerance).
+    Newton when the reaction changes less than this, relative), ``contact_skin`` [m], ``load_steps`` (nonlinear:
+    equal load increments, 4; K is their least-squares slope over the scene's fit range, as for the DEM), ``throw``
+    (raise :class:`ConvergenceError` instead of warning when a solve misses its tolerance).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
