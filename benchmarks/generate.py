@@ -22,7 +22,6 @@ import json
 import os
 import platform
 import sys
-import tempfile
 import time
 
 
@@ -120,16 +119,9 @@ def main(argv=None) -> dict:
     }
     text = json.dumps(report, indent=2)
     print(text)
-    out = os.path.abspath(args.out)
-    os.makedirs(os.path.dirname(out), exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".generate-", suffix=".json", dir=os.path.dirname(out))
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text + "\n")
-        os.replace(tmp, out)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    from jaxbpm.io import write_json
+
+    write_json(args.out, report)
     return report
 
 

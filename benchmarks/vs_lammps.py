@@ -87,7 +87,6 @@ Differences between the two bond laws (documented, not hidden)
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import pathlib
@@ -488,20 +487,9 @@ def _git_state() -> dict:
 
 
 def _write_json(path: pathlib.Path, obj) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmpname = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=2)
-            fh.write("\n")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmpname, 0o666 & ~umask)  # mkstemp makes it 0600; give it the usual permissions
-        os.replace(tmpname, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmpname)
-        raise
+    from jaxbpm.io import write_json  # atomic: temporary file, then rename
+
+    write_json(path, obj)
 
 
 def _fmt(v, spec=".4g"):

@@ -35,11 +35,12 @@ import numpy as np
 from jax_md import partition, space
 
 from jaxbpm.errors import InstabilityError
+from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
-           "potential_energy", "NeighborSettings"]
+           "potential_energy", "NeighborSettings", "progress_printer"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,14 +225,15 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
         rebuilt = jnp.any(nbrs.reference_position != state.nbrs.reference_position)
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n),
                               lambda: state.spring)
-        pairs = nbrs.idx.T
-        i, j = jnp.minimum(pairs[:, 0], model.n - 1), jnp.minimum(pairs[:, 1], model.n - 1)
-        d = x[j] - x[i]
-        nrm = d / jnp.maximum(jnp.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-        arm_i = model.radii[i, None] * nrm
-        arm_j = -model.radii[j, None] * nrm
-        v_rel = (v[j] + jnp.cross(w[j], arm_j)) - (v[i] + jnp.cross(w[i], arm_i))
-        dxi = dt * v_rel
+        # relative velocity of the contact points, v_j - v_i - (r_j w_j + r_i w_i) x n, on [C] component arrays
+        # (the same pair vectors as the contact law, which XLA then computes once)
+        i, j, d = contact_mod.pair_vectors(x, *_contact_pairs(model, nbrs))
+        inv = 1.0 / jnp.maximum(jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]), 1e-300)
+        v_t, w_t, r_i, r_j = v.T, w.T, model.radii[i], model.radii[j]
+        s = tuple(r_j * w_t[k, j] + r_i * w_t[k, i] for k in range(3))
+        spin = (s[1] * d[2] - s[2] * d[1], s[2] * d[0] - s[0] * d[2], s[0] * d[1] - s[1] * d[0])
+        v_rel = tuple(v_t[k, j] - v_t[k, i] - spin[k] * inv for k in range(3))
+        dxi = tuple(dt * c for c in v_rel)  # the contact law takes these component tuples as well as [C, 3] rows
 
     new = DEMState(positions=x, velocities=v, orientations=q, omegas=w, force=state.force, moment=state.moment,
                    intact=state.intact, spring=spring, nbrs=nbrs, time=t)
@@ -399,17 +401,22 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     return state, out, stats
 
 
-def _progress_fn(progress):
-    if callable(progress):
-        return progress
-    if not progress:
-        return lambda *a: None
-    last = [0.0]
+def progress_printer(strain_per_step: float | None = None):
+    """A progress callback for :func:`simulate` printing steps (and simulated strain, when the strain per step is
+    given) and elapsed time to stderr, at most every 2 s."""
+    last = [-1e9]
 
     def report(done, total, elapsed):
         if elapsed - last[0] >= 2.0 or done == total:
             last[0] = elapsed
-            print(f"  DEM step {done}/{total} ({100.0 * done / total:5.1f} %)  elapsed {elapsed:7.1f} s",
+            strain = "" if strain_per_step is None else f"  strain {100 * strain_per_step * done:.4f} %"
+            print(f"  DEM step {done}/{total} ({100.0 * done / total:5.1f} %){strain}  elapsed {elapsed:7.1f} s",
                   file=sys.stderr, flush=True)
 
     return report
+
+
+def _progress_fn(progress):
+    if callable(progress):
+        return progress
+    return progress_printer() if progress else (lambda *a: None)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 
 import numpy as np
@@ -68,7 +67,7 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     n_steps = -(-n_steps // chunk) * chunk
     load = scene.loading(sample, speed)
     if progress is True:
-        progress = _strain_progress(speed * dt / length)
+        progress = dem.progress_printer(strain_per_step=speed * dt / length)
     state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping, chunk=chunk,
                                      neighbors=neighbors, progress=progress, dt_crit=dt_crit)
     disp = speed * rec["time"]
@@ -80,19 +79,6 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     return Result(method="dem", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
                   area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
                   compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state)
-
-
-def _strain_progress(strain_per_step):
-    """A progress printer showing steps, simulated strain and elapsed time, at most every 2 s."""
-    last = [-1e9]
-
-    def report(done, total, elapsed):
-        if elapsed - last[0] >= 2.0 or done == total:
-            last[0] = elapsed
-            print(f"  DEM step {done}/{total}  strain {100 * strain_per_step * done:.4f} %  elapsed {elapsed:.1f} s",
-                  file=sys.stderr, flush=True)
-
-    return report
 
 
 def _transit_time(model, params, length) -> float:

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 
 __all__ = ["ContactParams", "ContactForces", "contact_params", "hertz_mindlin", "hertz_normal_force",
-           "pair_forces"]
+           "pair_forces", "pair_vectors"]
 
 
 class ContactParams(NamedTuple):
@@ -66,6 +66,71 @@ def _safe_sqrt(x):
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
+def _law(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True):
+    """The contact law on components: ``d, spring, dxi, v_rel`` are ``(x, y, z)`` tuples of scalars (one pair) or of
+    ``[C]`` arrays (all pairs at once), the rest scalars or ``[C]`` arrays; ``valid`` masks padding. Returns the
+    fields of :class:`ContactForces`, vectors as component tuples, zero where the pair is not in contact.
+
+    Written like the bond law (:func:`jaxbpm.physics.bond._law`): elementwise on components, projections on the
+    normal as ``(a . d) / |d|`` (XLA on CPU keeps a division as a separate loop, so the projections are computed
+    once per pair instead of once in every fused consumer).
+    """
+    dist = jnp.sqrt(_dot(d, d))
+    overlap = r_i + r_j - dist
+    active = (overlap > 0) & valid
+    delta = jnp.where(active, overlap, 0.0)
+    r_star = r_i * r_j / (r_i + r_j)
+    m_star = m_i * m_j / (m_i + m_j)
+    sqrt_rd = _safe_sqrt(r_star * delta)
+    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta
+    inv = 1.0 / dist
+    n = tuple(c * inv for c in d)
+    v_n = _dot(v_rel, d) / dist
+    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * _safe_sqrt(2.0 * p.E_star * sqrt_rd * m_star) * v_n
+    fn = jnp.where(active, jnp.maximum(fn, 0.0), 0.0)
+
+    # tangential spring: keep it in the current tangent plane (same length), then add this step's slip
+    s_n = _dot(spring, d) / dist
+    old = tuple(spring[k] - s_n * n[k] for k in range(3))
+    old_len2, proj_len2 = _dot(spring, spring), _dot(old, old)
+    pos = proj_len2 > 0
+    stretch = jnp.where(pos, _safe_sqrt(old_len2 / jnp.where(pos, proj_len2, 1.0)), 0.0)
+    dxi_n = _dot(dxi, d) / dist
+    xi = tuple(old[k] * stretch + dxi[k] - dxi_n * n[k] for k in range(3))
+    kt = 8.0 * p.G_star * sqrt_rd
+    c_t = damp * _safe_sqrt(kt * m_star)
+    ft_j = tuple(-kt * xi[k] - c_t * (v_rel[k] - v_n * n[k]) for k in range(3))
+    ft_len = _safe_sqrt(_dot(ft_j, ft_j))
+    limit = p.friction * fn
+    sliding = (ft_len > limit) & active
+    scale = jnp.where(sliding, limit / jnp.where(ft_len > 0, ft_len, 1.0), 1.0)
+    scale = jnp.where(active, scale, 0.0)
+    ft_j = tuple(c * scale for c in ft_j)
+    back = -1.0 / jnp.where(kt > 0, kt, 1.0)  # a sliding spring is shortened to match the Coulomb force
+    xi = tuple(jnp.where(sliding, ft_j[k] * back, jnp.where(active, xi[k], 0.0)) for k in range(3))
+
+    f_i = tuple(-fn * n[k] - ft_j[k] for k in range(3))
+    # moments -(r - delta / 2) n x ft_j on both particles (arms (r_i - delta/2) n and -(r_j - delta/2) n)
+    twist = _cross(d, ft_j)
+    arm_i = (0.5 * delta - r_i) / dist
+    arm_j = (0.5 * delta - r_j) / dist
+    return ContactForces(f_i=f_i, m_i=tuple(arm_i * c for c in twist), m_j=tuple(arm_j * c for c in twist),
+                         normal=fn, spring=xi, sliding=sliding, active=active)
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a, b):
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _stack(out: ContactForces) -> ContactForces:
+    """Component tuples to ``[..., 3]`` arrays."""
+    return ContactForces(*(jnp.stack(o, axis=-1) if isinstance(o, tuple) else o for o in out))
+
+
 def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -> ContactForces:
     """Forces of ONE contact.
 
@@ -75,63 +140,38 @@ def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -
         point of j with respect to that of i since then. v_rel: ``[3]`` relative velocity of the contact points
         (zeros for a static solve).
     """
-    dist = jnp.sqrt(jnp.dot(d, d))
-    n = d / dist
-    overlap = r_i + r_j - dist
-    active = overlap > 0
-    delta = jnp.where(active, overlap, 0.0)
-    r_star = r_i * r_j / (r_i + r_j)
-    m_star = m_i * m_j / (m_i + m_j)
-    sqrt_rd = _safe_sqrt(r_star * delta)
-    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta
-    v_n = jnp.dot(v_rel, n)
-    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * _safe_sqrt(2.0 * p.E_star * sqrt_rd * m_star) * v_n
-    fn = jnp.where(active, jnp.maximum(fn, 0.0), 0.0)
-
-    # tangential spring: keep it in the current tangent plane (same length), then add this step's slip
-    old = spring - jnp.dot(spring, n) * n
-    old_len, proj_len = _safe_sqrt(jnp.dot(spring, spring)), _safe_sqrt(jnp.dot(old, old))
-    old = old * jnp.where(proj_len > 0, old_len / jnp.where(proj_len > 0, proj_len, 1.0), 0.0)
-    xi = old + dxi - jnp.dot(dxi, n) * n
-    kt = 8.0 * p.G_star * sqrt_rd
-    v_t = v_rel - v_n * n
-    ft_j = -kt * xi - damp * _safe_sqrt(kt * m_star) * v_t
-    ft_len = _safe_sqrt(jnp.dot(ft_j, ft_j))
-    limit = p.friction * fn
-    sliding = ft_len > limit
-    scale = jnp.where(sliding, limit / jnp.where(ft_len > 0, ft_len, 1.0), 1.0)
-    ft_j = ft_j * scale
-    xi = jnp.where(sliding, -ft_j / jnp.where(kt > 0, kt, 1.0), xi)
-    xi = jnp.where(active, xi, 0.0)
-    ft_j = jnp.where(active, ft_j, 0.0)
-
-    f_i = -fn * n - ft_j
-    arm_i = (r_i - 0.5 * delta) * n
-    arm_j = -(r_j - 0.5 * delta) * n
-    return ContactForces(f_i=f_i, m_i=jnp.cross(arm_i, -ft_j), m_j=jnp.cross(arm_j, ft_j), normal=fn, spring=xi,
-                         sliding=sliding & active, active=active)
+    return _stack(_law(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), p))
 
 
-_hertz_mindlin_all = jax.vmap(hertz_mindlin, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, None))
+def _components(a):
+    """``[C, 3]`` rows (or a tuple of three ``[C]`` arrays) as a tuple of three ``[C]`` component arrays."""
+    return tuple(a) if isinstance(a, tuple) else tuple(a.T)
+
+
+def pair_vectors(positions, pairs, valid):
+    """Particle indices ``i, j [C]`` of the candidate pairs (padding and excluded pairs point at particles 0 and 1)
+    and the components ``(x, y, z)`` of ``d = x_j - x_i`` (``[C]`` each; ones for those, keeping them finite)."""
+    n = positions.shape[0]
+    i = jnp.where(valid, pairs[:, 0], 0)
+    j = jnp.where(valid, pairs[:, 1], 1 % n)
+    # gather columns of the transposed [3, n] positions: the law runs on [C] component arrays
+    x_t = positions.T
+    return i, j, tuple(jnp.where(valid, x_t[k, j] - x_t[k, i], 1.0) for k in range(3))
 
 
 def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: ContactParams):
     """Contacts of all candidate pairs ``[C, 2]`` (``valid [C]`` masks padding and excluded pairs).
 
+    ``spring``, ``dxi`` and ``v_rel`` are ``[C, 3]`` (or tuples of their three ``[C]`` columns).
     Returns per-particle force and moment sums ``([n, 3], [n, 3])`` and the per-pair :class:`ContactForces`.
     """
     n = positions.shape[0]
-    i = jnp.where(valid, pairs[:, 0], 0)
-    j = jnp.where(valid, pairs[:, 1], 1 % n)
-    d = positions[j] - positions[i]
-    d = jnp.where(valid[:, None], d, jnp.ones_like(d))  # keep padding finite
-    cf = _hertz_mindlin_all(d, radii[i], radii[j], mass[i], mass[j], spring, dxi, v_rel, p)
-    keep = valid & cf.active
-    cf = cf._replace(
-        f_i=jnp.where(keep[:, None], cf.f_i, 0.0), m_i=jnp.where(keep[:, None], cf.m_i, 0.0),
-        m_j=jnp.where(keep[:, None], cf.m_j, 0.0), normal=jnp.where(keep, cf.normal, 0.0),
-        spring=jnp.where(keep[:, None], cf.spring, 0.0), sliding=cf.sliding & keep, active=keep)
-    idx = jnp.concatenate([i, j])
-    force = jax.ops.segment_sum(jnp.concatenate([cf.f_i, -cf.f_i]), idx, n)
-    moment = jax.ops.segment_sum(jnp.concatenate([cf.m_i, cf.m_j]), idx, n)
-    return force, moment, cf
+    i, j, d = pair_vectors(positions, pairs, valid)
+    cf = _law(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel), p,
+              valid)
+    # one scatter of (force, 0, moment, 0) rows for both ends (see jaxbpm.physics.bond.bond_forces)
+    zero = jnp.zeros_like(cf.normal)
+    rows_i = jnp.stack(cf.f_i + (zero,) + cf.m_i + (zero,), axis=1)
+    rows_j = jnp.stack(tuple(-f for f in cf.f_i) + (zero,) + cf.m_j + (zero,), axis=1)
+    total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), n)
+    return total[:, :3], total[:, 4:7], _stack(cf)

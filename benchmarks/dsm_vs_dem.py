@@ -1,0 +1,692 @@
+#!/usr/bin/env python
+"""DSM vs DEM (and a sparse direct solve): the stiffness of a bonded sample in uniaxial compression, three ways.
+
+Usage::
+
+    python benchmarks/dsm_vs_dem.py                       # sizes 2k 3k 10k 50k, ~15-20 min on one core
+    python benchmarks/dsm_vs_dem.py --quick               # smoke run (small samples, ~3 min)
+    python benchmarks/dsm_vs_dem.py --sizes 2000 10000 --no-contacts --dem-max 10000
+
+What is compared (the SAME sample for every method of one size)
+----------------------------------------------------------------
+* Sample: ``jaxbpm.generate.box(n, seed).largest_cluster()`` (random polydisperse packing, bonds at contacts).
+* Scene: ``UniaxialCompression(strain=0.002, boundary="layers")``: bottom layer clamped, top layer moved rigidly.
+* DEM (bonds only, 6 DOF, the reference): ``jaxbpm.solve(..., "dem")`` with its defaults (local damping 0.7,
+  loading over 40 elastic-wave transit times, time step 0.5 x critical); compile and run time as the DEM reports
+  them (run = median chunk time x chunks), run once. Skipped above ``--dem-max`` particles (said in the output).
+  Optionally a rotation-free DEM (3 DOF, ``--dem3-max``): the matched reference of the 3-DOF DSM, which is a
+  different (stiffer) model than the 6-DOF one.
+* DSM linear (bonds only), 6 and 3 DOF: ``jaxbpm.solve(..., "dsm", dofs=d)`` -- preconditioned CG on
+  Jacobian-vector products of the force function. Called ``--repeats`` times: the first call's compile time, the
+  min / median run time (jitted solve only, ``block_until_ready``) and wall time (whole ``solve`` call) of the calls.
+* CG diagnostics (where the DSM time goes): jax's ``cg`` does not report its iteration count, so this script runs
+  an instrumented copy of ``jax.scipy.sparse.linalg.cg``'s algorithm (same operator, preconditioner, start,
+  stopping test and tolerance; checked by comparing the solution with the library's) and times its pieces alone:
+  the matvec (``jax.jvp`` of the forces, as the library does), the forces themselves, the block-Jacobi
+  preconditioner (build and apply). It also times a matvec with the per-bond Jacobians precomputed once
+  (``dsm.bond_jacobians``: gather, ``[nb,12,12]`` batched product, scatter) and a whole PCG solve with it
+  ("DSM prototype" below -- written in this script, NOT the library; it shows what the library could gain).
+* Sparse direct solve of the SAME linear 6-DOF system (``--splu-max``): the global stiffness assembled from
+  ``dsm.bond_jacobians`` (``jax.jacfwd`` of the same bond law; ``coo_matrix -> csc``), restricted to the free
+  DOFs, ``scipy.sparse.linalg.splu(K_ff)`` (SuperLU, COLAMD ordering) and ``K_ff u_f = -K_fp u_p``; reaction and
+  stiffness exactly as the DSM measures them. Timed: Jacobians (jitted, compiled beforehand), assembly
+  (COO -> CSC, restriction), factorisation, solve; ``--repeats`` times (min / median). The assembled matrix is
+  checked against the DSM operator (``K v`` vs the jvp on a random ``v``), the stiffness against the DSM-6 one.
+* Nonlinear DSM with Hertz contacts (``contacts=True``: Newton-Krylov over 4 load steps, contact candidates fixed
+  at rest, no slip) vs DEM with contacts (Hertz-Mindlin, neighbour list) at ``--contact-sizes``. The nonlinear DSM
+  compiles inside every call (its jitted steps are closures), so each repeat pays it again; run time excludes it.
+
+Speed-ups are run time to run time (compilation excluded on both sides) and wall to wall (each method's whole
+``solve`` call, compilation and setup included, first call). splu: "total" = Jacobians + assembly + factorisation +
+solve (the Jacobians' compilation excluded), "f+s" = factorisation + solve only.
+Timing: one core (the least busy one, unless ``--cpu``), XLA single-threaded; the load of every core is measured
+before and after and written to the output -- the machine may be shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from _common import enable_x64, machine_info, pin_threads, table, write_json
+
+DEFAULT_SIZES = [2000, 3000, 10000, 50000]
+QUICK_SIZES = [500, 1000]
+
+
+# ---------------------------------------------------------------------------------------------------- machine load
+def cpu_busy(interval: float = 1.0) -> list[float]:
+    """Busy fraction of every core over ``interval`` seconds (from /proc/stat); [] where unavailable."""
+    def read():
+        rows = {}
+        try:
+            with open("/proc/stat") as f:
+                for line in f:
+                    if line.startswith("cpu") and line[3].isdigit():
+                        name, *vals = line.split()
+                        vals = [int(v) for v in vals]
+                        idle = vals[3] + (vals[4] if len(vals) > 4 else 0)
+                        rows[int(name[3:])] = (sum(vals), idle)
+        except OSError:
+            pass
+        return rows
+
+    a = read()
+    time.sleep(interval)
+    b = read()
+    return [round(1.0 - (b[k][1] - a[k][1]) / max(b[k][0] - a[k][0], 1), 3) for k in sorted(b) if k in a]
+
+
+def machine_load(interval: float = 1.0) -> dict:
+    load = {"cpu_busy": cpu_busy(interval)}
+    if hasattr(os, "getloadavg"):
+        load["loadavg"] = [round(x, 2) for x in os.getloadavg()]
+    return load
+
+
+def pin(cpu, threads):
+    """Pin to ``threads`` cores; with one thread to core ``cpu`` (default: the least busy core)."""
+    if threads == 1 and hasattr(os, "sched_setaffinity"):
+        allowed = sorted(os.sched_getaffinity(0))
+        if cpu is None:
+            busy = cpu_busy(1.0)
+            cpu = min(allowed, key=lambda c: busy[c] if c < len(busy) else 1.0)
+        os.sched_setaffinity(0, {cpu})
+    pin_threads(threads)
+    return cpu
+
+
+def spread(times) -> dict:
+    import numpy as np
+
+    t = np.asarray(times, float)
+    return {"min": float(t.min()), "median": float(np.median(t)), "all": [float(x) for x in t]}
+
+
+def log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------------------------------- linear system
+class LinearSystem:
+    """The linear DSM system of ``scene`` on ``sample`` with ``dofs`` per particle, built as ``dsm.solve_scene``
+    builds it (same Model, free mask and prescribed displacements)."""
+
+    def __init__(self, sample, scene, params, dofs):
+        import jax.numpy as jnp
+        import numpy as np
+
+        from jaxbpm import dsm
+
+        self.model = scene.model(sample, rotations=dofs == 6, contacts=False)
+        self.params = params
+        free, fixed, driven = dsm._free_mask(self.model, scene, sample)
+        self.free_np, self.fixed, self.driven = free, fixed, driven
+        length, _ = scene.geometry(sample)
+        self.delta = scene.strain * length
+        self.axis = scene.axis
+        u_p = np.zeros(free.shape)
+        u_p[driven, scene.axis] = -self.delta
+        self.u_p_np = u_p
+        self.free = jnp.asarray(free)
+        self.u_p = jnp.asarray(u_p, self.model.positions0.dtype)
+        self.nd = free.shape[1]
+
+    def reaction(self, gen):
+        """Reaction [N] from generalised internal forces ``gen [n, nd]`` (numpy or jax), as ``dsm._linear_jit``."""
+        comp = gen[:, self.axis]
+        return 0.5 * (comp[self.driven].sum() - comp[self.fixed].sum())
+
+
+def cg_diagnostics(system: LinearSystem, tol: float, repeats: int, ref_u=None) -> dict:
+    """Iterations and cost breakdown of the library's PCG (an instrumented copy of jax's cg), plus a prototype PCG
+    on precomputed per-bond Jacobians."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from jaxbpm import dsm
+
+    model, params, free, u_p = system.model, system.params, system.free, system.u_p
+    size = int(u_p.size)
+
+    def forces(u):
+        return dsm._internal_forces(model, params, u)[0]
+
+    def pcg(matvec_of, M, b, tol):
+        # jax.scipy.sparse.linalg._cg_solve (x0 = 0, maxiter = 10 x size, stop at |r| <= tol |b|), plus a counter
+        atol2 = jnp.square(tol) * jnp.vdot(b, b)
+        z0 = M(b)
+
+        def cond(c):
+            _, r, _, _, k = c
+            return (jnp.vdot(r, r) > atol2) & (k < 10 * size)
+
+        def body(c):
+            x, r, g, p, k = c
+            ap = matvec_of(p)
+            a = g / jnp.vdot(p, ap)
+            x, r = x + a * p, r - a * ap
+            z = M(r)
+            g2 = jnp.vdot(r, z)
+            return x, r, g2, z + (g2 / g) * p, k + 1
+
+        x, r, _, _, k = jax.lax.while_loop(cond, body, (jnp.zeros_like(b), b, jnp.vdot(b, z0), z0, 0))
+        return x, k
+
+    def jvp_matvec(v):
+        u0 = jnp.zeros_like(v)
+        return jnp.where(free, -jax.jvp(forces, (u0,), (jnp.where(free, v, 0.0),))[1], v)
+
+    @jax.jit
+    def library_pcg(params_, tol):
+        u0 = jnp.zeros_like(u_p)
+        b = jnp.where(free, jax.jvp(forces, (u0,), (u_p,))[1], 0.0)
+        M = dsm._preconditioner(model, params_, free)
+        x, k = pcg(jvp_matvec, M, b, tol)
+        return u_p + x, k
+
+    b_idx = model.bonds
+    nd = system.nd
+
+    def jac_matvec_of(jac):
+        def apply(v):
+            w = jnp.where(free, v, 0.0)
+            z = jnp.concatenate([w[b_idx[:, 0]], w[b_idx[:, 1]]], axis=1)
+            y = jnp.einsum("bij,bj->bi", jac, z)
+            kv = jax.ops.segment_sum(jnp.concatenate([y[:, :nd], y[:, nd:]]),
+                                     jnp.concatenate([b_idx[:, 0], b_idx[:, 1]]), model.n)
+            return kv  # K v (stiffness: minus the force jvp)
+        return apply
+
+    @jax.jit
+    def prototype_pcg(params_, tol):
+        jac = dsm.bond_jacobians(model, params_)
+        kmv = jac_matvec_of(jac)
+        b = jnp.where(free, -kmv(u_p), 0.0)
+        M = dsm._preconditioner(model, params_, free)
+        x, k = pcg(lambda v: jnp.where(free, kmv(v), v), M, b, tol)
+        u = u_p + x
+        return u, k, -kmv(u)
+
+    def timed(f, *a, reps=repeats):
+        tc = time.perf_counter()
+        out = jax.block_until_ready(f(*a))
+        first = time.perf_counter() - tc
+        ts = []
+        for _ in range(reps):
+            t = time.perf_counter()
+            out = jax.block_until_ready(f(*a))
+            ts.append(time.perf_counter() - t)
+        return out, first, spread(ts)
+
+    def per_call(f, *a, reps=20):
+        jax.block_until_ready(f(*a))
+        best = np.inf
+        for _ in range(3):
+            t = time.perf_counter()
+            for _ in range(reps):
+                out = f(*a)
+            jax.block_until_ready(out)
+            best = min(best, (time.perf_counter() - t) / reps)
+        return best
+
+    (u, iters), first, t_pcg = timed(library_pcg, params, tol)
+    iters = int(iters)
+    out = {"iterations": iters, "pcg_run_s": t_pcg, "pcg_compile_s": first - t_pcg["min"],
+           "per_iteration_ms": 1e3 * t_pcg["min"] / max(iters, 1)}
+    if ref_u is not None:
+        out["solution_vs_library"] = float(jnp.linalg.norm(u - ref_u) / jnp.linalg.norm(ref_u))
+    rng = np.random.default_rng(0)
+    v = jnp.asarray(rng.normal(size=u_p.shape) * system.delta, u_p.dtype)
+    u0 = jnp.zeros_like(u_p)
+    out["forces_ms"] = 1e3 * per_call(jax.jit(forces), u0)
+    out["matvec_jvp_ms"] = 1e3 * per_call(jax.jit(jvp_matvec), v)
+    M_build = jax.jit(lambda p: dsm._preconditioner(model, p, free)(jnp.ones_like(u_p)))
+    out["precond_build_ms"] = 1e3 * per_call(M_build, params, reps=3)
+    M = dsm._preconditioner(model, params, free)
+    out["precond_apply_ms"] = 1e3 * per_call(jax.jit(M), v)
+    out["vdot_ms"] = 1e3 * per_call(jax.jit(jnp.vdot), v, v)
+    out["matvec_share"] = out["matvec_jvp_ms"] / max(out["per_iteration_ms"], 1e-12)
+    # the prototype: per-bond Jacobians once, then a gather - [nb, 2nd, 2nd] product - scatter per matvec
+    jac = jax.jit(dsm.bond_jacobians)(model, params)
+    out["jacobians_ms"] = 1e3 * per_call(jax.jit(dsm.bond_jacobians), model, params, reps=3)
+    out["matvec_jacobian_ms"] = 1e3 * per_call(jax.jit(lambda v: jnp.where(free, jac_matvec_of(jac)(v), v)), v)
+    out["matvec_jvp_over_jacobian"] = out["matvec_jvp_ms"] / out["matvec_jacobian_ms"]
+    (u2, it2, gen2), first2, t_proto = timed(prototype_pcg, params, tol)
+    out["prototype"] = {"iterations": int(it2), "run_s": t_proto, "compile_s": first2 - t_proto["min"],
+                        "stiffness": float(system.reaction(np.asarray(gen2)) / system.delta),
+                        "memory_MB": float(jac.size * jac.dtype.itemsize / 2**20)}
+    return out
+
+
+def splu_solve(system: LinearSystem, repeats: int, dsm_matvec_check=True) -> dict:
+    """The same linear system assembled from dsm.bond_jacobians and solved by SuperLU."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from jaxbpm import dsm
+
+    model, params, nd = system.model, system.params, system.nd
+    jac_fn = jax.jit(dsm.bond_jacobians)
+    tc = time.perf_counter()
+    jax.block_until_ready(jac_fn(model, params))
+    jac_first = time.perf_counter() - tc
+    bonds = np.asarray(model.bonds)
+    ndof = model.n * nd
+    free = system.free_np.ravel()
+    fi, pi = np.flatnonzero(free), np.flatnonzero(~free)
+    u_p = system.u_p_np.ravel()
+    res = {"jacobians": [], "assembly": [], "factor": [], "solve": []}
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jac = np.asarray(jax.block_until_ready(jac_fn(model, params)))
+        t1 = time.perf_counter()
+        idx = np.concatenate([bonds[:, :1] * nd + np.arange(nd), bonds[:, 1:] * nd + np.arange(nd)], axis=1)
+        rows = np.broadcast_to(idx[:, :, None], jac.shape).ravel()
+        cols = np.broadcast_to(idx[:, None, :], jac.shape).ravel()
+        K = sp.coo_matrix((jac.ravel(), (rows, cols)), shape=(ndof, ndof)).tocsc()  # duplicates summed
+        K_f = K[:, fi]
+        K_ff = K_f[fi, :].tocsc()
+        K_fp = K[:, pi][fi, :]
+        t2 = time.perf_counter()
+        lu = spla.splu(K_ff, permc_spec="COLAMD")
+        t3 = time.perf_counter()
+        u_f = lu.solve(-(K_fp @ u_p[pi]))
+        u = u_p.copy()
+        u[fi] = u_f
+        gen = -(K @ u).reshape(-1, nd)  # internal forces
+        reaction = float(system.reaction(gen))
+        t4 = time.perf_counter()
+        for key, t in zip(res, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            res[key].append(t)
+    out = {k: spread(v) for k, v in res.items()}
+    total = [sum(x) for x in zip(*res.values())]
+    fs = [a + b for a, b in zip(res["factor"], res["solve"])]
+    out.update(total=spread(total), factor_solve=spread(fs), jacobians_compile_s=jac_first - min(res["jacobians"]),
+               stiffness=reaction / system.delta, dofs=int(ndof), free_dofs=int(fi.size), nnz=int(K.nnz),
+               nnz_ff=int(K_ff.nnz), fill_nnz=int(lu.L.nnz + lu.U.nnz), ordering="COLAMD",
+               factor_memory_MB=float((lu.L.nnz + lu.U.nnz) * 12 / 2**20),
+               residual=float(np.linalg.norm(K_ff @ u_f + K_fp @ u_p[pi]) / np.linalg.norm(K_fp @ u_p[pi])))
+    if dsm_matvec_check:
+        # the assembled matrix against the DSM operator: K v == -(jvp of the forces) v
+        v = np.random.default_rng(1).normal(size=(model.n, nd))
+
+        def f(w):
+            return dsm._internal_forces(model, params, w)[0]
+
+        jv = np.asarray(jax.jvp(f, (jnp.zeros((model.n, nd)),), (jnp.asarray(v),))[1]).ravel()
+        kv = K @ v.ravel()
+        out["operator_check"] = float(np.linalg.norm(kv + jv) / np.linalg.norm(kv))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- one size
+def run_size(n, args, jaxbpm, out_rows):
+    import numpy as np
+
+    from jaxbpm.physics.model import default_params
+
+    rec = {"n_requested": n}
+    t0 = time.perf_counter()
+    sample = jaxbpm.generate.box(n, seed=args.seed).largest_cluster()
+    rec["generate_s"] = time.perf_counter() - t0
+    rec["particles"], rec["bonds"] = sample.n_particles, sample.n_bonds
+    params = default_params(sample)
+    scene = jaxbpm.scenes.UniaxialCompression(strain=args.strain, boundary="layers")
+    fixed, driven = scene.layers(sample)
+    rec["clamped"] = {"fixed": int(fixed.sum()), "driven": int(driven.sum())}
+    log(f"== n={sample.n_particles} bonds={sample.n_bonds} (generated in {rec['generate_s']:.1f} s)")
+    base = {"particles": sample.n_particles, "bonds": sample.n_bonds}
+
+    # ---- DEM, bonds only (the reference)
+    dem = None
+    if sample.n_particles <= args.dem_max:
+        r = jaxbpm.solve(sample, scene, "dem")
+        dem = {"stiffness": r.stiffness, "compile_s": r.compile_time, "run_s": r.run_time, "wall_s": r.wall_time,
+               "steps": r.stats["steps"], "steps_per_s": r.stats["steps_per_second"], "dt": r.stats["dt"]}
+        log(f"  DEM bonds: K={r.stiffness:.6g}  compile {r.compile_time:.2f} s  run {r.run_time:.2f} s "
+            f"({dem['steps']} steps)  wall {r.wall_time:.2f} s")
+    else:
+        log(f"  DEM skipped: {sample.n_particles} particles > --dem-max {args.dem_max}")
+    rec["dem"] = dem
+    dem3 = None
+    if args.dem3_max and sample.n_particles <= args.dem3_max:
+        scene3 = jaxbpm.scenes.UniaxialCompression(strain=args.strain, boundary="layers", rotations=False)
+        r = jaxbpm.solve(sample, scene3, "dem")
+        dem3 = {"stiffness": r.stiffness, "compile_s": r.compile_time, "run_s": r.run_time, "wall_s": r.wall_time,
+                "steps": r.stats["steps"]}
+        log(f"  DEM 3 DOF: K={r.stiffness:.6g}  run {r.run_time:.2f} s")
+    rec["dem_3dof"] = dem3
+    if dem is not None:
+        out_rows.append({**base, "method": "DEM (6 DOF)", "compile_s": dem["compile_s"], "run_s": dem["run_s"],
+                         "wall_s": dem["wall_s"], "K": dem["stiffness"], "dK_vs_DEM_%": 0.0,
+                         "iters": f"{dem['steps']} steps"})
+    if dem3 is not None:
+        out_rows.append({**base, "method": "DEM (3 DOF)", "compile_s": dem3["compile_s"], "run_s": dem3["run_s"],
+                         "wall_s": dem3["wall_s"], "K": dem3["stiffness"],
+                         "dK_vs_DEM_%": 100 * (dem3["stiffness"] / dem["stiffness"] - 1) if dem else "",
+                         "iters": f"{dem3['steps']} steps"})
+
+    # ---- DSM linear, 6 and 3 DOF
+    rec["dsm"] = {}
+    for dofs in (6, 3):
+        runs = []
+        for _ in range(args.repeats):
+            runs.append(jaxbpm.solve(sample, scene, "dsm", dofs=dofs, linear_tol=args.linear_tol))
+        r0 = runs[0]
+        d = {"stiffness": r0.stiffness, "compile_s": r0.compile_time,
+             "compile_s_later_calls": [r.compile_time for r in runs[1:]],
+             "run_s": spread([r.run_time for r in runs]), "wall_s_first": r0.wall_time,
+             "wall_s": spread([r.wall_time for r in runs]), "residual": r0.stats["residual"],
+             "converged": bool(r0.stats["converged"]), "free_dofs": r0.stats["free_dofs"],
+             "stiffness_spread": float(np.ptp([r.stiffness for r in runs]) / abs(r0.stiffness))}
+        system = LinearSystem(sample, scene, params, dofs)
+        d["cg"] = cg_diagnostics(system, args.linear_tol, args.repeats, ref_u=r0.state)
+        ref = dem if dofs == 6 else (dem3 or dem)
+        if dem is not None:
+            d["dK_vs_DEM"] = r0.stiffness / dem["stiffness"] - 1
+            d["speedup_run_vs_DEM"] = dem["run_s"] / d["run_s"]["min"]
+            d["speedup_run_vs_DEM_median"] = dem["run_s"] / d["run_s"]["median"]
+            d["speedup_wall_vs_DEM"] = dem["wall_s"] / r0.wall_time
+        if dem3 is not None and dofs == 3:
+            d["dK_vs_DEM_3dof"] = r0.stiffness / dem3["stiffness"] - 1
+            d["speedup_run_vs_DEM_3dof"] = dem3["run_s"] / d["run_s"]["min"]
+        rec["dsm"][dofs] = d
+        cg = d["cg"]
+        log(f"  DSM {dofs} DOF: K={r0.stiffness:.6g}  compile {r0.compile_time:.2f} s  run min "
+            f"{d['run_s']['min']:.3f} s  wall {r0.wall_time:.2f} s  CG {cg['iterations']} it x "
+            f"{cg['per_iteration_ms']:.2f} ms (jvp matvec {cg['matvec_jvp_ms']:.2f} ms, Jacobian matvec "
+            f"{cg['matvec_jacobian_ms']:.3f} ms)  prototype run {cg['prototype']['run_s']['min']:.3f} s")
+        out_rows.append({**base, "method": f"DSM lin {dofs} DOF", "compile_s": r0.compile_time,
+                         "run_s": d["run_s"]["min"], "run_med_s": d["run_s"]["median"], "wall_s": r0.wall_time,
+                         "K": r0.stiffness,
+                         "dK_vs_DEM_%": 100 * d["dK_vs_DEM"] if dem else "",
+                         "dK_matched_%": 100 * (r0.stiffness / ref["stiffness"] - 1) if ref else "",
+                         "x_DEM_run": d.get("speedup_run_vs_DEM", ""), "x_DEM_wall": d.get("speedup_wall_vs_DEM", ""),
+                         "iters": f"{cg['iterations']} CG"})
+        proto = cg["prototype"]
+        out_rows.append({**base, "method": f"(proto {dofs} DOF)", "compile_s": proto["compile_s"],
+                         "run_s": proto["run_s"]["min"], "run_med_s": proto["run_s"]["median"], "K": proto["stiffness"],
+                         "dK_vs_DEM_%": 100 * (proto["stiffness"] / dem["stiffness"] - 1) if dem else "",
+                         "dK_matched_%": 100 * (proto["stiffness"] / ref["stiffness"] - 1) if ref else "",
+                         "x_DEM_run": dem["run_s"] / proto["run_s"]["min"] if dem else "",
+                         "iters": f"{proto['iterations']} CG"})
+
+    # ---- sparse direct solve of the linear 6-DOF system
+    splu = None
+    if sample.n_particles <= args.splu_max:
+        system = LinearSystem(sample, scene, params, 6)
+        splu = splu_solve(system, args.repeats)
+        d6 = rec["dsm"][6]
+        splu["dK_vs_DSM6"] = splu["stiffness"] / d6["stiffness"] - 1
+        splu["dsm_speedup_total"] = splu["total"]["min"] / d6["run_s"]["min"]
+        splu["dsm_speedup_factor_solve"] = splu["factor_solve"]["min"] / d6["run_s"]["min"]
+        splu["prototype_speedup_total"] = splu["total"]["min"] / d6["cg"]["prototype"]["run_s"]["min"]
+        splu["dsm3_speedup_total"] = splu["total"]["min"] / rec["dsm"][3]["run_s"]["min"]
+        log(f"  splu: K={splu['stiffness']:.9g} (vs DSM6 {splu['dK_vs_DSM6']:.2e})  jac "
+            f"{splu['jacobians']['min']:.3f} s  assembly {splu['assembly']['min']:.3f} s  factor "
+            f"{splu['factor']['min']:.2f} s  solve {splu['solve']['min']:.3f} s  fill {splu['fill_nnz']:.3g}  "
+            f"DSM6 speed-up {splu['dsm_speedup_total']:.2f}x")
+        out_rows.append({**base, "method": "splu 6 DOF", "compile_s": splu["jacobians_compile_s"],
+                         "run_s": splu["total"]["min"], "run_med_s": splu["total"]["median"], "K": splu["stiffness"],
+                         "dK_vs_DEM_%": 100 * (splu["stiffness"] / dem["stiffness"] - 1) if dem else "",
+                         "x_DEM_run": dem["run_s"] / splu["total"]["min"] if dem else "", "iters": "direct"})
+    else:
+        log(f"  splu skipped: {sample.n_particles} particles > --splu-max {args.splu_max}")
+    rec["splu"] = splu
+
+    # ---- contacts: nonlinear DSM vs DEM
+    rec["contacts"] = None
+    if not args.no_contacts and n in args.contact_sizes:
+        scene_c = jaxbpm.scenes.UniaxialCompression(strain=args.strain, boundary="layers", contacts=True)
+        c = {}
+        if sample.n_particles <= args.dem_max:
+            r = jaxbpm.solve(sample, scene_c, "dem")
+            c["dem"] = {"stiffness": r.stiffness, "compile_s": r.compile_time, "run_s": r.run_time,
+                        "wall_s": r.wall_time, "steps": r.stats["steps"], "reallocations": r.stats["reallocations"],
+                        "contact_capacity": r.stats["contact_capacity"]}
+            log(f"  DEM contacts: K={r.stiffness:.6g}  compile {r.compile_time:.2f} s  run {r.run_time:.2f} s")
+        runs = [jaxbpm.solve(sample, scene_c, "dsm") for _ in range(args.nonlinear_repeats)]
+        r0 = runs[0]
+        c["dsm"] = {"stiffness": r0.stiffness, "compile_s": spread([r.compile_time for r in runs]),
+                    "run_s": spread([r.run_time for r in runs]), "wall_s": spread([r.wall_time for r in runs]),
+                    "newton_iterations": r0.stats["iterations"], "converged": bool(r0.stats["converged"]),
+                    "residual": r0.stats["residual"], "contact_candidates": r0.stats["contacts"],
+                    "load_steps": r0.stats["load_steps"], "dofs": r0.stats["dofs"]}
+        log(f"  DSM nonlinear: K={r0.stiffness:.6g}  compile {r0.compile_time:.2f} s  run "
+            f"{c['dsm']['run_s']['min']:.2f} s  Newton {r0.stats['iterations']}  converged {r0.stats['converged']}")
+        d6, dn = rec["dsm"][6], c["dsm"]
+        c["contacts_effect_dsm"] = dn["stiffness"] / d6["stiffness"] - 1
+        c["cost_dsm_run_ratio"] = dn["run_s"]["min"] / d6["run_s"]["min"]
+        if "dem" in c:
+            c["contacts_effect_dem"] = c["dem"]["stiffness"] / dem["stiffness"] - 1
+            c["cost_dem_run_ratio"] = c["dem"]["run_s"] / dem["run_s"]
+            c["dK_dsm_vs_dem"] = dn["stiffness"] / c["dem"]["stiffness"] - 1
+            c["speedup_run"] = c["dem"]["run_s"] / dn["run_s"]["min"]
+            c["speedup_wall"] = c["dem"]["wall_s"] / r0.wall_time
+            out_rows.append({**base, "method": "DEM +contacts", "compile_s": c["dem"]["compile_s"],
+                             "run_s": c["dem"]["run_s"], "wall_s": c["dem"]["wall_s"], "K": c["dem"]["stiffness"],
+                             "dK_vs_DEM_%": 100 * c["contacts_effect_dem"], "iters": f"{c['dem']['steps']} steps"})
+        out_rows.append({**base, "method": "DSM nonlin +contacts", "compile_s": r0.compile_time,
+                         "run_s": dn["run_s"]["min"], "run_med_s": dn["run_s"]["median"], "wall_s": r0.wall_time,
+                         "K": dn["stiffness"], "dK_vs_DEM_%": 100 * (dn["stiffness"] / dem["stiffness"] - 1) if dem
+                         else "", "dK_matched_%": 100 * c["dK_dsm_vs_dem"] if "dem" in c else "",
+                         "x_DEM_run": c.get("speedup_run", ""), "x_DEM_wall": c.get("speedup_wall", ""),
+                         "iters": f"{dn['newton_iterations']} Newton"})
+        rec["contacts"] = c
+    return rec
+
+
+# ---------------------------------------------------------------------------------------------------- goals, plot
+def evaluate_goals(results) -> dict:
+    g = {}
+    split = [(r["particles"], r["splu"]) for r in results if r["splu"]]
+    near3k = [s for p, s in split if 2500 <= p <= 3500]
+    if near3k:
+        s = near3k[0]
+        g["dsm6_20x_faster_than_splu_at_3k"] = {"met": s["dsm_speedup_total"] >= 20,
+                                                "speedup_total": s["dsm_speedup_total"],
+                                                "speedup_factor_solve_only": s["dsm_speedup_factor_solve"]}
+    if len(split) > 1:
+        sp = [s["dsm_speedup_total"] for _, s in split]
+        g["dsm6_lead_over_splu_grows_with_size"] = {
+            "met": all(b > a for a, b in zip(sp, sp[1:])), "particles": [p for p, _ in split], "speedups": sp}
+    for dofs in (6, 3):
+        rows = [(r["particles"], r["dsm"][dofs]) for r in results if r["dem"] is not None]
+        if rows:
+            g[f"dsm{dofs}_100x_faster_than_dem_within_1pct"] = {
+                "met": all(d["speedup_run_vs_DEM"] >= 100 and abs(d["dK_vs_DEM"]) <= 0.01 for _, d in rows),
+                "per_size": [{"particles": p, "speedup_run": d["speedup_run_vs_DEM"],
+                              "speedup_wall": d["speedup_wall_vs_DEM"], "dK_vs_DEM": d["dK_vs_DEM"],
+                              **({"dK_vs_DEM_3dof": d["dK_vs_DEM_3dof"]} if "dK_vs_DEM_3dof" in d else {})}
+                             for p, d in rows]}
+    return g
+
+
+def plot(results, path, note):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    series = {
+        "DEM bonds (run)": ("C0", "o", "-", lambda r: r["dem"] and r["dem"]["run_s"]),
+        "DSM linear 6 DOF (run, min)": ("C1", "s", "-", lambda r: r["dsm"][6]["run_s"]["min"]),
+        "DSM linear 3 DOF (run, min)": ("C2", "^", "-", lambda r: r["dsm"][3]["run_s"]["min"]),
+        "splu 6 DOF (Jacobians+assembly+factor+solve)": ("C3", "D", "-", lambda r: r["splu"] and
+                                                        r["splu"]["total"]["min"]),
+        "splu 6 DOF (factor+solve)": ("C3", "d", ":", lambda r: r["splu"] and r["splu"]["factor_solve"]["min"]),
+        "DSM 6 DOF prototype, precomputed bond Jacobians": ("C1", "s", ":", lambda r: r["dsm"][6]["cg"]["prototype"][
+            "run_s"]["min"]),
+        "DEM + contacts (run)": ("C4", "o", "--", lambda r: r["contacts"] and r["contacts"].get("dem", {}).get(
+            "run_s")),
+        "DSM nonlinear + contacts (run, min)": ("C5", "v", "--", lambda r: r["contacts"] and r["contacts"]["dsm"][
+            "run_s"]["min"]),
+        "DEM bonds (wall)": ("C0", "o", ":", lambda r: r["dem"] and r["dem"]["wall_s"]),
+        "DSM linear 6 DOF (wall, 1st call)": ("C1", "s", "-.", lambda r: r["dsm"][6]["wall_s_first"]),
+    }
+    fig, ax = plt.subplots(figsize=(8.5, 6))
+    for label, (color, marker, ls, get) in series.items():
+        pts = [(r["particles"], get(r)) for r in results]
+        pts = [(p, t) for p, t in pts if t]
+        if pts:
+            p, t = np.array(pts).T
+            ax.plot(p, t, color=color, marker=marker, ls=ls, label=label, alpha=0.9 if ls == "-" else 0.7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("particles")
+    ax.set_ylabel("time [s]")
+    ax.set_title("uniaxial compression, 0.2 % strain, clamped layers: time per method")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7.5, loc="upper left")
+    fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    from jaxbpm.io import _atomic_write
+
+    return _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
+
+
+# ---------------------------------------------------------------------------------------------------- main
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=int, nargs="+", default=None, help=f"particles (default {DEFAULT_SIZES})")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--strain", type=float, default=0.002)
+    ap.add_argument("--dem-max", type=int, default=50000, help="skip the DEM above this many particles")
+    ap.add_argument("--dem3-max", type=int, default=10000,
+                    help="run a rotation-free (3 DOF) DEM, the matched reference of the 3-DOF DSM, up to this many "
+                         "particles (0: never)")
+    ap.add_argument("--splu-max", type=int, default=10000,
+                    help="skip splu above this many particles (its fill-in grows too fast: 50k would not fit in RAM)")
+    ap.add_argument("--contact-sizes", type=int, nargs="*", default=None,
+                    help="requested sizes with the contact comparison (default 2000 10000)")
+    ap.add_argument("--no-contacts", action="store_true", help="skip the contact comparison")
+    ap.add_argument("--repeats", type=int, default=3, help="timed repeats of DSM and splu (DEM runs once)")
+    ap.add_argument("--nonlinear-repeats", type=int, default=2,
+                    help="repeats of the nonlinear DSM (each one compiles again)")
+    ap.add_argument("--linear-tol", type=float, default=1e-6)
+    ap.add_argument("--threads", type=int, default=1, help="cores to use (default 1)")
+    ap.add_argument("--cpu", type=int, default=None, help="core to pin to with one thread (default: least busy)")
+    ap.add_argument("--quick", action="store_true", help=f"smoke run: sizes {QUICK_SIZES}, 2 repeats")
+    ap.add_argument("--out", default="results/dsm_vs_dem.json")
+    ap.add_argument("--png", default=None, help="plot (default: --out with .png)")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.sizes = args.sizes or QUICK_SIZES
+        args.contact_sizes = args.contact_sizes if args.contact_sizes is not None else args.sizes
+        args.repeats = min(args.repeats, 2)
+        args.nonlinear_repeats = 1
+        if args.out == "results/dsm_vs_dem.json":
+            args.out = "results/dsm_vs_dem_quick.json"
+    args.sizes = args.sizes or DEFAULT_SIZES
+    args.contact_sizes = args.contact_sizes if args.contact_sizes is not None else [2000, 10000]
+    png = args.png or os.path.splitext(args.out)[0] + ".png"
+
+    load_before = machine_load(1.0)
+    cpu = pin(args.cpu, args.threads)
+    enable_x64()
+    import warnings
+
+    import jaxbpm
+
+    warnings.filterwarnings("ignore", message=".*DSM did not converge.*")  # recorded in the results instead
+    log(f"pinned to core {cpu}; core load before: {load_before}")
+    t_start = time.perf_counter()
+    results, rows = [], []
+    for n in args.sizes:
+        results.append(run_size(n, args, jaxbpm, rows))
+    load_after = machine_load(1.0)
+    goals = evaluate_goals(results)
+
+    columns = ["particles", "bonds", "method", "compile_s", "run_s", "run_med_s", "wall_s", "K", "dK_vs_DEM_%",
+               "dK_matched_%", "x_DEM_run", "x_DEM_wall", "iters"]
+    print("\nAll methods (run_s: min over repeats; DEM once; dK_matched: vs the DEM of the same model -- 3-DOF DEM "
+          "for 3 DOF, DEM + contacts for the nonlinear DSM; '(proto ...)': this script's PCG on precomputed bond "
+          "Jacobians, not the library)")
+    table(rows, columns)
+    srows = [{"particles": r["particles"], "free_dofs": r["splu"]["free_dofs"], "nnz_ff": r["splu"]["nnz_ff"],
+              "fill_nnz": r["splu"]["fill_nnz"], "jac_s": r["splu"]["jacobians"]["min"],
+              "assembly_s": r["splu"]["assembly"]["min"], "factor_s": r["splu"]["factor"]["min"],
+              "solve_s": r["splu"]["solve"]["min"], "splu_total_s": r["splu"]["total"]["min"],
+              "DSM6_run_s": r["dsm"][6]["run_s"]["min"], "x_total": r["splu"]["dsm_speedup_total"],
+              "x_f+s": r["splu"]["dsm_speedup_factor_solve"], "x_proto": r["splu"]["prototype_speedup_total"],
+              "x_DSM3": r["splu"]["dsm3_speedup_total"], "dK_vs_DSM6": r["splu"]["dK_vs_DSM6"],
+              "op_check": r["splu"]["operator_check"]} for r in results if r["splu"]]
+    if srows:
+        print("\nsplu (SuperLU, COLAMD) on the same linear 6-DOF system; x_*: DSM speed-up = splu time / DSM run "
+              "(total, factor+solve only, prototype, 3-DOF DSM)")
+        table(srows, list(srows[0]))
+    crows = [{"particles": r["particles"], "dofs": d, "CG_iters": r["dsm"][d]["cg"]["iterations"],
+              "DSM_run_s": r["dsm"][d]["run_s"]["min"], "pcg_s": r["dsm"][d]["cg"]["pcg_run_s"]["min"],
+              "ms_per_iter": r["dsm"][d]["cg"]["per_iteration_ms"],
+              "jvp_matvec_ms": r["dsm"][d]["cg"]["matvec_jvp_ms"], "forces_ms": r["dsm"][d]["cg"]["forces_ms"],
+              "precond_ms": r["dsm"][d]["cg"]["precond_apply_ms"],
+              "prec_build_ms": r["dsm"][d]["cg"]["precond_build_ms"],
+              "jac_matvec_ms": r["dsm"][d]["cg"]["matvec_jacobian_ms"],
+              "proto_run_s": r["dsm"][d]["cg"]["prototype"]["run_s"]["min"],
+              "u_vs_lib": r["dsm"][d]["cg"].get("solution_vs_library", "")} for r in results for d in (6, 3)]
+    print("\nWhere the DSM time goes (instrumented copy of jax's cg; matvec/forces/preconditioner timed alone)")
+    table(crows, list(crows[0]))
+    cont = [{"particles": r["particles"], "candidates": r["contacts"]["dsm"]["contact_candidates"],
+             "K_DEM_c": r["contacts"].get("dem", {}).get("stiffness", ""), "K_DSM_c": r["contacts"]["dsm"]["stiffness"],
+             "dK_DSM_vs_DEM_%": 100 * r["contacts"].get("dK_dsm_vs_dem", float("nan")),
+             "contacts_effect_DEM_%": 100 * r["contacts"].get("contacts_effect_dem", float("nan")),
+             "contacts_effect_DSM_%": 100 * r["contacts"]["contacts_effect_dsm"],
+             "DEM_cost_x": r["contacts"].get("cost_dem_run_ratio", ""),
+             "DSM_cost_x": r["contacts"]["cost_dsm_run_ratio"], "x_run": r["contacts"].get("speedup_run", ""),
+             "x_wall": r["contacts"].get("speedup_wall", ""), "Newton": r["contacts"]["dsm"]["newton_iterations"],
+             "converged": r["contacts"]["dsm"]["converged"]} for r in results if r["contacts"]]
+    if cont:
+        print("\nContacts (Hertz): stiffness change they cause, run-time cost factor (with / without), nonlinear DSM "
+              "vs DEM")
+        table(cont, list(cont[0]))
+    print("\nGoals:")
+    for k, v in goals.items():
+        print(f"  {k}: {'MET' if v['met'] else 'NOT met'}")
+    skipped = [r["particles"] for r in results if r["dem"] is None]
+    if skipped:
+        print(f"  DEM skipped for {skipped} particles (> --dem-max {args.dem_max})")
+    skipped = [r["particles"] for r in results if r["splu"] is None]
+    if skipped:
+        print(f"  splu skipped for {skipped} particles (> --splu-max {args.splu_max})")
+    print(f"  machine load (busy fraction per core) before {load_before['cpu_busy']} after {load_after['cpu_busy']};"
+          f" this run pinned to core {cpu}")
+
+    settings = {k: v for k, v in vars(args).items()}
+    out = {"benchmark": "dsm_vs_dem", "machine": {**machine_info(), "pinned_core": cpu, "load_before": load_before,
+                                                  "load_after": load_after},
+           "settings": settings, "total_time_s": time.perf_counter() - t_start, "results": results, "rows": rows,
+           "splu_rows": srows, "cg_rows": crows, "contact_rows": cont, "goals": goals}
+    print(json.dumps(out, indent=1, default=_json_default))
+    path = write_json(args.out, json.loads(json.dumps(out, default=_json_default)))
+    print(f"wrote {path}")
+    note = (f"core {cpu} of {os.cpu_count()}, XLA 1 thread; load before {load_before['cpu_busy']} after "
+            f"{load_after['cpu_busy']}; jax {machine_info()['jax']}")
+    print(f"wrote {plot(results, png, note)}")
+    return 0
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return str(o)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
