@@ -143,7 +143,8 @@ class LinearSystem:
 
 def cg_diagnostics(system: LinearSystem, tol: float, repeats: int, ref_u=None) -> dict:
     """Iterations and cost breakdown of the library's PCG (an instrumented copy of jax's cg), plus a prototype PCG
-    on precomputed per-bond Jacobians."""
+    on precomputed per-bond Jacobians. Every jitted function takes the Model as an argument, as the library's
+    ``_linear_jit`` does (closed-over arrays would become constants that XLA folds at compile time)."""
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -151,23 +152,23 @@ def cg_diagnostics(system: LinearSystem, tol: float, repeats: int, ref_u=None) -
     from jaxbpm import dsm
 
     model, params, free, u_p = system.model, system.params, system.free, system.u_p
-    size = int(u_p.size)
+    nd = system.nd
 
-    def forces(u):
+    def forces(model, params, u):
         return dsm._internal_forces(model, params, u)[0]
 
-    def pcg(matvec_of, M, b, tol):
+    def pcg(matvec, M, b, tol):
         # jax.scipy.sparse.linalg._cg_solve (x0 = 0, maxiter = 10 x size, stop at |r| <= tol |b|), plus a counter
         atol2 = jnp.square(tol) * jnp.vdot(b, b)
         z0 = M(b)
 
         def cond(c):
             _, r, _, _, k = c
-            return (jnp.vdot(r, r) > atol2) & (k < 10 * size)
+            return (jnp.vdot(r, r) > atol2) & (k < 10 * b.size)
 
         def body(c):
             x, r, g, p, k = c
-            ap = matvec_of(p)
+            ap = matvec(p)
             a = g / jnp.vdot(p, ap)
             x, r = x + a * p, r - a * ap
             z = M(r)
@@ -177,54 +178,45 @@ def cg_diagnostics(system: LinearSystem, tol: float, repeats: int, ref_u=None) -
         x, r, _, _, k = jax.lax.while_loop(cond, body, (jnp.zeros_like(b), b, jnp.vdot(b, z0), z0, 0))
         return x, k
 
-    def jvp_matvec(v):
+    def jvp_matvec(model, params, free, v):
+        # the library's operator (dsm.linear_solve): minus the force jvp on the free DOFs, identity on the rest
         u0 = jnp.zeros_like(v)
-        return jnp.where(free, -jax.jvp(forces, (u0,), (jnp.where(free, v, 0.0),))[1], v)
+        return jnp.where(free, -jax.jvp(lambda u: forces(model, params, u), (u0,), (jnp.where(free, v, 0.0),))[1], v)
 
     @jax.jit
-    def library_pcg(params_, tol):
+    def library_pcg(model, params, free, u_p, tol):
         u0 = jnp.zeros_like(u_p)
-        b = jnp.where(free, jax.jvp(forces, (u0,), (u_p,))[1], 0.0)
-        M = dsm._preconditioner(model, params_, free)
-        x, k = pcg(jvp_matvec, M, b, tol)
+        b = jnp.where(free, jax.jvp(lambda u: forces(model, params, u), (u0,), (u_p,))[1], 0.0)
+        M = dsm._preconditioner(model, params, free)
+        x, k = pcg(lambda v: jvp_matvec(model, params, free, v), M, b, tol)
         return u_p + x, k
 
-    b_idx = model.bonds
-    nd = system.nd
+    def stiffness_matvec(model, jac, v):
+        # K v from the per-bond Jacobians: gather both ends, [nb, 2nd, 2nd] x [nb, 2nd], scatter-add
+        b = model.bonds
+        z = jnp.concatenate([v[b[:, 0]], v[b[:, 1]]], axis=1)
+        y = jnp.einsum("bij,bj->bi", jac, z)
+        return jax.ops.segment_sum(jnp.concatenate([y[:, :nd], y[:, nd:]]), jnp.concatenate([b[:, 0], b[:, 1]]),
+                                   model.n)
 
-    def jac_matvec_of(jac):
-        def apply(v):
-            w = jnp.where(free, v, 0.0)
-            z = jnp.concatenate([w[b_idx[:, 0]], w[b_idx[:, 1]]], axis=1)
-            y = jnp.einsum("bij,bj->bi", jac, z)
-            kv = jax.ops.segment_sum(jnp.concatenate([y[:, :nd], y[:, nd:]]),
-                                     jnp.concatenate([b_idx[:, 0], b_idx[:, 1]]), model.n)
-            return kv  # K v (stiffness: minus the force jvp)
-        return apply
+    def jacobian_matvec(model, jac, free, v):
+        return jnp.where(free, stiffness_matvec(model, jac, jnp.where(free, v, 0.0)), v)
 
     @jax.jit
-    def prototype_pcg(params_, tol):
-        jac = dsm.bond_jacobians(model, params_)
-        kmv = jac_matvec_of(jac)
-        b = jnp.where(free, -kmv(u_p), 0.0)
-        M = dsm._preconditioner(model, params_, free)
-        x, k = pcg(lambda v: jnp.where(free, kmv(v), v), M, b, tol)
+    def prototype_pcg(model, params, free, u_p, tol):
+        jac = dsm.bond_jacobians(model, params)
+        b = jnp.where(free, -stiffness_matvec(model, jac, u_p), 0.0)
+        M = dsm._preconditioner(model, params, free)
+        x, k = pcg(lambda v: jacobian_matvec(model, jac, free, v), M, b, tol)
         u = u_p + x
-        return u, k, -kmv(u)
+        return u, k, -stiffness_matvec(model, jac, u)
 
-    def timed(f, *a, reps=repeats):
-        tc = time.perf_counter()
-        out = jax.block_until_ready(f(*a))
-        first = time.perf_counter() - tc
-        ts = []
-        for _ in range(reps):
-            t = time.perf_counter()
-            out = jax.block_until_ready(f(*a))
-            ts.append(time.perf_counter() - t)
-        return out, first, spread(ts)
-
-    def per_call(f, *a, reps=20):
+    def per_call(f, *a, seconds=0.3):
+        """Best of 3 of the mean time of ``reps`` back-to-back calls (reps from a first timing: ~seconds / 3)."""
         jax.block_until_ready(f(*a))
+        t = time.perf_counter()
+        jax.block_until_ready(f(*a))
+        reps = int(np.clip(seconds / 3 / max(time.perf_counter() - t, 1e-6), 2, 50))
         best = np.inf
         for _ in range(3):
             t = time.perf_counter()
@@ -234,37 +226,54 @@ def cg_diagnostics(system: LinearSystem, tol: float, repeats: int, ref_u=None) -
             best = min(best, (time.perf_counter() - t) / reps)
         return best
 
-    (u, iters), first, t_pcg = timed(library_pcg, params, tol)
+    # the copy of the library's solve: compiled ahead, run once (it takes as long as the library's own solve)
+    args = (model, params, free, u_p, tol)
+    tc = time.perf_counter()
+    compiled = library_pcg.lower(*args).compile()
+    t_compile = time.perf_counter() - tc
+    tr = time.perf_counter()
+    u, iters = jax.block_until_ready(compiled(*args))
+    t_run = time.perf_counter() - tr
     iters = int(iters)
-    out = {"iterations": iters, "pcg_run_s": t_pcg, "pcg_compile_s": first - t_pcg["min"],
-           "per_iteration_ms": 1e3 * t_pcg["min"] / max(iters, 1)}
+    out = {"iterations": iters, "pcg_run_s": t_run, "pcg_compile_s": t_compile,
+           "per_iteration_ms": 1e3 * t_run / max(iters, 1)}
     if ref_u is not None:
         out["solution_vs_library"] = float(jnp.linalg.norm(u - ref_u) / jnp.linalg.norm(ref_u))
     rng = np.random.default_rng(0)
     v = jnp.asarray(rng.normal(size=u_p.shape) * system.delta, u_p.dtype)
-    u0 = jnp.zeros_like(u_p)
-    out["forces_ms"] = 1e3 * per_call(jax.jit(forces), u0)
-    out["matvec_jvp_ms"] = 1e3 * per_call(jax.jit(jvp_matvec), v)
-    M_build = jax.jit(lambda p: dsm._preconditioner(model, p, free)(jnp.ones_like(u_p)))
-    out["precond_build_ms"] = 1e3 * per_call(M_build, params, reps=3)
-    M = dsm._preconditioner(model, params, free)
-    out["precond_apply_ms"] = 1e3 * per_call(jax.jit(M), v)
+    out["forces_ms"] = 1e3 * per_call(jax.jit(forces), model, params, jnp.zeros_like(u_p))
+    out["matvec_jvp_ms"] = 1e3 * per_call(jax.jit(jvp_matvec), model, params, free, v)
+    # the same matvec, 20 in a row inside a jitted loop (as in the CG's while loop)
+    looped = jax.jit(lambda model, params, free, v: jax.lax.fori_loop(
+        0, 20, lambda _, w: jvp_matvec(model, params, free, w) * 1e-9, v))
+    out["matvec_jvp_in_loop_ms"] = 1e3 * per_call(looped, model, params, free, v) / 20
+    out["precond_build_ms"] = 1e3 * per_call(jax.jit(lambda model, params, free: dsm._preconditioner(
+        model, params, free)(jnp.ones(free.shape))), model, params, free)
+    out["precond_apply_ms"] = 1e3 * per_call(jax.jit(dsm._preconditioner(model, params, free)), v)
     out["vdot_ms"] = 1e3 * per_call(jax.jit(jnp.vdot), v, v)
     out["matvec_share"] = out["matvec_jvp_ms"] / max(out["per_iteration_ms"], 1e-12)
     # the prototype: per-bond Jacobians once, then a gather - [nb, 2nd, 2nd] product - scatter per matvec
     jac = jax.jit(dsm.bond_jacobians)(model, params)
-    out["jacobians_ms"] = 1e3 * per_call(jax.jit(dsm.bond_jacobians), model, params, reps=3)
-    out["matvec_jacobian_ms"] = 1e3 * per_call(jax.jit(lambda v: jnp.where(free, jac_matvec_of(jac)(v), v)), v)
+    out["jacobians_ms"] = 1e3 * per_call(jax.jit(dsm.bond_jacobians), model, params)
+    out["matvec_jacobian_ms"] = 1e3 * per_call(jax.jit(jacobian_matvec), model, jac, free, v)
     out["matvec_jvp_over_jacobian"] = out["matvec_jvp_ms"] / out["matvec_jacobian_ms"]
-    (u2, it2, gen2), first2, t_proto = timed(prototype_pcg, params, tol)
-    out["prototype"] = {"iterations": int(it2), "run_s": t_proto, "compile_s": first2 - t_proto["min"],
+    tc = time.perf_counter()
+    compiled = prototype_pcg.lower(*args).compile()
+    t_compile = time.perf_counter() - tc
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        u2, it2, gen2 = jax.block_until_ready(compiled(*args))
+        times.append(time.perf_counter() - t)
+    out["prototype"] = {"iterations": int(it2), "run_s": spread(times), "compile_s": t_compile,
                         "stiffness": float(system.reaction(np.asarray(gen2)) / system.delta),
                         "memory_MB": float(jac.size * jac.dtype.itemsize / 2**20)}
     return out
 
 
-def splu_solve(system: LinearSystem, repeats: int, dsm_matvec_check=True) -> dict:
-    """The same linear system assembled from dsm.bond_jacobians and solved by SuperLU."""
+def splu_solve(system: LinearSystem, repeats: int, budget: float = float("inf"), dsm_matvec_check=True) -> dict:
+    """The same linear system assembled from dsm.bond_jacobians and solved by SuperLU; repeated ``repeats`` times,
+    or fewer once the repeats so far took more than ``budget`` seconds (at least once)."""
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -298,6 +307,7 @@ def splu_solve(system: LinearSystem, repeats: int, dsm_matvec_check=True) -> dic
         t2 = time.perf_counter()
         lu = spla.splu(K_ff, permc_spec="COLAMD")
         t3 = time.perf_counter()
+        fill = int(lu.L.nnz + lu.U.nnz)
         u_f = lu.solve(-(K_fp @ u_p[pi]))
         u = u_p.copy()
         u[fi] = u_f
@@ -306,13 +316,16 @@ def splu_solve(system: LinearSystem, repeats: int, dsm_matvec_check=True) -> dic
         t4 = time.perf_counter()
         for key, t in zip(res, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
             res[key].append(t)
+        del lu
+        if sum(map(sum, res.values())) > budget:
+            break
     out = {k: spread(v) for k, v in res.items()}
+    out["repeats"] = len(res["factor"])
     total = [sum(x) for x in zip(*res.values())]
     fs = [a + b for a, b in zip(res["factor"], res["solve"])]
     out.update(total=spread(total), factor_solve=spread(fs), jacobians_compile_s=jac_first - min(res["jacobians"]),
                stiffness=reaction / system.delta, dofs=int(ndof), free_dofs=int(fi.size), nnz=int(K.nnz),
-               nnz_ff=int(K_ff.nnz), fill_nnz=int(lu.L.nnz + lu.U.nnz), ordering="COLAMD",
-               factor_memory_MB=float((lu.L.nnz + lu.U.nnz) * 12 / 2**20),
+               nnz_ff=int(K_ff.nnz), fill_nnz=fill, ordering="COLAMD", factor_memory_MB=float(fill * 12 / 2**20),
                residual=float(np.linalg.norm(K_ff @ u_f + K_fp @ u_p[pi]) / np.linalg.norm(K_fp @ u_p[pi])))
     if dsm_matvec_check:
         # the assembled matrix against the DSM operator: K v == -(jvp of the forces) v
@@ -335,7 +348,16 @@ def run_size(n, args, jaxbpm, out_rows):
 
     rec = {"n_requested": n}
     t0 = time.perf_counter()
-    sample = jaxbpm.generate.box(n, seed=args.seed).largest_cluster()
+    cached = os.path.join(args.cache_dir, f"box_{n}_seed{args.seed}.h5") if args.cache_dir else None
+    if cached and os.path.exists(cached):
+        sample = jaxbpm.io.load_sample(cached)
+        rec["sample_source"] = cached
+    else:
+        sample = jaxbpm.generate.box(n, seed=args.seed).largest_cluster()
+        rec["sample_source"] = f"generate.box({n}, seed={args.seed}).largest_cluster()"
+        if cached:
+            os.makedirs(args.cache_dir, exist_ok=True)
+            jaxbpm.io.save_sample(cached, sample)
     rec["generate_s"] = time.perf_counter() - t0
     rec["particles"], rec["bonds"] = sample.n_particles, sample.n_bonds
     params = default_params(sample)
@@ -357,7 +379,7 @@ def run_size(n, args, jaxbpm, out_rows):
         log(f"  DEM skipped: {sample.n_particles} particles > --dem-max {args.dem_max}")
     rec["dem"] = dem
     dem3 = None
-    if args.dem3_max and sample.n_particles <= args.dem3_max:
+    if args.dem3_max and sample.n_particles <= min(args.dem3_max, args.dem_max):
         scene3 = jaxbpm.scenes.UniaxialCompression(strain=args.strain, boundary="layers", rotations=False)
         r = jaxbpm.solve(sample, scene3, "dem")
         dem3 = {"stiffness": r.stiffness, "compile_s": r.compile_time, "run_s": r.run_time, "wall_s": r.wall_time,
@@ -389,7 +411,7 @@ def run_size(n, args, jaxbpm, out_rows):
              "stiffness_spread": float(np.ptp([r.stiffness for r in runs]) / abs(r0.stiffness))}
         system = LinearSystem(sample, scene, params, dofs)
         d["cg"] = cg_diagnostics(system, args.linear_tol, args.repeats, ref_u=r0.state)
-        ref = dem if dofs == 6 else (dem3 or dem)
+        ref = dem if dofs == 6 else dem3  # the DEM of the same model
         if dem is not None:
             d["dK_vs_DEM"] = r0.stiffness / dem["stiffness"] - 1
             d["speedup_run_vs_DEM"] = dem["run_s"] / d["run_s"]["min"]
@@ -423,7 +445,7 @@ def run_size(n, args, jaxbpm, out_rows):
     splu = None
     if sample.n_particles <= args.splu_max:
         system = LinearSystem(sample, scene, params, 6)
-        splu = splu_solve(system, args.repeats)
+        splu = splu_solve(system, args.repeats, args.splu_budget)
         d6 = rec["dsm"][6]
         splu["dK_vs_DSM6"] = splu["stiffness"] / d6["stiffness"] - 1
         splu["dsm_speedup_total"] = splu["total"]["min"] / d6["run_s"]["min"]
@@ -434,8 +456,7 @@ def run_size(n, args, jaxbpm, out_rows):
             f"{splu['jacobians']['min']:.3f} s  assembly {splu['assembly']['min']:.3f} s  factor "
             f"{splu['factor']['min']:.2f} s  solve {splu['solve']['min']:.3f} s  fill {splu['fill_nnz']:.3g}  "
             f"DSM6 speed-up {splu['dsm_speedup_total']:.2f}x")
-        out_rows.append({**base, "method": "splu 6 DOF", "compile_s": splu["jacobians_compile_s"],
-                         "run_s": splu["total"]["min"], "run_med_s": splu["total"]["median"], "K": splu["stiffness"],
+        out_rows.append({**base, "method": "splu 6 DOF", "run_s": splu["total"]["min"], "run_med_s": splu["total"]["median"], "K": splu["stiffness"],
                          "dK_vs_DEM_%": 100 * (splu["stiffness"] / dem["stiffness"] - 1) if dem else "",
                          "x_DEM_run": dem["run_s"] / splu["total"]["min"] if dem else "", "iters": "direct"})
     else:
@@ -453,13 +474,15 @@ def run_size(n, args, jaxbpm, out_rows):
                         "wall_s": r.wall_time, "steps": r.stats["steps"], "reallocations": r.stats["reallocations"],
                         "contact_capacity": r.stats["contact_capacity"]}
             log(f"  DEM contacts: K={r.stiffness:.6g}  compile {r.compile_time:.2f} s  run {r.run_time:.2f} s")
-        runs = [jaxbpm.solve(sample, scene_c, "dsm") for _ in range(args.nonlinear_repeats)]
+        runs, tn = [], time.perf_counter()
+        while len(runs) < args.nonlinear_repeats and (not runs or time.perf_counter() - tn < args.nonlinear_budget):
+            runs.append(jaxbpm.solve(sample, scene_c, "dsm"))
         r0 = runs[0]
         c["dsm"] = {"stiffness": r0.stiffness, "compile_s": spread([r.compile_time for r in runs]),
                     "run_s": spread([r.run_time for r in runs]), "wall_s": spread([r.wall_time for r in runs]),
                     "newton_iterations": r0.stats["iterations"], "converged": bool(r0.stats["converged"]),
                     "residual": r0.stats["residual"], "contact_candidates": r0.stats["contacts"],
-                    "load_steps": r0.stats["load_steps"], "dofs": r0.stats["dofs"]}
+                    "load_steps": r0.stats["load_steps"], "dofs": r0.stats["dofs"], "repeats": len(runs)}
         log(f"  DSM nonlinear: K={r0.stiffness:.6g}  compile {r0.compile_time:.2f} s  run "
             f"{c['dsm']['run_s']['min']:.2f} s  Newton {r0.stats['iterations']}  converged {r0.stats['converged']}")
         d6, dn = rec["dsm"][6], c["dsm"]
@@ -485,6 +508,31 @@ def run_size(n, args, jaxbpm, out_rows):
 
 
 # ---------------------------------------------------------------------------------------------------- goals, plot
+def extrapolate_splu(results) -> None:
+    """For sizes where splu was skipped: fill-in and factorisation time from a power law in the free DOFs through
+    the two largest measured sizes (an estimate, marked as such; never a measurement)."""
+    import numpy as np
+
+    done = [r for r in results if r["splu"]]
+    if len(done) < 2:
+        return
+    a, b = done[-2]["splu"], done[-1]["splu"]
+    for r in results:
+        if r["splu"] is not None:
+            continue
+        nfree = r["dsm"][6]["free_dofs"]
+        est = {"note": f"extrapolated (power law in free DOFs through the {done[-2]['particles']} and "
+                       f"{done[-1]['particles']} particle runs), not measured"}
+        for key, get in (("fill_nnz", lambda s: s["fill_nnz"]), ("factor_s", lambda s: s["factor"]["min"]),
+                         ("total_s", lambda s: s["total"]["min"])):
+            slope = np.log(get(b) / get(a)) / np.log(b["free_dofs"] / a["free_dofs"])
+            est[key] = float(get(b) * (nfree / b["free_dofs"]) ** slope)
+            est[key + "_exponent"] = float(slope)
+        est["factor_memory_GB"] = est["fill_nnz"] * 12 / 2**30
+        est["dsm_speedup_total"] = est["total_s"] / r["dsm"][6]["run_s"]["min"]
+        r["splu_extrapolated"] = est
+
+
 def evaluate_goals(results) -> dict:
     g = {}
     split = [(r["particles"], r["splu"]) for r in results if r["splu"]]
@@ -533,7 +581,7 @@ def plot(results, path, note):
         "DEM bonds (wall)": ("C0", "o", ":", lambda r: r["dem"] and r["dem"]["wall_s"]),
         "DSM linear 6 DOF (wall, 1st call)": ("C1", "s", "-.", lambda r: r["dsm"][6]["wall_s_first"]),
     }
-    fig, ax = plt.subplots(figsize=(8.5, 6))
+    fig, ax = plt.subplots(figsize=(12, 6))
     for label, (color, marker, ls, get) in series.items():
         pts = [(r["particles"], get(r)) for r in results]
         pts = [(p, t) for p, t in pts if t]
@@ -546,7 +594,7 @@ def plot(results, path, note):
     ax.set_ylabel("time [s]")
     ax.set_title("uniaxial compression, 0.2 % strain, clamped layers: time per method")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7.5, loc="upper left")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     from jaxbpm.io import _atomic_write
@@ -566,12 +614,18 @@ def main(argv=None) -> int:
                          "particles (0: never)")
     ap.add_argument("--splu-max", type=int, default=10000,
                     help="skip splu above this many particles (its fill-in grows too fast: 50k would not fit in RAM)")
+    ap.add_argument("--splu-budget", type=float, default=60.0,
+                    help="stop repeating splu once its repeats took this long [s] (it always runs once)")
     ap.add_argument("--contact-sizes", type=int, nargs="*", default=None,
                     help="requested sizes with the contact comparison (default 2000 10000)")
     ap.add_argument("--no-contacts", action="store_true", help="skip the contact comparison")
     ap.add_argument("--repeats", type=int, default=3, help="timed repeats of DSM and splu (DEM runs once)")
-    ap.add_argument("--nonlinear-repeats", type=int, default=2,
+    ap.add_argument("--nonlinear-repeats", type=int, default=3,
                     help="repeats of the nonlinear DSM (each one compiles again)")
+    ap.add_argument("--nonlinear-budget", type=float, default=60.0,
+                    help="stop repeating the nonlinear DSM once its repeats took this long [s] (it always runs once)")
+    ap.add_argument("--cache-dir", default=None,
+                    help="load the generated samples from (or save them to) this folder (box_<n>_seed<s>.h5)")
     ap.add_argument("--linear-tol", type=float, default=1e-6)
     ap.add_argument("--threads", type=int, default=1, help="cores to use (default 1)")
     ap.add_argument("--cpu", type=int, default=None, help="core to pin to with one thread (default: least busy)")
@@ -604,6 +658,7 @@ def main(argv=None) -> int:
     for n in args.sizes:
         results.append(run_size(n, args, jaxbpm, rows))
     load_after = machine_load(1.0)
+    extrapolate_splu(results)
     goals = evaluate_goals(results)
 
     columns = ["particles", "bonds", "method", "compile_s", "run_s", "run_med_s", "wall_s", "K", "dK_vs_DEM_%",
@@ -625,9 +680,10 @@ def main(argv=None) -> int:
               "(total, factor+solve only, prototype, 3-DOF DSM)")
         table(srows, list(srows[0]))
     crows = [{"particles": r["particles"], "dofs": d, "CG_iters": r["dsm"][d]["cg"]["iterations"],
-              "DSM_run_s": r["dsm"][d]["run_s"]["min"], "pcg_s": r["dsm"][d]["cg"]["pcg_run_s"]["min"],
+              "DSM_run_s": r["dsm"][d]["run_s"]["min"], "pcg_s": r["dsm"][d]["cg"]["pcg_run_s"],
               "ms_per_iter": r["dsm"][d]["cg"]["per_iteration_ms"],
-              "jvp_matvec_ms": r["dsm"][d]["cg"]["matvec_jvp_ms"], "forces_ms": r["dsm"][d]["cg"]["forces_ms"],
+              "jvp_matvec_ms": r["dsm"][d]["cg"]["matvec_jvp_ms"],
+              "jvp_mv_loop_ms": r["dsm"][d]["cg"]["matvec_jvp_in_loop_ms"], "forces_ms": r["dsm"][d]["cg"]["forces_ms"],
               "precond_ms": r["dsm"][d]["cg"]["precond_apply_ms"],
               "prec_build_ms": r["dsm"][d]["cg"]["precond_build_ms"],
               "jac_matvec_ms": r["dsm"][d]["cg"]["matvec_jacobian_ms"],
@@ -654,9 +710,15 @@ def main(argv=None) -> int:
     skipped = [r["particles"] for r in results if r["dem"] is None]
     if skipped:
         print(f"  DEM skipped for {skipped} particles (> --dem-max {args.dem_max})")
-    skipped = [r["particles"] for r in results if r["splu"] is None]
-    if skipped:
-        print(f"  splu skipped for {skipped} particles (> --splu-max {args.splu_max})")
+    for r in results:
+        if r["splu"] is None:
+            print(f"  splu skipped for {r['particles']} particles (> --splu-max {args.splu_max})", end="")
+            e = r.get("splu_extrapolated")
+            if e:
+                print(f"; {e['note']}: fill {e['fill_nnz']:.3g} nnz (~{e['factor_memory_GB']:.2g} GB for the "
+                      f"factors), factorisation ~{e['factor_s']:.3g} s, total ~{e['total_s']:.3g} s, i.e. DSM 6 DOF "
+                      f"~{e['dsm_speedup_total']:.3g}x faster", end="")
+            print()
     print(f"  machine load (busy fraction per core) before {load_before['cpu_busy']} after {load_after['cpu_busy']};"
           f" this run pinned to core {cpu}")
 

@@ -175,3 +175,38 @@ def test_neighbor_overflow_is_reallocated_and_matches_big_buffer():
     assert tight.stats["reallocations"] >= 1
     assert roomy.stats["reallocations"] == 0
     np.testing.assert_allclose(tight.force, roomy.force, rtol=1e-9, atol=1e-12 * np.max(np.abs(roomy.force)))
+
+
+def test_second_solve_of_same_size_does_not_recompile():
+    s = jaxbpm.generate.lattice("sc", (2, 2, 4), R)
+    scene = jaxbpm.scenes.UniaxialCompression(strain=0.002)
+    jaxbpm.solve(s, scene)
+    before = dem._run_chunk._cache_size()
+    stiffer = s.replace(materials={"E": 3e9, "nu": 0.25})  # same shapes, other values
+    res = jaxbpm.solve(stiffer, scene, dt=1e-7, loading_time=2e-4, chunk=100)
+    jaxbpm.solve(stiffer, scene, dt=1e-7, loading_time=2e-4, chunk=100)
+    assert dem._run_chunk._cache_size() == before + 1  # one new chunk length, then reused
+    assert res.stiffness > 0
+
+
+def test_bonded_pairs_replace_or_superimpose_contacts():
+    """Two bonded spheres pressed together: with "replace" only the bond acts, with "superimpose" Hertz adds."""
+    pos = np.array([[0.0, 0.0, 0.0], [1.98 * R, 0.0, 0.0]])
+    kw = dict(bond_radius_ratio=0.5, particle_material={"E": 1e9, "friction": 0.0})
+    model_r = build_model(jaxbpm.Sample.from_arrays(pos, R, [[0, 1]], bond_contact="replace", **kw), contacts=True)
+    model_s = build_model(jaxbpm.Sample.from_arrays(pos, R, [[0, 1]], bond_contact="superimpose", **kw),
+                          contacts=True)
+    params = default_params(jaxbpm.Sample.from_arrays(pos, R, [[0, 1]], **kw))
+    pairs = jnp.array([[0, 1]])
+    x = model_r.positions0.at[1, 0].add(-0.01 * R)  # squeeze the bond too
+    out = {}
+    for name, model in (("replace", model_r), ("superimpose", model_s)):
+        valid = jnp.array([True]) if name == "superimpose" else ~model.bonded(pairs)
+        zeros = jnp.zeros((1, 3))
+        f, _, _ = model.forces(x, None, params, contacts=(pairs, valid, zeros, zeros, zeros))
+        out[name] = float(f[1, 0])
+    k = model_r.stiffness(params)
+    np.testing.assert_allclose(out["replace"], float(k.kn[0]) * 0.01 * R, rtol=1e-9)  # bond only
+    delta = 2 * R - (1.98 * R - 0.01 * R)
+    hertz = 4 / 3 * (1e9 / (2 * (1 - 0.25**2))) * np.sqrt(R / 2) * delta**1.5
+    np.testing.assert_allclose(out["superimpose"], out["replace"] + hertz, rtol=1e-9)

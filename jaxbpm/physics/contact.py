@@ -71,51 +71,63 @@ def _law(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True
     ``[C]`` arrays (all pairs at once), the rest scalars or ``[C]`` arrays; ``valid`` masks padding. Returns the
     fields of :class:`ContactForces`, vectors as component tuples, zero where the pair is not in contact.
 
-    Written like the bond law (:func:`jaxbpm.physics.bond._law`): elementwise on components, projections on the
-    normal as ``(a . d) / |d|`` (XLA on CPU keeps a division as a separate loop, so the projections are computed
-    once per pair instead of once in every fused consumer).
+    Written like the bond law (:func:`jaxbpm.physics.bond._law`), elementwise on components. XLA's CPU fusion copies
+    cheap elementwise producers into every consumer (gathers included) but computes a division or a square root once
+    into memory; the law is arranged so that every value with several consumers ends in one (``_once`` adds an exact
+    division by one where none is natural).
     """
+    one = _one(p)
     dist = jnp.sqrt(_dot(d, d))
+    n = tuple(c / dist for c in d)
     overlap = r_i + r_j - dist
-    active = (overlap > 0) & valid
-    delta = jnp.where(active, overlap, 0.0)
-    r_star = r_i * r_j / (r_i + r_j)
-    m_star = m_i * m_j / (m_i + m_j)
-    sqrt_rd = _safe_sqrt(r_star * delta)
-    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta
-    inv = 1.0 / dist
-    n = tuple(c * inv for c in d)
-    v_n = _dot(v_rel, d) / dist
-    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * _safe_sqrt(2.0 * p.E_star * sqrt_rd * m_star) * v_n
-    fn = jnp.where(active, jnp.maximum(fn, 0.0), 0.0)
+    delta = _once(jnp.where((overlap > 0) & valid, overlap, 0.0), one)
+    active = delta > 0
+    sqrt_rd = _safe_sqrt(r_i * r_j / (r_i + r_j) * delta)  # sqrt(R* delta)
+    # Tsuji damping: c_n = damp sqrt(2 E* sqrt(R* delta) m*), c_t = damp sqrt(k_t m*), one square root for both
+    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta * _safe_sqrt(sqrt_rd * (m_i * m_j / (m_i + m_j)))
+    v_n = _dot(v_rel, n)
+    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * jnp.sqrt(2.0 * p.E_star) * v_n
+    fn = _once(jnp.where(active, jnp.maximum(fn, 0.0), 0.0), one)
 
     # tangential spring: keep it in the current tangent plane (same length), then add this step's slip
-    s_n = _dot(spring, d) / dist
+    s_n = _dot(spring, n)
     old = tuple(spring[k] - s_n * n[k] for k in range(3))
     old_len2, proj_len2 = _dot(spring, spring), _dot(old, old)
     pos = proj_len2 > 0
     stretch = jnp.where(pos, _safe_sqrt(old_len2 / jnp.where(pos, proj_len2, 1.0)), 0.0)
-    dxi_n = _dot(dxi, d) / dist
-    xi = tuple(old[k] * stretch + dxi[k] - dxi_n * n[k] for k in range(3))
+    dxi_n = _dot(dxi, n)
+    xi = tuple(_once(old[k] * stretch + dxi[k] - dxi_n * n[k], one) for k in range(3))
     kt = 8.0 * p.G_star * sqrt_rd
-    c_t = damp * _safe_sqrt(kt * m_star)
+    c_t = damp * jnp.sqrt(8.0 * p.G_star)
     ft_j = tuple(-kt * xi[k] - c_t * (v_rel[k] - v_n * n[k]) for k in range(3))
     ft_len = _safe_sqrt(_dot(ft_j, ft_j))
     limit = p.friction * fn
     sliding = (ft_len > limit) & active
-    scale = jnp.where(sliding, limit / jnp.where(ft_len > 0, ft_len, 1.0), 1.0)
-    scale = jnp.where(active, scale, 0.0)
-    ft_j = tuple(c * scale for c in ft_j)
-    back = -1.0 / jnp.where(kt > 0, kt, 1.0)  # a sliding spring is shortened to match the Coulomb force
-    xi = tuple(jnp.where(sliding, ft_j[k] * back, jnp.where(active, xi[k], 0.0)) for k in range(3))
+    # scale by limit / |ft| when sliding, by 1 when sticking, by 0 out of contact, in one division per component
+    num = jnp.where(active, jnp.where(sliding, limit, 1.0), 0.0)
+    den = jnp.where(sliding, ft_len, 1.0)
+    ft_j = tuple(c * num / den for c in ft_j)
+    # a sliding spring is shortened to match the Coulomb force: -ft_j / kt
+    back = jnp.where(sliding, kt, 1.0)
+    xi = tuple(jnp.where(sliding, -ft_j[k], jnp.where(active, xi[k], 0.0)) / back for k in range(3))
 
     f_i = tuple(-fn * n[k] - ft_j[k] for k in range(3))
-    # moments -(r - delta / 2) n x ft_j on both particles (arms (r_i - delta/2) n and -(r_j - delta/2) n)
-    twist = _cross(d, ft_j)
-    arm_i = (0.5 * delta - r_i) / dist
-    arm_j = (0.5 * delta - r_j) / dist
+    # moments (r_i - delta/2) n x (-ft_j) on i and -(r_j - delta/2) n x ft_j on j
+    twist = _cross(n, ft_j)
+    arm_i, arm_j = 0.5 * delta - r_i, 0.5 * delta - r_j
     return ContactForces(f_i=f_i, m_i=tuple(arm_i * c for c in twist), m_j=tuple(arm_j * c for c in twist),
                          normal=fn, spring=xi, sliding=sliding, active=active)
+
+
+def _one(p: ContactParams):
+    """A run-time 1.0 (XLA cannot fold it away)."""
+    ratio = p.E_star / p.E_star
+    return jnp.where(jnp.isfinite(ratio), ratio, 1.0)
+
+
+def _once(a, one):
+    """``a`` itself, divided by the run-time ``one``: XLA computes it once instead of in each consumer."""
+    return a / one
 
 
 def _dot(a, b):
@@ -152,11 +164,12 @@ def pair_vectors(positions, pairs, valid):
     """Particle indices ``i, j [C]`` of the candidate pairs (padding and excluded pairs point at particles 0 and 1)
     and the components ``(x, y, z)`` of ``d = x_j - x_i`` (``[C]`` each; ones for those, keeping them finite)."""
     n = positions.shape[0]
-    i = jnp.where(valid, pairs[:, 0], 0)
-    j = jnp.where(valid, pairs[:, 1], 1 % n)
+    # unsigned indices: no wrapping of negative ones to compute in every gather
+    i = jnp.where(valid, pairs[:, 0], 0).astype(jnp.uint32)
+    j = jnp.where(valid, pairs[:, 1], 1 % n).astype(jnp.uint32)
     # gather columns of the transposed [3, n] positions: the law runs on [C] component arrays
     x_t = positions.T
-    return i, j, tuple(jnp.where(valid, x_t[k, j] - x_t[k, i], 1.0) for k in range(3))
+    return i, j, tuple(jnp.where(valid, x_t[k][j] - x_t[k][i], 1.0) for k in range(3))
 
 
 def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: ContactParams):
