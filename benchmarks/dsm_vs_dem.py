@@ -16,16 +16,12 @@ What is compared (the SAME sample for every method of one size)
   them (run = median chunk time x chunks), run once. Skipped above ``--dem-max`` particles (said in the output).
   Optionally a rotation-free DEM (3 DOF, ``--dem3-max``): the matched reference of the 3-DOF DSM, which is a
   different (stiffer) model than the 6-DOF one.
-* DSM linear (bonds only), 6 and 3 DOF: ``jaxbpm.solve(..., "dsm", dofs=d)`` -- preconditioned CG on
-  Jacobian-vector products of the force function. Called ``--repeats`` times: the first call's compile time, the
-  min / median run time (jitted solve only, ``block_until_ready``) and wall time (whole ``solve`` call) of the calls.
-* CG diagnostics (where the DSM time goes): jax's ``cg`` does not report its iteration count, so this script runs
-  an instrumented copy of ``jax.scipy.sparse.linalg.cg``'s algorithm (same operator, preconditioner, start,
-  stopping test and tolerance; checked by comparing the solution with the library's) and times its pieces alone:
-  the matvec (``jax.jvp`` of the forces, as the library does), the forces themselves, the block-Jacobi
-  preconditioner (build and apply). It also times a matvec with the per-bond Jacobians precomputed once
-  (``dsm.bond_jacobians``: gather, ``[nb,12,12]`` batched product, scatter) and a whole PCG solve with it
-  ("DSM prototype" below -- written in this script, NOT the library; it shows what the library could gain).
+* DSM linear (bonds only): ``jaxbpm.solve(..., "dsm", ...)`` -- preconditioned CG on the element-by-element
+  stiffness operator (per-bond Jacobians of the same bond law), stiffness from the strain energy. Configurations:
+  6 DOF (the library's default: two-level preconditioner, relative residual 1e-6), 6 DOF with ``stiffness_tol``
+  (stop when the energy has settled to 1e-3, ``--stiffness-tol``), 6 DOF with block-Jacobi alone, 3 DOF (default
+  preconditioner). Each is called ``--repeats`` times: the first call's compile time, the min / median run time
+  (jitted solve only, ``block_until_ready``) and wall time (whole ``solve`` call) of the calls, CG iterations.
 * Sparse direct solve of the SAME linear 6-DOF system (``--splu-max``): the global stiffness assembled from
   ``dsm.bond_jacobians`` (``jax.jacfwd`` of the same bond law; ``coo_matrix -> csc``), restricted to the free
   DOFs, ``scipy.sparse.linalg.splu(K_ff)`` (SuperLU, COLAMD ordering) and ``K_ff u_f = -K_fp u_p``; reaction and
@@ -139,136 +135,6 @@ class LinearSystem:
         """Reaction [N] from generalised internal forces ``gen [n, nd]`` (numpy or jax), as ``dsm._linear_jit``."""
         comp = gen[:, self.axis]
         return 0.5 * (comp[self.driven].sum() - comp[self.fixed].sum())
-
-
-def cg_diagnostics(system: LinearSystem, tol: float, repeats: int, ref_u=None) -> dict:
-    """Iterations and cost breakdown of the library's PCG (an instrumented copy of jax's cg), plus a prototype PCG
-    on precomputed per-bond Jacobians. Every jitted function takes the Model as an argument, as the library's
-    ``_linear_jit`` does (closed-over arrays would become constants that XLA folds at compile time)."""
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    from jaxbpm import dsm
-
-    model, params, free, u_p = system.model, system.params, system.free, system.u_p
-    nd = system.nd
-
-    def forces(model, params, u):
-        return dsm._internal_forces(model, params, u)[0]
-
-    def pcg(matvec, M, b, tol):
-        # jax.scipy.sparse.linalg._cg_solve (x0 = 0, maxiter = 10 x size, stop at |r| <= tol |b|), plus a counter
-        atol2 = jnp.square(tol) * jnp.vdot(b, b)
-        z0 = M(b)
-
-        def cond(c):
-            _, r, _, _, k = c
-            return (jnp.vdot(r, r) > atol2) & (k < 10 * b.size)
-
-        def body(c):
-            x, r, g, p, k = c
-            ap = matvec(p)
-            a = g / jnp.vdot(p, ap)
-            x, r = x + a * p, r - a * ap
-            z = M(r)
-            g2 = jnp.vdot(r, z)
-            return x, r, g2, z + (g2 / g) * p, k + 1
-
-        x, r, _, _, k = jax.lax.while_loop(cond, body, (jnp.zeros_like(b), b, jnp.vdot(b, z0), z0, 0))
-        return x, k
-
-    def jvp_matvec(model, params, free, v):
-        # the library's operator (dsm.linear_solve): minus the force jvp on the free DOFs, identity on the rest
-        u0 = jnp.zeros_like(v)
-        return jnp.where(free, -jax.jvp(lambda u: forces(model, params, u), (u0,), (jnp.where(free, v, 0.0),))[1], v)
-
-    @jax.jit
-    def library_pcg(model, params, free, u_p, tol):
-        u0 = jnp.zeros_like(u_p)
-        b = jnp.where(free, jax.jvp(lambda u: forces(model, params, u), (u0,), (u_p,))[1], 0.0)
-        M = dsm._preconditioner(model, params, free)
-        x, k = pcg(lambda v: jvp_matvec(model, params, free, v), M, b, tol)
-        return u_p + x, k
-
-    def stiffness_matvec(model, jac, v):
-        # K v from the per-bond Jacobians: gather both ends, [nb, 2nd, 2nd] x [nb, 2nd], scatter-add
-        b = model.bonds
-        z = jnp.concatenate([v[b[:, 0]], v[b[:, 1]]], axis=1)
-        y = jnp.einsum("bij,bj->bi", jac, z)
-        return jax.ops.segment_sum(jnp.concatenate([y[:, :nd], y[:, nd:]]), jnp.concatenate([b[:, 0], b[:, 1]]),
-                                   model.n)
-
-    def jacobian_matvec(model, jac, free, v):
-        return jnp.where(free, stiffness_matvec(model, jac, jnp.where(free, v, 0.0)), v)
-
-    @jax.jit
-    def prototype_pcg(model, params, free, u_p, tol):
-        jac = dsm.bond_jacobians(model, params)
-        b = jnp.where(free, -stiffness_matvec(model, jac, u_p), 0.0)
-        M = dsm._preconditioner(model, params, free)
-        x, k = pcg(lambda v: jacobian_matvec(model, jac, free, v), M, b, tol)
-        u = u_p + x
-        return u, k, -stiffness_matvec(model, jac, u)
-
-    def per_call(f, *a, seconds=0.3):
-        """Best of 3 of the mean time of ``reps`` back-to-back calls (reps from a first timing: ~seconds / 3)."""
-        jax.block_until_ready(f(*a))
-        t = time.perf_counter()
-        jax.block_until_ready(f(*a))
-        reps = int(np.clip(seconds / 3 / max(time.perf_counter() - t, 1e-6), 2, 50))
-        best = np.inf
-        for _ in range(3):
-            t = time.perf_counter()
-            for _ in range(reps):
-                out = f(*a)
-            jax.block_until_ready(out)
-            best = min(best, (time.perf_counter() - t) / reps)
-        return best
-
-    # the copy of the library's solve: compiled ahead, run once (it takes as long as the library's own solve)
-    args = (model, params, free, u_p, tol)
-    tc = time.perf_counter()
-    compiled = library_pcg.lower(*args).compile()
-    t_compile = time.perf_counter() - tc
-    tr = time.perf_counter()
-    u, iters = jax.block_until_ready(compiled(*args))
-    t_run = time.perf_counter() - tr
-    iters = int(iters)
-    out = {"iterations": iters, "pcg_run_s": t_run, "pcg_compile_s": t_compile,
-           "per_iteration_ms": 1e3 * t_run / max(iters, 1)}
-    if ref_u is not None:
-        out["solution_vs_library"] = float(jnp.linalg.norm(u - ref_u) / jnp.linalg.norm(ref_u))
-    rng = np.random.default_rng(0)
-    v = jnp.asarray(rng.normal(size=u_p.shape) * system.delta, u_p.dtype)
-    out["forces_ms"] = 1e3 * per_call(jax.jit(forces), model, params, jnp.zeros_like(u_p))
-    out["matvec_jvp_ms"] = 1e3 * per_call(jax.jit(jvp_matvec), model, params, free, v)
-    # the same matvec, 20 in a row inside a jitted loop (as in the CG's while loop)
-    looped = jax.jit(lambda model, params, free, v: jax.lax.fori_loop(
-        0, 20, lambda _, w: jvp_matvec(model, params, free, w) * 1e-9, v))
-    out["matvec_jvp_in_loop_ms"] = 1e3 * per_call(looped, model, params, free, v) / 20
-    out["precond_build_ms"] = 1e3 * per_call(jax.jit(lambda model, params, free: dsm._preconditioner(
-        model, params, free)(jnp.ones(free.shape))), model, params, free)
-    out["precond_apply_ms"] = 1e3 * per_call(jax.jit(dsm._preconditioner(model, params, free)), v)
-    out["vdot_ms"] = 1e3 * per_call(jax.jit(jnp.vdot), v, v)
-    out["matvec_share"] = out["matvec_jvp_ms"] / max(out["per_iteration_ms"], 1e-12)
-    # the prototype: per-bond Jacobians once, then a gather - [nb, 2nd, 2nd] product - scatter per matvec
-    jac = jax.jit(dsm.bond_jacobians)(model, params)
-    out["jacobians_ms"] = 1e3 * per_call(jax.jit(dsm.bond_jacobians), model, params)
-    out["matvec_jacobian_ms"] = 1e3 * per_call(jax.jit(jacobian_matvec), model, jac, free, v)
-    out["matvec_jvp_over_jacobian"] = out["matvec_jvp_ms"] / out["matvec_jacobian_ms"]
-    tc = time.perf_counter()
-    compiled = prototype_pcg.lower(*args).compile()
-    t_compile = time.perf_counter() - tc
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        u2, it2, gen2 = jax.block_until_ready(compiled(*args))
-        times.append(time.perf_counter() - t)
-    out["prototype"] = {"iterations": int(it2), "run_s": spread(times), "compile_s": t_compile,
-                        "stiffness": float(system.reaction(np.asarray(gen2)) / system.delta),
-                        "memory_MB": float(jac.size * jac.dtype.itemsize / 2**20)}
-    return out
 
 
 def splu_solve(system: LinearSystem, repeats: int, budget: float = float("inf"), dsm_matvec_check=True) -> dict:
@@ -396,21 +262,26 @@ def run_size(n, args, jaxbpm, out_rows):
                          "dK_vs_DEM_%": 100 * (dem3["stiffness"] / dem["stiffness"] - 1) if dem else "",
                          "iters": f"{dem3['steps']} steps"})
 
-    # ---- DSM linear, 6 and 3 DOF
+    # ---- DSM linear: configurations (keys 6 and 3 are the library's defaults)
     rec["dsm"] = {}
-    for dofs in (6, 3):
+    configs = [(6, "DSM lin 6 DOF", dict(dofs=6)),
+               ("6-fast", f"DSM lin 6 DOF stol {args.stiffness_tol:g}", dict(dofs=6, stiffness_tol=args.stiffness_tol)),
+               ("6-jacobi", "DSM lin 6 DOF Jacobi", dict(dofs=6, preconditioner="jacobi")),
+               (3, "DSM lin 3 DOF", dict(dofs=3))]
+    for key, label, kw in configs:
+        dofs = kw["dofs"]
         runs = []
         for _ in range(args.repeats):
-            runs.append(jaxbpm.solve(sample, scene, "dsm", dofs=dofs, linear_tol=args.linear_tol))
+            runs.append(jaxbpm.solve(sample, scene, "dsm", linear_tol=args.linear_tol, **kw))
         r0 = runs[0]
-        d = {"stiffness": r0.stiffness, "compile_s": r0.compile_time,
+        d = {"label": label, "options": kw, "stiffness": r0.stiffness, "compile_s": r0.compile_time,
              "compile_s_later_calls": [r.compile_time for r in runs[1:]],
              "run_s": spread([r.run_time for r in runs]), "wall_s_first": r0.wall_time,
              "wall_s": spread([r.wall_time for r in runs]), "residual": r0.stats["residual"],
+             "iterations": r0.stats["iterations"], "preconditioner": r0.stats["preconditioner"],
+             "aggregates": r0.stats["aggregates"], "stiffness_boundary": r0.stats["stiffness_boundary"],
              "converged": bool(r0.stats["converged"]), "free_dofs": r0.stats["free_dofs"],
              "stiffness_spread": float(np.ptp([r.stiffness for r in runs]) / abs(r0.stiffness))}
-        system = LinearSystem(sample, scene, params, dofs)
-        d["cg"] = cg_diagnostics(system, args.linear_tol, args.repeats, ref_u=r0.state)
         ref = dem if dofs == 6 else dem3  # the DEM of the same model
         if dem is not None:
             d["dK_vs_DEM"] = r0.stiffness / dem["stiffness"] - 1
@@ -420,26 +291,17 @@ def run_size(n, args, jaxbpm, out_rows):
         if dem3 is not None and dofs == 3:
             d["dK_vs_DEM_3dof"] = r0.stiffness / dem3["stiffness"] - 1
             d["speedup_run_vs_DEM_3dof"] = dem3["run_s"] / d["run_s"]["min"]
-        rec["dsm"][dofs] = d
-        cg = d["cg"]
-        log(f"  DSM {dofs} DOF: K={r0.stiffness:.6g}  compile {r0.compile_time:.2f} s  run min "
-            f"{d['run_s']['min']:.3f} s  wall {r0.wall_time:.2f} s  CG {cg['iterations']} it x "
-            f"{cg['per_iteration_ms']:.2f} ms (jvp matvec {cg['matvec_jvp_ms']:.2f} ms, Jacobian matvec "
-            f"{cg['matvec_jacobian_ms']:.3f} ms)  prototype run {cg['prototype']['run_s']['min']:.3f} s")
-        out_rows.append({**base, "method": f"DSM lin {dofs} DOF", "compile_s": r0.compile_time,
+        rec["dsm"][key] = d
+        log(f"  {label}: K={r0.stiffness:.6g}  compile {r0.compile_time:.2f} s  run min {d['run_s']['min']:.3f} s  "
+            f"wall {r0.wall_time:.2f} s  CG {d['iterations']} it ({d['preconditioner']}, {d['aggregates']} aggregates)"
+            + (f"  {d['speedup_run_vs_DEM']:.1f}x DEM run" if dem is not None else ""))
+        out_rows.append({**base, "method": label, "compile_s": r0.compile_time,
                          "run_s": d["run_s"]["min"], "run_med_s": d["run_s"]["median"], "wall_s": r0.wall_time,
                          "K": r0.stiffness,
                          "dK_vs_DEM_%": 100 * d["dK_vs_DEM"] if dem else "",
                          "dK_matched_%": 100 * (r0.stiffness / ref["stiffness"] - 1) if ref else "",
                          "x_DEM_run": d.get("speedup_run_vs_DEM", ""), "x_DEM_wall": d.get("speedup_wall_vs_DEM", ""),
-                         "iters": f"{cg['iterations']} CG"})
-        proto = cg["prototype"]
-        out_rows.append({**base, "method": f"(proto {dofs} DOF)", "compile_s": proto["compile_s"],
-                         "run_s": proto["run_s"]["min"], "run_med_s": proto["run_s"]["median"], "K": proto["stiffness"],
-                         "dK_vs_DEM_%": 100 * (proto["stiffness"] / dem["stiffness"] - 1) if dem else "",
-                         "dK_matched_%": 100 * (proto["stiffness"] / ref["stiffness"] - 1) if ref else "",
-                         "x_DEM_run": dem["run_s"] / proto["run_s"]["min"] if dem else "",
-                         "iters": f"{proto['iterations']} CG"})
+                         "iters": f"{d['iterations']} CG"})
 
     # ---- sparse direct solve of the linear 6-DOF system
     splu = None
@@ -450,7 +312,8 @@ def run_size(n, args, jaxbpm, out_rows):
         splu["dK_vs_DSM6"] = splu["stiffness"] / d6["stiffness"] - 1
         splu["dsm_speedup_total"] = splu["total"]["min"] / d6["run_s"]["min"]
         splu["dsm_speedup_factor_solve"] = splu["factor_solve"]["min"] / d6["run_s"]["min"]
-        splu["prototype_speedup_total"] = splu["total"]["min"] / d6["cg"]["prototype"]["run_s"]["min"]
+        splu["dsm_fast_speedup_total"] = splu["total"]["min"] / rec["dsm"]["6-fast"]["run_s"]["min"]
+        splu["dsm_jacobi_speedup_total"] = splu["total"]["min"] / rec["dsm"]["6-jacobi"]["run_s"]["min"]
         splu["dsm3_speedup_total"] = splu["total"]["min"] / rec["dsm"][3]["run_s"]["min"]
         log(f"  splu: K={splu['stiffness']:.9g} (vs DSM6 {splu['dK_vs_DSM6']:.2e})  jac "
             f"{splu['jacobians']['min']:.3f} s  assembly {splu['assembly']['min']:.3f} s  factor "
@@ -546,7 +409,7 @@ def evaluate_goals(results) -> dict:
         sp = [s["dsm_speedup_total"] for _, s in split]
         g["dsm6_lead_over_splu_grows_with_size"] = {
             "met": all(b > a for a, b in zip(sp, sp[1:])), "particles": [p for p, _ in split], "speedups": sp}
-    for dofs in (6, 3):
+    for dofs in (6, "6-fast", 3):
         rows = [(r["particles"], r["dsm"][dofs]) for r in results if r["dem"] is not None]
         if rows:
             g[f"dsm{dofs}_100x_faster_than_dem_within_1pct"] = {
@@ -572,8 +435,8 @@ def plot(results, path, note):
         "splu 6 DOF (Jacobians+assembly+factor+solve)": ("C3", "D", "-", lambda r: r["splu"] and
                                                         r["splu"]["total"]["min"]),
         "splu 6 DOF (factor+solve)": ("C3", "d", ":", lambda r: r["splu"] and r["splu"]["factor_solve"]["min"]),
-        "DSM 6 DOF prototype, precomputed bond Jacobians": ("C1", "s", ":", lambda r: r["dsm"][6]["cg"]["prototype"][
-            "run_s"]["min"]),
+        "DSM linear 6 DOF, stiffness_tol (run, min)": ("C1", "s", ":", lambda r: r["dsm"]["6-fast"]["run_s"]["min"]),
+        "DSM linear 6 DOF, block-Jacobi (run, min)": ("C6", "s", "--", lambda r: r["dsm"]["6-jacobi"]["run_s"]["min"]),
         "DEM + contacts (run)": ("C4", "o", "--", lambda r: r["contacts"] and r["contacts"].get("dem", {}).get(
             "run_s")),
         "DSM nonlinear + contacts (run, min)": ("C5", "v", "--", lambda r: r["contacts"] and r["contacts"]["dsm"][
@@ -627,6 +490,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache-dir", default=None,
                     help="load the generated samples from (or save them to) this folder (box_<n>_seed<s>.h5)")
     ap.add_argument("--linear-tol", type=float, default=1e-6)
+    ap.add_argument("--stiffness-tol", type=float, default=1e-3,
+                    help="stiffness_tol of the 'fast' 6-DOF DSM configuration")
     ap.add_argument("--threads", type=int, default=1, help="cores to use (default 1)")
     ap.add_argument("--cpu", type=int, default=None, help="core to pin to with one thread (default: least busy)")
     ap.add_argument("--quick", action="store_true", help=f"smoke run: sizes {QUICK_SIZES}, 2 repeats")
@@ -664,33 +529,20 @@ def main(argv=None) -> int:
     columns = ["particles", "bonds", "method", "compile_s", "run_s", "run_med_s", "wall_s", "K", "dK_vs_DEM_%",
                "dK_matched_%", "x_DEM_run", "x_DEM_wall", "iters"]
     print("\nAll methods (run_s: min over repeats; DEM once; dK_matched: vs the DEM of the same model -- 3-DOF DEM "
-          "for 3 DOF, DEM + contacts for the nonlinear DSM; '(proto ...)': this script's PCG on precomputed bond "
-          "Jacobians, not the library)")
+          "for 3 DOF, DEM + contacts for the nonlinear DSM)")
     table(rows, columns)
     srows = [{"particles": r["particles"], "free_dofs": r["splu"]["free_dofs"], "nnz_ff": r["splu"]["nnz_ff"],
               "fill_nnz": r["splu"]["fill_nnz"], "jac_s": r["splu"]["jacobians"]["min"],
               "assembly_s": r["splu"]["assembly"]["min"], "factor_s": r["splu"]["factor"]["min"],
               "solve_s": r["splu"]["solve"]["min"], "splu_total_s": r["splu"]["total"]["min"],
               "DSM6_run_s": r["dsm"][6]["run_s"]["min"], "x_total": r["splu"]["dsm_speedup_total"],
-              "x_f+s": r["splu"]["dsm_speedup_factor_solve"], "x_proto": r["splu"]["prototype_speedup_total"],
+              "x_f+s": r["splu"]["dsm_speedup_factor_solve"], "x_fast": r["splu"]["dsm_fast_speedup_total"],
               "x_DSM3": r["splu"]["dsm3_speedup_total"], "dK_vs_DSM6": r["splu"]["dK_vs_DSM6"],
               "op_check": r["splu"]["operator_check"]} for r in results if r["splu"]]
     if srows:
         print("\nsplu (SuperLU, COLAMD) on the same linear 6-DOF system; x_*: DSM speed-up = splu time / DSM run "
-              "(total, factor+solve only, prototype, 3-DOF DSM)")
+              "(total, factor+solve only, DSM with stiffness_tol, 3-DOF DSM)")
         table(srows, list(srows[0]))
-    crows = [{"particles": r["particles"], "dofs": d, "CG_iters": r["dsm"][d]["cg"]["iterations"],
-              "DSM_run_s": r["dsm"][d]["run_s"]["min"], "pcg_s": r["dsm"][d]["cg"]["pcg_run_s"],
-              "ms_per_iter": r["dsm"][d]["cg"]["per_iteration_ms"],
-              "jvp_matvec_ms": r["dsm"][d]["cg"]["matvec_jvp_ms"],
-              "jvp_mv_loop_ms": r["dsm"][d]["cg"]["matvec_jvp_in_loop_ms"], "forces_ms": r["dsm"][d]["cg"]["forces_ms"],
-              "precond_ms": r["dsm"][d]["cg"]["precond_apply_ms"],
-              "prec_build_ms": r["dsm"][d]["cg"]["precond_build_ms"],
-              "jac_matvec_ms": r["dsm"][d]["cg"]["matvec_jacobian_ms"],
-              "proto_run_s": r["dsm"][d]["cg"]["prototype"]["run_s"]["min"],
-              "u_vs_lib": r["dsm"][d]["cg"].get("solution_vs_library", "")} for r in results for d in (6, 3)]
-    print("\nWhere the DSM time goes (instrumented copy of jax's cg; matvec/forces/preconditioner timed alone)")
-    table(crows, list(crows[0]))
     cont = [{"particles": r["particles"], "candidates": r["contacts"]["dsm"]["contact_candidates"],
              "K_DEM_c": r["contacts"].get("dem", {}).get("stiffness", ""), "K_DSM_c": r["contacts"]["dsm"]["stiffness"],
              "dK_DSM_vs_DEM_%": 100 * r["contacts"].get("dK_dsm_vs_dem", float("nan")),
@@ -726,7 +578,7 @@ def main(argv=None) -> int:
     out = {"benchmark": "dsm_vs_dem", "machine": {**machine_info(), "pinned_core": cpu, "load_before": load_before,
                                                   "load_after": load_after},
            "settings": settings, "total_time_s": time.perf_counter() - t_start, "results": results, "rows": rows,
-           "splu_rows": srows, "cg_rows": crows, "contact_rows": cont, "goals": goals}
+           "splu_rows": srows, "contact_rows": cont, "goals": goals}
     print(json.dumps(out, indent=1, default=_json_default))
     path = write_json(args.out, json.loads(json.dumps(out, default=_json_default)))
     print(f"wrote {path}")

@@ -1,5 +1,7 @@
 """Direct stiffness method: closed forms, agreement with the DEM, gradients, linearity, failure reports."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -107,3 +109,72 @@ def test_floating_cluster_is_reported(column):
 def test_walls_need_the_nonlinear_solver(column):
     with pytest.raises(SceneError, match="nonlinear"):
         jaxbpm.solve(column, UniaxialCompression(boundary="walls"), method="dsm", nonlinear=False)
+
+
+@pytest.mark.parametrize("dofs", [3, 6])
+def test_element_by_element_operator_equals_the_force_jvp(packing, dofs):
+    model = UniaxialCompression().model(packing, rotations=dofs == 6)
+    p = default_params(packing)
+    v = jnp.asarray(np.random.default_rng(0).normal(size=(model.n, dofs)) * 1e-6)
+    ebe, jac = dsm.tangent_operator(model, p, operator="jacobians")
+    jvp, none = dsm.tangent_operator(model, p, operator="jvp")
+    assert jac.shape == (model.bonds.shape[0], 2 * dofs, 2 * dofs) and none is None
+    a, b = ebe(v), jvp(v)
+    np.testing.assert_allclose(a, b, atol=1e-12 * float(jnp.abs(b).max()))
+    # the per-bond Jacobians are symmetric (the bond law has a potential at rest)
+    np.testing.assert_allclose(jac, jnp.swapaxes(jac, 1, 2), atol=1e-9 * float(jnp.abs(jac).max()))
+
+
+def test_coarse_matrix_needs_only_the_coupling_bonds(packing):
+    model = UniaxialCompression().model(packing)
+    free = dsm._free_mask(model, UniaxialCompression(), packing)[0]
+    coarse = dsm.coarse_space(model, free, aggregate_size=25)
+    assert 4 <= coarse.count <= 16 and 0 < coarse.bonds.shape[0] < model.bonds.shape[0]
+    jac = dsm.bond_jacobians(model, default_params(packing))
+    every = dataclasses.replace(coarse, bonds=jnp.arange(model.bonds.shape[0]))
+    a, b = dsm._coarse_factor(model, jac, coarse), dsm._coarse_factor(model, jac, every)
+    np.testing.assert_allclose(a @ a.T, b @ b.T, rtol=1e-8, atol=1e-10 * float(jnp.abs(b @ b.T).max()))
+    # and it is P^T K_ff P: compare with the operator applied to the coarse basis (one column per rigid mode)
+    basis = np.zeros((coarse.count * 6,) + free.shape)
+    for a_ in range(coarse.count):
+        members = np.asarray(coarse.labels) == a_
+        basis[6 * a_:6 * a_ + 6, members] = np.moveaxis(np.asarray(coarse.basis)[members], 2, 0)
+    full, _ = dsm.tangent_operator(model, default_params(packing))
+    kp = jax.vmap(full)(jnp.asarray(basis))
+    direct = jnp.einsum("aij,bij->ab", jnp.asarray(basis), kp)
+    d = jnp.diag(direct)
+    direct = direct + jnp.diag(jnp.where(d > 0, 1e-10 * d.max(), 1.0))  # the factor's documented shift
+    np.testing.assert_allclose(b @ b.T, direct, atol=1e-9 * float(jnp.abs(direct).max()))
+
+
+def test_two_level_preconditioner_same_answer_fewer_iterations(packing):
+    scene = UniaxialCompression(strain=0.002)
+    a = jaxbpm.solve(packing, scene, method="dsm", preconditioner="jacobi", linear_tol=1e-10)
+    b = jaxbpm.solve(packing, scene, method="dsm", preconditioner="two-level", aggregate_size=25, linear_tol=1e-10)
+    assert a.stats["preconditioner"] == "jacobi" and b.stats["preconditioner"] == "two-level"
+    assert b.stats["aggregates"] >= 4
+    np.testing.assert_allclose(b.stiffness, a.stiffness, rtol=1e-8)
+    assert b.stats["iterations"] < 0.7 * a.stats["iterations"], (a.stats["iterations"], b.stats["iterations"])
+    # the energy measure of K and the DEM's boundary measure agree at convergence
+    np.testing.assert_allclose(a.stats["stiffness_boundary"], a.stiffness, rtol=1e-7)
+
+
+def test_stiffness_tolerance_stops_sooner_within_its_bound(packing):
+    scene = UniaxialCompression(strain=0.002)
+    tight = jaxbpm.solve(packing, scene, method="dsm", linear_tol=1e-10)
+    for stol in (1e-2, 1e-4):
+        loose = jaxbpm.solve(packing, scene, method="dsm", stiffness_tol=stol, linear_tol=1e-10)
+        assert loose.stats["converged"] and loose.stats["iterations"] < tight.stats["iterations"]
+        # the energy of the CG iterate is an upper bound that settles from above
+        assert 0 <= loose.stiffness / tight.stiffness - 1 < stol, (stol, loose.stiffness / tight.stiffness - 1)
+
+
+def test_bad_solver_options_are_named(packing):
+    scene = UniaxialCompression(strain=0.002)
+    with pytest.raises(ValueError, match="preconditioner"):
+        jaxbpm.solve(packing, scene, method="dsm", preconditioner="ilu")
+    with pytest.raises(ValueError, match="operator"):
+        jaxbpm.solve(packing, scene, method="dsm", operator="dense")
+    model = UniaxialCompression(contacts=True).model(packing, contacts=True)
+    with pytest.raises(SceneError, match="bonds only"):
+        dsm.tangent_operator(model, default_params(packing), operator="jacobians")
