@@ -12,7 +12,7 @@ from jaxbpm.sample import Sample
 
 __all__ = ["solve", "METHODS"]
 
-METHODS = ("dem", "dsm")
+METHODS = ("dem", "dsm", "ste")
 
 
 def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options) -> Result:
@@ -30,6 +30,11 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     Newton when the reaction changes less than this, relative), ``contact_skin`` [m], ``load_steps`` (nonlinear:
     equal load increments, 4; K is their least-squares slope over the scene's fit range, as for the DEM), ``throw``
     (raise :class:`ConvergenceError` instead of warning when a solve misses its tolerance).
+    options for ``"ste"`` (stiffness tensor estimation, no displacement computed): ``dofs`` (3, the paper's
+    translations-only form, or 6), ``first_neighbour`` (Eq. 33-35 instead of Eq. 32), ``layered`` (layered
+    springs in series along the load, for porous or shaped bodies), ``layer_thickness`` [m], ``contact_fraction``
+    (contacts: fraction of the target strain at which Hertz contacts are linearised), ``volumes`` (``[n]`` particle
+    volumes V^n). The stats hold the Voigt tensor, E_x, E_y, E_z, nu, an isotropic fit and the skipped particles.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
@@ -39,6 +44,10 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
         from jaxbpm import dsm
 
         return dsm.solve_scene(sample, scene, params, **options)
+    if method == "ste":
+        from jaxbpm import ste
+
+        return ste.solve_scene(sample, scene, params, **options)
     return _solve_dem(sample, scene, params, **options)
 
 

@@ -1,0 +1,174 @@
+#!/usr/bin/env python
+"""STE vs DSM vs DEM: time and stiffness error of the stiffness tensor estimate, and its scaling.
+
+Usage::
+
+    python benchmarks/ste.py                              # 2k, 10k random packings; 100k, 500k perturbed FCC
+    python benchmarks/ste.py --quick                      # smoke run
+    python benchmarks/ste.py --dem-max 10000 --dsm-max 100000
+
+Samples
+-------
+* ``random``: ``jaxbpm.generate.box(n, seed).largest_cluster()`` (FIRE-packed polydisperse spheres, bonds at contacts)
+  at ``--random-sizes`` (default 2k and 10k): the accuracy points.
+* ``fcc``: an FCC lattice (``jaxbpm.generate.lattice``) with every centre moved at random by up to 5 % of the radius
+  (bonds kept), at ``--fcc-sizes`` (default ~2k to ~500k): the scaling points. The FIRE packer is too slow for
+  500k particles on this machine, so the large sizes use this cheap generator; the output says which sample is which.
+
+Methods (scene: ``UniaxialCompression(strain=0.002)``, clamped layers, bonds only)
+---------------------------------------------------------------------------------
+* STE (3 DOF, Eq. 32): ``jaxbpm.ste.scene_stiffness`` jitted; compile time (``lower().compile()``) and run time
+  (min of ``--repeats`` calls, ``block_until_ready``) separately; the estimator setup (NumPy: fabric, volumes) is
+  timed as ``setup``.
+* DSM (linear, 3 DOF = the STE's model, and 6 DOF = the DEM's model) up to ``--dsm-max`` particles.
+* DEM (6 DOF, the reference, ``jaxbpm.solve(..., "dem")`` defaults) up to ``--dem-max`` particles.
+Speed-up = DEM run time / STE run time (compilation excluded on both sides). Exponent: least-squares slope of
+log(run time) against log(particles) over the sizes >= 10k.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from _common import enable_x64, machine_info, table, write_json
+
+
+def log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def fcc_sample(n_target, seed=0, radius=1e-3):
+    import numpy as np
+
+    import jaxbpm
+
+    cells = max(1, int(round((n_target / 4.0) ** (1.0 / 3.0))))
+    s = jaxbpm.generate.lattice("fcc", (cells, cells, cells), radius, bond_radius_ratio=0.5,
+                                materials={"E": 1e9, "nu": 0.25})
+    rng = np.random.default_rng(seed)
+    pos = np.asarray(s.positions) + rng.uniform(-0.05, 0.05, (s.n_particles, 3)) * radius
+    return jaxbpm.Sample.from_arrays(pos, s.radii, s.bonds, s.bond_radius, materials=s.materials, domain=s.domain)
+
+
+def time_ste(sample, scene, repeats):
+    import jax
+
+    from jaxbpm import ste
+    from jaxbpm.physics.model import default_params
+
+    params = default_params(sample)
+    t = time.perf_counter()
+    est = ste.estimator(sample, scene)
+    setup = time.perf_counter() - t
+
+    def k_of(est, params):
+        return ste.scene_stiffness(est, params, sample, scene)[0]
+
+    t = time.perf_counter()
+    compiled = jax.jit(k_of).lower(est, params).compile()
+    compile_s = time.perf_counter() - t
+    runs = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        k = jax.block_until_ready(compiled(est, params))
+        runs.append(time.perf_counter() - t)
+    return {"K": float(k), "setup_s": setup, "compile_s": compile_s, "run_s": min(runs), "skipped": est.skipped,
+            "surface": est.surface}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--random-sizes", type=int, nargs="*", default=[2000, 10000])
+    ap.add_argument("--fcc-sizes", type=int, nargs="*", default=[2000, 10000, 100000, 500000])
+    ap.add_argument("--dem-max", type=int, default=10000)
+    ap.add_argument("--dsm-max", type=int, default=100000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default="results/ste.json")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.random_sizes, args.fcc_sizes, args.dem_max, args.dsm_max = [500], [500, 2000], 500, 2000
+    enable_x64()
+    import numpy as np
+
+    import jaxbpm
+    from jaxbpm.scenes import UniaxialCompression
+
+    scene = UniaxialCompression(strain=0.002)
+    rows = []
+    t_all = time.perf_counter()
+    jobs = [("random", n) for n in args.random_sizes] + [("fcc", n) for n in args.fcc_sizes]
+    for kind, n in jobs:
+        t = time.perf_counter()
+        s = jaxbpm.generate.box(n, seed=0).largest_cluster() if kind == "random" else fcc_sample(n)
+        gen = time.perf_counter() - t
+        log(f"{kind} {s.n_particles} particles, {s.n_bonds} bonds (generated in {gen:.1f} s)")
+        row = {"sample": kind, "particles": s.n_particles, "bonds": s.n_bonds, "gen_s": gen}
+        st = time_ste(s, scene, args.repeats)
+        row.update({f"ste_{k}": v for k, v in st.items()})
+        log(f"  STE K={st['K']:.5g} compile {st['compile_s']:.2f} s run {st['run_s'] * 1e3:.2f} ms")
+        if s.n_particles <= args.dsm_max:
+            for dofs in (3, 6):
+                r = jaxbpm.solve(s, scene, method="dsm", dofs=dofs)
+                row[f"dsm{dofs}_K"], row[f"dsm{dofs}_run_s"] = r.stiffness, r.run_time
+                row[f"err_vs_dsm{dofs}_%"] = 100 * (st["K"] / r.stiffness - 1)
+                log(f"  DSM{dofs} K={r.stiffness:.5g} run {r.run_time:.2f} s")
+        if s.n_particles <= args.dem_max:
+            r = jaxbpm.solve(s, scene, method="dem")
+            row.update(dem_K=r.stiffness, dem_run_s=r.run_time, dem_compile_s=r.compile_time,
+                       dem_steps=r.stats.get("steps"))
+            row["err_vs_dem_%"] = 100 * (st["K"] / r.stiffness - 1)
+            row["speedup_vs_dem"] = r.run_time / st["run_s"]
+            log(f"  DEM K={r.stiffness:.5g} run {r.run_time:.2f} s -> speed-up {row['speedup_vs_dem']:.0f}x")
+        rows.append(row)
+
+    fcc = [r for r in rows if r["sample"] == "fcc" and r["particles"] >= 10000]
+    exponent = None
+    if len(fcc) >= 2:
+        exponent = float(np.polyfit(np.log([r["particles"] for r in fcc]), np.log([r["ste_run_s"] for r in fcc]),
+                                    1)[0])
+    cols = ["sample", "particles", "bonds", "ste_compile_s", "ste_run_s", "dsm3_run_s", "dsm6_run_s", "dem_run_s",
+            "err_vs_dsm3_%", "err_vs_dsm6_%", "err_vs_dem_%", "speedup_vs_dem"]
+    table(rows, cols)
+    print(f"STE run-time scaling exponent (fcc, >= 10k particles): {exponent}")
+    print(f"DEM run above {args.dem_max} particles and DSM above {args.dsm_max} skipped (time budget); "
+          "fcc = perturbed FCC lattice (cheap generator for the scaling points), random = FIRE packing")
+    out = {"benchmark": "ste", "machine": machine_info(), "settings": vars(args), "rows": rows,
+           "scaling_exponent": exponent, "total_time_s": time.perf_counter() - t_all,
+           "notes": "STE 3 DOF (Eq. 32), default surface_depth (one diameter); speed-up = DEM run / STE run"}
+    write_json(args.out, out)
+    _plot(rows, exponent, args.out.replace(".json", ".png"))
+
+
+def _plot(rows, exponent, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for kind, marker in (("fcc", "o"), ("random", "s")):
+        rr = [r for r in rows if r["sample"] == kind]
+        if not rr:
+            continue
+        n = [r["particles"] for r in rr]
+        ax.loglog(n, [r["ste_run_s"] for r in rr], marker + "-", label=f"STE run ({kind})")
+        dem = [(r["particles"], r["dem_run_s"]) for r in rr if "dem_run_s" in r]
+        if dem:
+            ax.loglog(*zip(*dem), marker + "--", label=f"DEM run ({kind})")
+        dsm = [(r["particles"], r["dsm6_run_s"]) for r in rr if "dsm6_run_s" in r]
+        if dsm:
+            ax.loglog(*zip(*dsm), marker + ":", label=f"DSM 6 DOF run ({kind})")
+    ax.set_xlabel("particles")
+    ax.set_ylabel("run time [s]")
+    ax.set_title(f"STE scaling (exponent {exponent:.2f})" if exponent is not None else "STE scaling")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
