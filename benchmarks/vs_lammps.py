@@ -362,21 +362,19 @@ def find_lammps(explicit: str | None, tmp: pathlib.Path) -> tuple[str | None, di
 
 
 def write_lammps_data(path: pathlib.Path, positions, radii, bonds, density: float, atom_type, bond_type) -> None:
-    """LAMMPS data file, atom_style bpm/sphere (``id mol type diameter density x y z``); atom ids = index + 1."""
-    pos, rad, b = np.asarray(positions), np.asarray(radii), np.asarray(bonds)
-    n = len(pos)
-    pad = 10.0 * rad.max()
-    lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
-    lines = ["LAMMPS data file written by jaxbpm benchmarks/vs_lammps.py", "",
-             f"{n} atoms", f"{int(np.max(atom_type))} atom types", f"{len(b)} bonds",
-             f"{int(np.max(bond_type))} bond types", "",
-             *(f"{_r(lo[c])} {_r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
-             "Atoms # bpm/sphere", ""]
-    lines += [f"{i + 1} 1 {atom_type[i]} {_r(2.0 * rad[i])} {_r(density)} " + " ".join(_r(v) for v in pos[i])
-              for i in range(n)]
-    lines += ["", "Bonds", ""]
-    lines += [f"{k + 1} {bond_type[k]} {b[k, 0] + 1} {b[k, 1] + 1}" for k in range(len(b))]
-    path.write_text("\n".join(lines) + "\n")
+    """LAMMPS data file, atom_style bpm/sphere (``id mol type diameter density x y z``); atom ids = index + 1.
+
+    Written by :func:`jaxbpm.formats.write_lammps_data` without its ``Bond Coeffs`` section (the coefficients
+    come from :func:`write_coeffs`, included after ``bond_style``)."""
+    from jaxbpm.formats import write_lammps_data as write
+    from jaxbpm.sample import Sample
+
+    rad = np.asarray(radii, dtype=np.float64)
+    b = np.asarray(bonds)
+    sample = Sample.from_arrays(np.asarray(positions, dtype=np.float64), rad, b,
+                                0.5 * np.minimum(rad[b[:, 0]], rad[b[:, 1]]), density=float(density))
+    write(path, sample, atom_types=atom_type, bond_types=bond_type, coefficients=False,
+          title="LAMMPS data file written by jaxbpm benchmarks/vs_lammps.py")
 
 
 def bond_types(k: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -394,12 +392,10 @@ def bond_types(k: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def write_coeffs(path: pathlib.Path, table: np.ndarray) -> None:
     """bond_coeff lines: Kr Ks Kt Kb, thresholds 1e3 x stiffness (irrelevant with ``break no``), no damping."""
-    lines = []
-    for t, (kr, ks, kt, kb) in enumerate(table, start=1):
-        th = [1e3 * kr, 1e3 * ks, 1e3 * kt, 1e3 * kb]
-        lines.append(f"bond_coeff {t} {_r(kr)} {_r(ks)} {_r(kt)} {_r(kb)} " + " ".join(_r(v) for v in th) +
-                     " 0.0 0.0 0.0 0.0")
-    path.write_text("\n".join(lines) + "\n")
+    from jaxbpm.formats import write_lammps_coeffs
+
+    table = np.asarray(table, dtype=np.float64)
+    write_lammps_coeffs(path, np.concatenate([table, 1e3 * table], axis=1), bond_style=None)
 
 
 def two_particle_cases(L: float, rng: np.random.Generator) -> tuple[np.ndarray, list[dict]]:

@@ -223,6 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-solve", action="store_true", dest="no_solve",
                    help="only generate and save the sample (skip the DEM/DSM comparison)")
     p.set_defaults(func=_cmd_demo)
+
+    from jaxbpm._interop_cli import add_parsers as _add_interop  # convert, params
+
+    _add_interop(sub)
     return parser
 
 

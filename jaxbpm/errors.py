@@ -32,3 +32,7 @@ class InstabilityError(JaxbpmError, RuntimeError):
 
 class ConvergenceError(JaxbpmError, RuntimeError):
     """An iterative solve did not reach its tolerance."""
+
+
+class ConventionError(JaxbpmError, ValueError):
+    """Bond parameters of another code's convention have no counterpart in jaxbpm's bond law (or are malformed)."""
