@@ -66,8 +66,9 @@ jax.tree_util.register_dataclass(Loading, data_fields=["clamped", "velocity", "w
 @dataclasses.dataclass(frozen=True)
 class DEMState:
     """Integrator state (a pytree): positions/velocities ``[n, 3]``, orientations ``[n, 4]``, angular velocities
-    ``[n, 3]``, current forces and moments ``[n, 3]``, bond ``intact`` mask ``[nb]``, contact ``spring`` ``[C, 3]``
-    and the jax-md neighbour list (``None`` without contacts), simulated ``time``."""
+    ``[n, 3]``, current forces and moments ``[n, 3]``, bond ``intact`` mask ``[nb]``, how and when each bond broke
+    (``broken`` ``[nb]`` int8: 0 intact, 1 tensile, 2 shear; ``broken_time`` ``[nb]`` [s], NaN while intact),
+    contact ``spring`` ``[C, 3]`` and the jax-md neighbour list (``None`` without contacts), simulated ``time``."""
 
     positions: Any
     velocities: Any
@@ -79,10 +80,13 @@ class DEMState:
     spring: Any
     nbrs: Any
     time: Any
+    broken: Any = None
+    broken_time: Any = None
 
 
 jax.tree_util.register_dataclass(DEMState, data_fields=["positions", "velocities", "orientations", "omegas", "force",
-                                                        "moment", "intact", "spring", "nbrs", "time"],
+                                                        "moment", "intact", "spring", "nbrs", "time", "broken",
+                                                        "broken_time"],
                                  meta_fields=[])
 
 
@@ -142,11 +146,12 @@ class _Neighbors:
                                      extra_capacity=extra_per_particle)
 
 
-def _contact_pairs(model: Model, nbrs):
+def _contact_pairs(model: Model, nbrs, intact=None):
     pairs = nbrs.idx.T
     valid = pairs[:, 0] < model.n
     if model.bond_contact == "replace":
-        valid = valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0))
+        # bonded pairs have no contact while their bond holds; a broken bond falls back to the contact law
+        valid = valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0), intact)
     return pairs, valid
 
 
@@ -170,7 +175,7 @@ def _walls(load: Loading, t):
 def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, pairs_valid=None):
     contacts = None
     if model.contacts:
-        pairs, valid = _contact_pairs(model, state.nbrs) if pairs_valid is None else pairs_valid
+        pairs, valid = _contact_pairs(model, state.nbrs, state.intact) if pairs_valid is None else pairs_valid
         contacts = (pairs, valid, state.spring, dxi, v_rel)
     points, normals = _walls(load, state.time)
     return model.forces(state.positions, state.orientations, params, state.intact, contacts,
@@ -184,7 +189,7 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
     every pair it is given: when the touching pairs fit in half the buffer, only those are handed to the law (packed
     into a list of that size), otherwise all candidates are.
     """
-    pairs, valid = _contact_pairs(model, state.nbrs)
+    pairs, valid = _contact_pairs(model, state.nbrs, state.intact)
     capacity = pairs.shape[0]
     size = max(capacity // 3, 1)
     i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)
@@ -195,17 +200,18 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
         dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
         force, moment, parts = _evaluate(model, params, dataclasses.replace(state, spring=spring), load, dxi, v_rel,
                                          (pairs, valid))
-        return force, moment, parts["walls"], parts["contacts"].spring
+        return force, moment, parts["walls"], parts["contacts"].spring, parts["intact"], parts["broken"]
 
     def packed():
         # position of each touching pair in the packed list (associative_scan: XLA's CPU cumsum is slower)
         slot = jax.lax.associative_scan(jnp.add, touching.astype(jnp.int32)) - 1
         take = jnp.full(size, capacity, jnp.int32).at[jnp.where(touching, slot, size)].set(
             jnp.arange(capacity, dtype=jnp.int32), mode="drop")  # the touching slots, then `capacity` (none)
-        force, moment, walls, packed_spring = evaluate(
+        force, moment, walls, packed_spring, intact, broken = evaluate(
             pairs.at[take].get(mode="fill", fill_value=model.n), take < capacity,
             spring.at[take].get(mode="fill", fill_value=0.0))
-        return force, moment, walls, jnp.zeros_like(spring).at[take].set(packed_spring, mode="drop")
+        return (force, moment, walls, jnp.zeros_like(spring).at[take].set(packed_spring, mode="drop"), intact,
+                broken)
 
     return jax.lax.cond(jnp.sum(touching.astype(jnp.int32)) <= size, packed, lambda: evaluate(pairs, valid, spring))
 
@@ -238,6 +244,8 @@ def init_state(model: Model, params, load: Loading, nbrs=None) -> DEMState:
         spring=jnp.zeros((capacity, 3), dtype),
         nbrs=nbrs,
         time=jnp.zeros((), dtype),
+        broken=jnp.zeros(model.bonds.shape[0], jnp.int8),
+        broken_time=jnp.full(model.bonds.shape[0], jnp.nan, dtype),
     )
     zeros = jnp.zeros((capacity, 3), dtype)
     force, moment, _ = _evaluate(model, params, state, load, zeros, zeros)
@@ -265,7 +273,8 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
         w, q = state.omegas, state.orientations
 
     new = DEMState(positions=x, velocities=v, orientations=q, omegas=w, force=state.force, moment=state.moment,
-                   intact=state.intact, spring=state.spring, nbrs=state.nbrs, time=t)
+                   intact=state.intact, spring=state.spring, nbrs=state.nbrs, time=t, broken=state.broken,
+                   broken_time=state.broken_time)
     if model.contacts:
         # the pairs gather x, v and w about 20 times each: an exact division by a run-time one makes XLA compute them
         # once, not again inside every gather
@@ -277,10 +286,10 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n),
                               lambda: state.spring)
         new = dataclasses.replace(new, positions=x, velocities=v, omegas=w, nbrs=nbrs)
-        force, moment, walls, spring = _contact_step(model, params, load, new, spring, dt)
+        force, moment, walls, spring, intact, broken = _contact_step(model, params, load, new, spring, dt)
     else:
         force, moment, parts = _evaluate(model, params, new, load, None, None)
-        walls, spring = parts["walls"], state.spring
+        walls, spring, intact, broken = parts["walls"], state.spring, parts["intact"], parts["broken"]
     v = v + 0.5 * dt * _damped(force, v, alpha) * inv_m
     v = jnp.where(clamped, load.velocity, v)
     if model.rotations:
@@ -292,12 +301,19 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
     if model.walls:
         reactions = [*walls, *reactions]
     record = {"reaction": jnp.stack(reactions), "vmax": jnp.max(jnp.abs(v)), "time": t}
-    return dataclasses.replace(new, velocities=v, omegas=w, force=force, moment=moment, spring=spring), record
+    new = dataclasses.replace(new, velocities=v, omegas=w, force=force, moment=moment, spring=spring)
+    if broken is not None:
+        # bonds that broke in this step: their mode and time; the counts so far (tensile, shear) are recorded
+        mode = jnp.where(state.broken > 0, state.broken, broken)
+        new = dataclasses.replace(new, intact=intact, broken=mode,
+                                  broken_time=jnp.where((broken > 0) & (state.broken == 0), t, state.broken_time))
+        record["broken"] = jnp.stack([jnp.sum(mode == 1), jnp.sum(mode == 2)]).astype(jnp.int32)
+    return new, record
 
 
 @functools.partial(jax.jit, static_argnames=("n_steps",))
 def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps):
-    params = model.stiffness(params)  # once per chunk, not per step
+    params = model.precompute(params)  # stiffnesses and strengths once per chunk, not per step
 
     def body(s, _):
         return step(model, params, load, s, dt, alpha, origin)

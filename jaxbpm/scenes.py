@@ -16,7 +16,15 @@ import numpy as np
 from jaxbpm.errors import SceneError
 from jaxbpm.sample import Sample
 
-__all__ = ["UniaxialCompression"]
+__all__ = ["UniaxialCompression", "ThreePointBending", "sample_breaks"]
+
+
+def sample_breaks(sample: Sample, breakage) -> bool:
+    """Resolve a scene's ``breakage`` switch: ``None`` means "when the material table has a finite strength"."""
+    if breakage is not None:
+        return bool(breakage)
+    m = sample.materials
+    return bool(np.isfinite(m.tensile_strength).any() or np.isfinite(m.shear_strength).any())
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,6 +43,9 @@ class UniaxialCompression:
     contacts: Hertz-Mindlin particle contacts on (True) or off. rotations: None = the Model decides.
     wall_law, wall_stiffness: see :func:`jaxbpm.physics.model.build_model`.
     fit_range: the part of the loading (fractions of the target strain) over which K is fitted.
+    breakage: bonds break in the DEM when their stresses exceed their strengths (``None``: when the sample's material
+      table has a finite strength). Loading past the peak gives the uniaxial compressive strength (UCS = peak
+      stress); see :meth:`to_failure`. The static solvers (DSM, STE) always model the elastic range.
     """
 
     axis: int = 2
@@ -50,6 +61,15 @@ class UniaxialCompression:
     wall_law: str = "hertz"
     wall_stiffness: float | None = None
     fit_range: tuple[float, float] = (0.25, 1.0)
+    breakage: bool | None = None
+
+    @classmethod
+    def to_failure(cls, strain: float = 0.02, **kw) -> "UniaxialCompression":
+        """A compression past the peak: bonds break, particles whose bond broke interact by Hertz-Mindlin contacts,
+        and E is fitted over the first 5-25 % of the loading (the elastic part)."""
+        kw.setdefault("contacts", True)
+        kw.setdefault("fit_range", (0.05, 0.25))
+        return cls(strain=strain, breakage=True, **kw)
 
     def __post_init__(self):
         if self.axis not in (0, 1, 2):
@@ -146,6 +166,15 @@ class UniaxialCompression:
         return Loading(clamped=jnp.asarray(fixed | driven), velocity=jnp.asarray(vel, dtype), wall_points0=empty,
                        wall_normals=empty, wall_velocity=empty)
 
+    def modulus(self, stiffness: float, sample: Sample) -> float:
+        """Young's modulus E = K l / A [Pa]."""
+        length, area = self.geometry(sample)
+        return stiffness * length / area
+
+    def strength(self, peak_force: float, sample: Sample) -> float:
+        """Uniaxial compressive strength: peak force over the cross-section [Pa]."""
+        return peak_force / self.geometry(sample)[1]
+
     def compressive_force(self, reaction: np.ndarray) -> np.ndarray:
         """Compressive force [N] per record from the DEM reactions ``[steps, W+2, 3]`` (mean of both ends)."""
         ax = self.axis
@@ -160,3 +189,136 @@ class UniaxialCompression:
         if sel.sum() < 2:
             raise SceneError("too few records in fit_range to fit a stiffness")
         return float(np.polyfit(displacement[sel], force[sel], 1)[0])
+
+
+@dataclasses.dataclass(frozen=True)
+class ThreePointBending:
+    """Three-point bending of a bonded beam: two supports under its ends, a punch pressed down at mid-span.
+
+    The beam spans ``span_axis`` (default x); the load acts against ``axis`` (default z, downwards). The supports are
+    the particles of the bottom layer (``layer_thickness``, default one mean radius) within ``support_width`` of the
+    points ``centre -/+ span / 2``; the punch is the top-layer particles within ``punch_width`` of mid-span. Both
+    are clamped (every DOF prescribed): the supports fixed, the punch moved down at constant speed to a deflection
+    of ``strain`` x beam height. (A clamped row of particles stands for a roller or a cylindrical punch; it also
+    holds rotation, which matters little when the supports are narrow against the span.)
+
+    Observables: load-deflection curve, stiffness K = dF/dw over ``fit_range``, the beam modulus
+    E = K S^3 / (48 I) with I = b h^3 / 12, and the flexural strength sigma_f = 3 F_peak S / (2 b h^2) (S: span,
+    b: width, h: height).
+    span: [m], default 80 % of the beam length. support_width, punch_width: [m], default one mean diameter.
+    contacts: Hertz-Mindlin contacts (on by default: broken bonds fall back to them).
+    """
+
+    span: float | None = None
+    axis: int = 2
+    span_axis: int = 0
+    strain: float = 0.1
+    support_width: float | None = None
+    punch_width: float | None = None
+    layer_thickness: float | None = None
+    contacts: bool = True
+    rotations: bool | None = None
+    fit_range: tuple[float, float] = (0.02, 0.1)
+    breakage: bool | None = None
+
+    boundary = "layers"
+    wall_law = "hertz"
+    wall_stiffness = None
+
+    def __post_init__(self):
+        if self.axis not in (0, 1, 2) or self.span_axis not in (0, 1, 2) or self.axis == self.span_axis:
+            raise SceneError(f"axis and span_axis must be two different axes of 0, 1, 2, got {self.axis!r} and "
+                             f"{self.span_axis!r}")
+        if not (0 < self.strain < 1):
+            raise SceneError(f"strain (deflection / beam height) must lie in (0, 1), got {self.strain!r}")
+        lo, hi = self.fit_range
+        if not (0 <= lo < hi <= 1):
+            raise SceneError(f"fit_range must satisfy 0 <= lo < hi <= 1, got {self.fit_range!r}")
+        for name in ("span", "support_width", "punch_width", "layer_thickness"):
+            v = getattr(self, name)
+            if v is not None and not v > 0:
+                raise SceneError(f"{name} must be positive [m], got {v!r}")
+
+    @property
+    def uses_walls(self) -> bool:
+        return False
+
+    def _extent(self, sample: Sample):
+        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+        return (pos - rad[:, None]).min(axis=0), (pos + rad[:, None]).max(axis=0)
+
+    def dimensions(self, sample: Sample) -> tuple[float, float, float]:
+        """Span S, width b and height h of the beam [m]."""
+        lo, hi = self._extent(sample)
+        size = hi - lo
+        width_axis = 3 - self.axis - self.span_axis
+        span = self.span if self.span is not None else 0.8 * float(size[self.span_axis])
+        if span >= size[self.span_axis]:
+            raise SceneError(f"span {span:.4g} m must be shorter than the beam ({size[self.span_axis]:.4g} m)")
+        return float(span), float(size[width_axis]), float(size[self.axis])
+
+    def layers(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
+        """Boolean masks ``(supports, punch)`` of the clamped particles."""
+        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+        d = 2.0 * float(np.mean(rad))
+        t = self.layer_thickness if self.layer_thickness is not None else 0.5 * d
+        z, x = pos[:, self.axis], pos[:, self.span_axis]
+        lo, hi = self._extent(sample)
+        mid = 0.5 * (lo[self.span_axis] + hi[self.span_axis])
+        span = self.dimensions(sample)[0]
+        ws = self.support_width if self.support_width is not None else d
+        wp = self.punch_width if self.punch_width is not None else d
+        bottom, top = z <= z.min() + t, z >= z.max() - t
+        supports = bottom & ((np.abs(x - (mid - 0.5 * span)) <= 0.5 * ws) | (np.abs(x - (mid + 0.5 * span)) <= 0.5 * ws))
+        punch = top & (np.abs(x - mid) <= 0.5 * wp)
+        left, right = supports & (x < mid), supports & (x > mid)
+        if not left.any() or not right.any() or not punch.any():
+            raise SceneError("three-point bending: no particle found under a support or under the punch; widen "
+                             "support_width / punch_width or layer_thickness")
+        return supports, punch
+
+    def geometry(self, sample: Sample) -> tuple[float, float]:
+        """Beam height h (the deflection scale) and the cross-section b h [m^2]."""
+        span, width, height = self.dimensions(sample)
+        return height, width * height
+
+    def transit_length(self, sample: Sample) -> float:
+        """The span: the DEM's default loading time counts elastic-wave transits along it."""
+        return self.dimensions(sample)[0]
+
+    def model(self, sample: Sample, **overrides):
+        from jaxbpm.physics.model import build_model
+
+        kw = dict(contacts=self.contacts, walls=None, rotations=self.rotations)
+        kw.update(overrides)
+        return build_model(sample, **kw)
+
+    def loading(self, sample: Sample, speed: float):
+        from jaxbpm.dem import Loading
+
+        supports, punch = self.layers(sample)
+        n = sample.n_particles
+        dtype = jnp.asarray(1.0).dtype
+        vel = np.zeros((n, 3))
+        vel[punch, self.axis] = -speed
+        empty = jnp.zeros((0, 3), dtype)
+        return Loading(clamped=jnp.asarray(supports | punch), velocity=jnp.asarray(vel, dtype), wall_points0=empty,
+                       wall_normals=empty, wall_velocity=empty)
+
+    def compressive_force(self, reaction: np.ndarray) -> np.ndarray:
+        """Punch force [N] (mean of the punch's push and the supports' reaction)."""
+        ax = self.axis
+        return 0.5 * (reaction[:, 0, ax] - reaction[:, 1, ax])
+
+    def fit_stiffness(self, displacement, force, target) -> float:
+        return UniaxialCompression.fit_stiffness(self, displacement, force, target)
+
+    def modulus(self, stiffness: float, sample: Sample) -> float:
+        """Beam modulus E = K S^3 / (48 I), I = b h^3 / 12 [Pa] (Euler-Bernoulli, simply supported)."""
+        span, b, h = self.dimensions(sample)
+        return stiffness * span**3 / (48.0 * b * h**3 / 12.0)
+
+    def strength(self, peak_force: float, sample: Sample) -> float:
+        """Flexural strength sigma_f = 3 F S / (2 b h^2) [Pa]."""
+        span, b, h = self.dimensions(sample)
+        return 3.0 * peak_force * span / (2.0 * b * h**2)

@@ -56,8 +56,11 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     from jaxbpm import dem
     from jaxbpm.physics.model import default_params
 
+    from jaxbpm.scenes import sample_breaks
+
     t0 = time.perf_counter()
-    model = scene.model(sample)
+    breaks = sample_breaks(sample, getattr(scene, "breakage", False))
+    model = scene.model(sample, breakage=breaks)
     params = default_params(sample) if params is None else params
     dt_crit = dem.critical_time_step(model, params)
     if dt is None:
@@ -69,7 +72,9 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     length, area = scene.geometry(sample)
     target = scene.strain * length
     if loading_time is None:
-        loading_time = transits * _transit_time(model, params, length)
+        # a wave crossing the sample along its longest loaded path (the gauge length; a beam's span)
+        path = scene.transit_length(sample) if hasattr(scene, "transit_length") else length
+        loading_time = transits * _transit_time(model, params, path)
     n_steps = int(np.ceil(loading_time / dt))
     speed = target / (n_steps * dt)
     chunk = chunk or int(np.clip(n_steps // 20, 50, 5000))
@@ -84,8 +89,19 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     stiffness = scene.fit_stiffness(disp, force, target)
     keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
     stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
-                 damping=float(damping), rotations=model.rotations, contacts=model.contacts)
-    return Result(method="dem", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
+                 damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks)
+    peak = int(np.argmax(force))
+    stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]))
+    if hasattr(scene, "strength"):
+        stats["strength"] = float(scene.strength(float(force[peak]), sample))
+    if breaks:
+        counts = rec["broken"]  # [steps, 2]: tensile, shear (cumulative)
+        stats.update(broken_tensile=int(counts[-1, 0]), broken_shear=int(counts[-1, 1]),
+                     broken_curve=counts[keep], broken_at_peak=int(counts[peak].sum()))
+        # the curve points are the loading's; peaks inside the first or last record mean the run stopped too early
+        stats["past_peak"] = bool(peak < len(force) - 1 and force[-1] < force[peak])
+    modulus = scene.modulus(stiffness, sample) if hasattr(scene, "modulus") else stiffness * length / area
+    return Result(method="dem", stiffness=stiffness, youngs_modulus=modulus, gauge_length=length,
                   area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
                   compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state)
 

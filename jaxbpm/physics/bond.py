@@ -35,7 +35,10 @@ import jax.numpy as jnp
 
 from jaxbpm.physics import rotation
 
-__all__ = ["BondStiffness", "BondForces", "stiffness", "bond_law", "bond_forces", "bond_energy"]
+__all__ = ["BondStiffness", "BondForces", "BondStrength", "stiffness", "bond_law", "bond_forces", "bond_energy",
+           "bond_stresses", "bond_failure", "TENSILE", "SHEAR"]
+
+TENSILE, SHEAR = 1, 2  # break modes (0: intact)
 
 
 class BondStiffness(NamedTuple):
@@ -62,6 +65,46 @@ class BondForces(NamedTuple):
     shear: jnp.ndarray
     twist: jnp.ndarray
     bend: jnp.ndarray
+
+
+class BondStrength(NamedTuple):
+    """Per-bond strengths ``[nb]`` (parallel-bond style, Potyondy & Cundall 2004): tensile strength sigma_c [Pa],
+    cohesion c [Pa] and tan(phi) of the shear strength tau_c = c - sigma_n tan(phi) (phi = 0: constant tau_c = c),
+    and the bond's cross-section: radius r_b [m], area A, second moments I and J."""
+
+    tensile: jnp.ndarray
+    cohesion: jnp.ndarray
+    tan_phi: jnp.ndarray
+    radius: jnp.ndarray
+    area: jnp.ndarray
+    inertia: jnp.ndarray
+    polar: jnp.ndarray
+
+
+def bond_stresses(normal, shear, twist, bend, s: BondStrength):
+    """Largest normal and shear stress at the bond's rim [Pa] and the mean normal stress sigma_n = F_n / A.
+
+    sigma = F_n / A + |M_b| r_b / I (tension > 0), tau = |F_t| / A + |M_t| r_b / J. ``shear`` and ``bend`` are
+    ``(x, y, z)`` component tuples (or ``[..., 3]`` rows).
+    """
+    def norm(v):
+        if isinstance(v, tuple):
+            return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        return jnp.linalg.norm(v, axis=-1)
+
+    sigma_n = normal / s.area
+    sigma = sigma_n + norm(bend) * s.radius / s.inertia
+    tau = norm(shear) / s.area + jnp.abs(twist) * s.radius / s.polar
+    return sigma, tau, sigma_n
+
+
+def bond_failure(normal, shear, twist, bend, s: BondStrength):
+    """Break mode per bond: 0 intact, :data:`TENSILE` (sigma > sigma_c) or :data:`SHEAR` (tau > tau_c =
+    c - sigma_n tan(phi)); tension is checked first. Returns ``(mode, sigma, tau, tau_c)``."""
+    sigma, tau, sigma_n = bond_stresses(normal, shear, twist, bend, s)
+    tau_c = s.cohesion - sigma_n * s.tan_phi
+    mode = jnp.where(sigma > s.tensile, TENSILE, jnp.where(tau > tau_c, SHEAR, 0)).astype(jnp.int8)
+    return mode, sigma, tau, tau_c
 
 
 def stiffness(E, nu, area, inertia, polar, length) -> BondStiffness:
@@ -127,13 +170,20 @@ def bond_law(d, r0, q_i, q_j, kn, kt, ktw, kb) -> BondForces:
     return _stack(_law(tuple(d), tuple(r0), tuple(q_i), tuple(q_j), kn, kt, ktw, kb))
 
 
-def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=None) -> tuple[jnp.ndarray, jnp.ndarray,
-                                                                                             BondForces]:
+def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None):
     """Per-particle force and moment sums ``([n, 3], [n, 3])`` of all intact bonds, and the per-bond forces.
 
     positions ``[n, 3]``, orientations ``[n, 4]`` (or ``None``: no rotational degrees of freedom, particles keep their
     reference orientation), bonds ``[nb, 2]``, r0 ``[nb, 3]`` reference bond vectors, intact ``[nb]`` bool or None.
+    strength: a :class:`BondStrength` to break bonds: a bond whose stresses exceed its strength in this evaluation
+    carries no force from it on (use :func:`bond_forces_breaking` to get the new ``intact`` mask and break modes).
     """
+    return bond_forces_breaking(positions, orientations, bonds, r0, k, intact, strength)[:3]
+
+
+def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None):
+    """:func:`bond_forces` plus the new ``intact`` mask and the break mode of each bond in this evaluation
+    ``[nb]`` int8 (0: none; None without ``strength``)."""
     i, j = bonds[:, 0], bonds[:, 1]
     # the law runs on [nb] component arrays: gather columns of the transposed [3, n] and [4, n] arrays
     x_t = positions.T
@@ -144,6 +194,12 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
         q_t = orientations.T
         q_i, q_j = tuple(q_t[:, i]), tuple(q_t[:, j])
     out = _law(tuple(d), tuple(r0.T), q_i, q_j, k.kn, k.kt, k.ktw, k.kb)
+    mode = None
+    if strength is not None:
+        mode, *_ = bond_failure(out.normal, out.shear, out.twist, out.bend, strength)
+        was = jnp.ones(bonds.shape[0], bool) if intact is None else intact
+        mode = jnp.where(was, mode, 0).astype(jnp.int8)
+        intact = was & (mode == 0)
     if intact is not None:
         out = jax.tree_util.tree_map(lambda a: _mask(a, intact), out)
     # one scatter of (force, 0, moment, 0) rows for both ends: XLA's CPU scatter is several times faster for rows of
@@ -152,7 +208,7 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
     rows_i = jnp.stack(out.f_i + (zero,) + out.m_i + (zero,), axis=1)
     rows_j = jnp.stack(tuple(-f for f in out.f_i) + (zero,) + out.m_j + (zero,), axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), positions.shape[0])
-    return total[:, :3], total[:, 4:7], _stack(out)
+    return total[:, :3], total[:, 4:7], _stack(out), intact, mode
 
 
 def _mask(a, intact):

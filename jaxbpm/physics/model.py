@@ -51,12 +51,17 @@ class Model:
     bond_J: Any
     bond_length: Any
     bond_keys: Any        # [nb] sorted keys i * n + j of bonded pairs (to exclude them from contacts)
+    bond_key_index: Any   # [nb] bond index of each sorted key
+    bond_radius: Any      # [nb] r_b [m]
+    bond_tensile: Any     # [n_materials] tensile strength sigma_c [Pa] (inf: unbreakable)
+    bond_cohesion: Any    # [n_materials] shear strength (cohesion) c [Pa]
     contact: contact_mod.ContactParams
     wall_stiffness: Any   # E* of particle on rigid wall [Pa] (hertz) or k [N/m] (linear)
     rotations: bool = True
     contacts: bool = False
     walls: str | None = None
     bond_contact: str = "superimpose"
+    breakage: bool = False
 
     @property
     def n(self) -> int:
@@ -67,18 +72,45 @@ class Model:
         loops can compute it once)."""
         if isinstance(params, bond_mod.BondStiffness):
             return params
+        if "_stiffness" in params:  # precomputed (see :meth:`precompute`)
+            return params["_stiffness"]
         E = jnp.asarray(params["bond_E"])[self.bond_material]
         nu = jnp.asarray(params["bond_nu"])[self.bond_material]
         return bond_mod.stiffness(E, nu, self.bond_area, self.bond_I, self.bond_J, self.bond_length)
 
-    def bonded(self, pairs):
-        """Whether each candidate pair ``[C, 2]`` (i < j) is bonded."""
+    def strength(self, params) -> bond_mod.BondStrength | None:
+        """Per-bond strengths (``None`` when the model does not break bonds). ``params`` may override the material
+        table with ``"bond_tensile_strength"``, ``"bond_shear_strength"`` (cohesion c) [Pa] and
+        ``"bond_friction_angle"`` phi [rad] of the Mohr-Coulomb shear strength (default 0: constant)."""
+        if not self.breakage:
+            return None
+        if isinstance(params, dict) and "_strength" in params:
+            return params["_strength"]
+        get = params.get if isinstance(params, dict) else (lambda key, default=None: default)
+        mat = self.bond_material
+        tensile = jnp.asarray(get("bond_tensile_strength", self.bond_tensile))[mat]
+        cohesion = jnp.asarray(get("bond_shear_strength", self.bond_cohesion))[mat]
+        phi = get("bond_friction_angle", None)
+        tan_phi = jnp.zeros_like(cohesion) if phi is None else jnp.tan(jnp.asarray(phi))[mat]
+        return bond_mod.BondStrength(tensile=tensile, cohesion=cohesion, tan_phi=tan_phi, radius=self.bond_radius,
+                                     area=self.bond_area, inertia=self.bond_I, polar=self.bond_J)
+
+    def precompute(self, params) -> dict:
+        """Per-bond stiffnesses and strengths computed once (a loop of force evaluations passes this instead of
+        ``params``)."""
+        return {"_stiffness": self.stiffness(params), "_strength": self.strength(params)}
+
+    def bonded(self, pairs, intact=None):
+        """Whether each candidate pair ``[C, 2]`` (i < j) is bonded (by an intact bond, when ``intact`` is given)."""
         if self.bond_keys.shape[0] == 0:
             return jnp.zeros(pairs.shape[0], bool)
         key_t = self.bond_keys.dtype
         key = pairs[:, 0].astype(key_t) * self.n + pairs[:, 1].astype(key_t)
         pos = jnp.clip(jnp.searchsorted(self.bond_keys, key), 0, self.bond_keys.shape[0] - 1)
-        return self.bond_keys[pos] == key
+        found = self.bond_keys[pos] == key
+        if intact is not None:
+            found = found & intact[self.bond_key_index[pos]]
+        return found
 
     def forces(self, positions, orientations, params, intact=None, contacts=None, wall_points=None,
                wall_normals=None):
@@ -87,12 +119,15 @@ class Model:
         contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``.
         wall_points, wall_normals: ``[W, 3]`` when the model has walls.
         Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
-        "walls": [W, 3] reactions or None}``.
+        "walls": [W, 3] reactions or None, "intact": the new intact mask (bonds that broke in this evaluation
+        removed; the given one without breakage), "broken": break mode of each bond in this evaluation (0: none,
+        1: tensile, 2: shear; None without breakage)}``.
         """
         k = self.stiffness(params)
-        force, moment, bf = bond_mod.bond_forces(positions, orientations if self.rotations else None, self.bonds,
-                                                 self.r0, k, intact)
-        parts = {"bonds": bf, "contacts": None, "walls": None}
+        force, moment, bf, intact, broken = bond_mod.bond_forces_breaking(
+            positions, orientations if self.rotations else None, self.bonds, self.r0, k, intact,
+            self.strength(params))
+        parts = {"bonds": bf, "contacts": None, "walls": None, "intact": intact, "broken": broken}
         if self.contacts and contacts is not None:
             pairs, valid, spring, dxi, v_rel = contacts
             fc, mc, cf = contact_mod.pair_forces(positions, pairs, valid, self.radii, self.mass, spring, dxi, v_rel,
@@ -110,18 +145,22 @@ class Model:
 jax.tree_util.register_dataclass(
     Model,
     data_fields=["positions0", "radii", "mass", "inertia", "bonds", "r0", "bond_material", "bond_area", "bond_I",
-                 "bond_J", "bond_length", "bond_keys", "contact", "wall_stiffness"],
-    meta_fields=["rotations", "contacts", "walls", "bond_contact"],
+                 "bond_J", "bond_length", "bond_keys", "bond_key_index", "bond_radius", "bond_tensile",
+                 "bond_cohesion", "contact", "wall_stiffness"],
+    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage"],
 )
 
 
 def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = None, rotations: bool | None = None,
-                contact_damping: bool = False, wall_stiffness: float | None = None) -> Model:
+                contact_damping: bool = False, wall_stiffness: float | None = None,
+                breakage: bool = False) -> Model:
     """A :class:`Model` of ``sample`` with just the interactions asked for.
 
     rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
     walls: ``"hertz"`` (default wall stiffness: the particle material on a rigid plane, E / (1 - nu^2)) or
     ``"linear"`` (give ``wall_stiffness`` in N/m).
+    breakage: bonds break when their stresses exceed the strengths of the material table (or of the params); off
+    by default (the static solvers model the elastic range).
     """
     pm = sample.particle_material
     if rotations is None:
@@ -133,7 +172,10 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
     pos = jnp.asarray(sample.positions, dtype)
     bonds = np.asarray(sample.bonds)
     n = sample.n_particles
-    keys = np.sort(bonds[:, 0].astype(np.int64) * n + bonds[:, 1])
+    all_keys = bonds[:, 0].astype(np.int64) * n + bonds[:, 1]
+    key_index = np.argsort(all_keys, kind="stable")
+    keys = all_keys[key_index]
+    mats = sample.materials
     if walls == "hertz":
         ws = float(pm.E) / (1.0 - float(pm.nu) ** 2) if wall_stiffness is None else wall_stiffness
     elif walls == "linear":
@@ -157,6 +199,10 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         bond_J=jnp.asarray(sample.bond_J, dtype),
         bond_length=jnp.asarray(sample.bond_length, dtype),
         bond_keys=jnp.asarray(keys if jax.config.jax_enable_x64 else keys.astype(np.int32)),
+        bond_key_index=jnp.asarray(key_index, jnp.int32),
+        bond_radius=jnp.asarray(sample.bond_radius, dtype),
+        bond_tensile=jnp.asarray(mats.tensile_strength, dtype),
+        bond_cohesion=jnp.asarray(mats.shear_strength, dtype),
         contact=contact_mod.contact_params(jnp.asarray(pm.E, dtype), jnp.asarray(pm.nu, dtype),
                                            jnp.asarray(pm.friction, dtype), jnp.asarray(pm.restitution, dtype),
                                            damping=contact_damping),
@@ -165,4 +211,5 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         contacts=bool(contacts),
         walls=walls,
         bond_contact=sample.bond_contact,
+        breakage=bool(breakage) and sample.n_bonds > 0,
     )
