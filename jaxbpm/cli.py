@@ -227,6 +227,10 @@ def build_parser() -> argparse.ArgumentParser:
     from jaxbpm._interop_cli import add_parsers as _add_interop  # convert, params
 
     _add_interop(sub)
+
+    from jaxbpm.calibrate._cli import add_parser as _add_calibrate
+
+    _add_calibrate(sub)
     return parser
 
 

@@ -1,0 +1,106 @@
+"""The ``jaxbpm calibrate`` command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "calibrate", help="calibrate the bond moduli of a sample to measured targets",
+        description="Calibrate the bond parameters of a sample so that a uniaxial compression reproduces the "
+                    "targets. Scalar targets come from --target-E / --target-K; vector targets (stress-strain "
+                    "points), several parameters and calibrator options from --config FILE.json: "
+                    '{"targets": [{"observable": "stress", "at": [...], "value": [...], "weight": 1}], '
+                    '"parameters": [{"key": "bond_E", "index": 0, "bounds": [lo, hi]}], "options": {...}}.')
+    p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
+    p.add_argument("--target-E", type=float, default=None, dest="target_E", metavar="PA",
+                   help="target Young's modulus [Pa]")
+    p.add_argument("--target-K", type=float, default=None, dest="target_K", metavar="N/M",
+                   help="target stiffness [N/m]")
+    p.add_argument("--config", type=pathlib.Path, default=None, help="JSON file with targets, parameters, options")
+    p.add_argument("--method", default="auto", choices=("auto", "adam", "surrogate", "closed-form"),
+                   help="calibrator (default: auto = multi-fidelity, closed form where it applies)")
+    p.add_argument("--model", default="dsm", choices=("dsm", "ste", "dem"),
+                   help="solver for adam/surrogate/closed-form (default: dsm)")
+    p.add_argument("--tol", type=float, default=0.05, help="relative tolerance on every target (default: 0.05)")
+    p.add_argument("--strain", type=float, default=0.002, help="compression strain (default: 0.002)")
+    p.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="loading axis (default: 2)")
+    p.add_argument("--check", default=None, choices=("dsm", "ste", "dem"),
+                   help="solve once at the answer with this model and report its errors")
+    p.add_argument("--no-shortcut", action="store_true", dest="no_shortcut",
+                   help="do not replace Adam by the closed form where it applies")
+    p.add_argument("--history", type=pathlib.Path, default=None, help="write the history to this HDF5 file")
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.set_defaults(func=run)
+
+
+def _config(path: pathlib.Path) -> dict:
+    from jaxbpm.calibrate import CalibrationError
+
+    if not path.exists():
+        raise CalibrationError(f"{path}: no such config file")
+    try:
+        cfg = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise CalibrationError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(cfg, dict):
+        raise CalibrationError(f"{path}: the config must be a JSON object")
+    unknown = set(cfg) - {"targets", "parameters", "options", "method", "model", "tol"}
+    if unknown:
+        raise CalibrationError(f"{path}: unknown config keys {sorted(unknown)}")
+    return cfg
+
+
+def run(args: argparse.Namespace) -> int:
+    from jaxbpm.calibrate import CalibrationError, Parameter, Target, calibrate
+    from jaxbpm.io import load_sample
+    from jaxbpm.scenes import UniaxialCompression
+
+    cfg = _config(args.config) if args.config is not None else {}
+    targets = []
+    if args.target_E is not None:
+        targets.append(Target("youngs_modulus", args.target_E))
+    if args.target_K is not None:
+        targets.append(Target("stiffness", args.target_K))
+    for i, t in enumerate(cfg.get("targets", [])):
+        if not isinstance(t, dict):
+            raise CalibrationError(f"config targets[{i}] must be an object")
+        try:
+            targets.append(Target(**t))
+        except TypeError as exc:
+            raise CalibrationError(f"config targets[{i}]: {exc}") from None
+    if not targets:
+        raise CalibrationError("no target: give --target-E, --target-K or targets in --config")
+    parameters = None
+    if "parameters" in cfg:
+        try:
+            parameters = [Parameter(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in p.items()})
+                          for p in cfg["parameters"]]
+        except (TypeError, AttributeError) as exc:
+            raise CalibrationError(f"config parameters: {exc}") from None
+    options = cfg.get("options", {})
+    if not isinstance(options, dict):
+        raise CalibrationError("config options must be an object")
+    sample = load_sample(args.sample)
+    scene = UniaxialCompression(axis=args.axis, strain=args.strain)
+    method = cfg.get("method", args.method)
+    model = cfg.get("model", args.model)
+    tol = cfg.get("tol", args.tol)
+    print(f"calibrating {sample.n_particles} particles, {sample.n_bonds} bonds: method {method}, model {model}, "
+          f"tol {100 * tol:g} %", flush=True)
+    try:
+        result = calibrate(sample, scene, targets, method=method, model=model, parameters=parameters, tol=tol,
+                           shortcut=not args.no_shortcut, check=args.check, progress=not args.quiet, **options)
+    except TypeError as exc:
+        raise CalibrationError(f"bad calibrator option: {exc}") from None
+    print()
+    print(result.table())
+    if "check" in result.info:
+        c = result.info["check"]
+        print(f"check with {c['model']}: largest error {100 * c['max_error']:.3f} % ({c['wall_time']:.2f} s)")
+    if args.history is not None:
+        print(f"wrote {result.save(args.history)}")
+    return 0 if result.converged else 1

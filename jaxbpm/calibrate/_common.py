@@ -1,0 +1,108 @@
+"""Helpers shared by the calibrators: ties between parameters and targets, results, progress output."""
+
+from __future__ import annotations
+
+import sys
+from typing import Callable, Mapping
+
+import numpy as np
+
+from jaxbpm.calibrate.objective import CalibrationError, Problem
+from jaxbpm.calibrate.result import CalibrationResult, History
+
+# parameter key -> observables measured in the same units (seed 003, Eq. 14: the macroscopic value is a first
+# estimate of the microscopic one)
+_SAME_UNITS = {"bond_E": ("youngs_modulus",), "bond_nu": ("poisson_ratio",)}
+
+
+def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | None:
+    """Index of the target each parameter is tied to (seed 003, 3.5-3.6), or None when there is no tie.
+
+    ``tie`` maps parameter names to target names; ``None`` ties the only parameter to the only target when the
+    problem has one of each (a scalar target)."""
+    names, targets = problem.space.names, problem.target_names
+    if tie is None:
+        if problem.space.n == 1 and len(problem.targets) == 1 and problem.targets[0].size == 1:
+            return [0]
+        return None
+    if not isinstance(tie, Mapping):
+        raise CalibrationError(f"tie must map parameter names to target names, got {tie!r}")
+    unknown = sorted(set(tie) - set(names))
+    if unknown:
+        raise CalibrationError(f"tie: unknown parameters {unknown} (parameters: {names})")
+    missing = [n for n in names if n not in tie]
+    if missing:
+        raise CalibrationError(f"tie: every parameter needs a target; missing {missing}")
+    out = []
+    for n in names:
+        if tie[n] not in targets:
+            raise CalibrationError(f"tie: parameter {n!r} tied to unknown target {tie[n]!r} (targets: {targets})")
+        k = targets.index(tie[n])
+        if problem.targets[k].size != 1:
+            raise CalibrationError(f"tie: parameter {n!r} tied to the vector target {tie[n]!r}; ties need scalar "
+                                   "targets")
+        out.append(k)
+    return out
+
+
+def same_units(problem: Problem, ties: list[int]) -> bool:
+    return all(problem.targets[k].observable in _SAME_UNITS.get(p.key, ())
+               for p, k in zip(problem.space.parameters, ties))
+
+
+def printer(prefix: str = "") -> Callable[[dict, list[str], list[str]], None]:
+    """A progress callback printing one line per iteration."""
+
+    def show(row, parameter_names, target_names):
+        vals = " ".join(f"{n}={v:.6g}" for n, v in zip(parameter_names, row["values"]))
+        errs = " ".join(f"{n}={100 * e:+.3f}%" for n, e in zip(target_names, row["errors"]))
+        print(f"{prefix}[{row['level']}] it {row['iteration']:>3} {row['kind']:<12} {vals}  loss={row['loss']:.3e}  "
+              f"{errs}  evals={row['evaluations']}  {row['time']:.2f} s", file=sys.stdout, flush=True)
+
+    return show
+
+
+def progress_fn(progress):
+    if progress is True:
+        return printer()
+    if progress in (None, False):
+        return None
+    if callable(progress):
+        return progress
+    raise CalibrationError(f"progress must be True, False or a callable, got {progress!r}")
+
+
+def record(history: History, problem: Problem, progress, *, kind, values, errors, time, level=None) -> dict:
+    row = history.append(kind=kind, level=level or problem.forward.name, values=values,
+                         loss=float(problem.loss_of(np.asarray(errors))), errors=problem.per_target(errors),
+                         evaluations=problem.evaluations, time=time)
+    if progress is not None:
+        progress(row, history.parameter_names, history.target_names)
+    return row
+
+
+def make_result(problem: Problem, history: History, values, errors, *, method: str, tol: float, wall_time: float,
+                evaluations: int, notes=(), info=None, band=None, converged=None,
+                iterations: int | None = None) -> CalibrationResult:
+    values = np.asarray(values, dtype=np.float64)
+    params = {k: np.asarray(v) for k, v in problem.space.to_params(values).items()}
+    if converged is None:
+        converged = bool(np.all(problem.max_errors(errors) <= tol))
+    return CalibrationResult(values=problem.space.describe(values), params=params,
+                             errors=problem.signed_errors(errors), converged=bool(converged), method=method,
+                             model=problem.forward.name, evaluations=int(evaluations),
+                             iterations=len(history) if iterations is None else int(iterations),
+                             wall_time=float(wall_time), tol=float(tol), history=history, notes=list(notes),
+                             band=band, info=dict(info or {}))
+
+
+def check_tol(tol) -> float:
+    if not (isinstance(tol, (int, float, np.number)) and 0 < tol < 1):
+        raise CalibrationError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
+    return float(tol)
+
+
+def check_count(name, value, minimum=1) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise CalibrationError(f"{name} must be a whole number >= {minimum}, got {value!r}")
+    return int(value)

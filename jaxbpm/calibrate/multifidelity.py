@@ -1,0 +1,114 @@
+"""Multi-fidelity calibration: cheap models first, dearer ones only while they change the answer.
+
+Levels run from the cheapest to the most faithful model, by default STE -> DSM (``jaxbpm.solve`` methods ``"ste"``
+and ``"dsm"``; DEM can be appended as a last level, or asked for as a final check only). The first level is
+calibrated; every later level first evaluates the current answer (one solve): if every target is within ``tol``
+there, the answer is accepted at that level without calibrating it (early stop); else the level is calibrated
+starting from the answer (escalation). Each level is calibrated with the closed form where it applies (bonds-only
+elasticity), else with Adam (autodiff gradients on pure models, forward differences otherwise). The result reports
+the evaluations and time per level.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from typing import Sequence
+
+import numpy as np
+
+from jaxbpm.calibrate import _common
+from jaxbpm.calibrate.adam import adam
+from jaxbpm.calibrate.closed_form import closed_form
+from jaxbpm.calibrate.objective import CalibrationError, Forward, ParameterSpace, Problem, forward_model
+from jaxbpm.calibrate.result import CalibrationResult, History
+
+__all__ = ["default_levels", "calibrate_level", "multifidelity"]
+
+
+def default_levels() -> tuple[str, ...]:
+    """``("ste", "dsm")`` when the STE solver is available, else ``("dsm",)``."""
+    solve_mod = importlib.import_module("jaxbpm.solve")
+
+    return ("ste", "dsm") if "ste" in solve_mod.METHODS else ("dsm",)
+
+
+def calibrate_level(problem: Problem, *, tol: float, shortcut: bool = True, progress=None,
+                    adam_options: dict | None = None) -> CalibrationResult:
+    """Calibrate one model: the closed form where it applies (and the targets determine the moduli), else Adam."""
+    ok, why = problem.closed_form_applies()
+    m = sum(t.size for t in problem.targets)
+    if shortcut and ok and m >= problem.space.n:
+        return closed_form(problem, tol=tol, progress=progress)
+    opts = {"gradient": "autodiff" if problem.differentiable else "fd-forward"}
+    opts.update(adam_options or {})
+    res = adam(problem, tol=tol, progress=progress, **opts)
+    if shortcut and not ok:
+        res.notes.append(f"no closed form: {why}")
+    return res
+
+
+def _forward(level, sample, scenes, solve_options) -> Forward:
+    if isinstance(level, Forward):
+        return level
+    if isinstance(level, str):
+        return forward_model(sample, scenes, level, **(solve_options or {}).get(level, {}))
+    raise CalibrationError(f"a level must be a model name or a Forward, got {level!r}")
+
+
+def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Sequence | None = None,
+                  tol: float = 0.05, shortcut: bool = True, solve_options: dict | None = None,
+                  adam_options: dict | None = None, progress=None) -> CalibrationResult:
+    """Calibrate through ``levels`` (model names or :class:`Forward`; default :func:`default_levels`).
+
+    solve_options: ``{model name: options for jaxbpm.solve}``. Returns the answer of the last level reached, with
+    ``levels`` = per level: ``model``, ``action`` (``"calibrated"``, ``"accepted"``: the previous answer was within
+    ``tol`` there, or ``"escalated"``: it was not and the level was calibrated), ``evaluations``, ``wall_time``,
+    ``max_error`` and ``errors``.
+    """
+    t_start = time.perf_counter()
+    tol = _common.check_tol(tol)
+    levels = list(default_levels() if levels is None else levels)
+    if not levels:
+        raise CalibrationError("levels must name at least one model")
+    progress = _common.progress_fn(progress)
+    values = space.clip(space.initial)
+    history = History(space.names, [])
+    report, notes = [], []
+    total = 0
+    final = None
+    for i, level in enumerate(levels):
+        t0 = time.perf_counter()
+        fwd = _forward(level, sample, scenes, solve_options)
+        problem = Problem(fwd, targets, space.with_initial(values))
+        if not history.target_names:
+            history.target_names = problem.target_names
+        if i > 0:
+            e = np.asarray(problem.errors_of(problem.outputs(values[None, :])[0]))
+            _common.record(history, problem, progress, kind="check", values=values, errors=e,
+                           time=time.perf_counter() - t0)
+            if np.all(problem.max_errors(e) <= tol):
+                final = _common.make_result(problem, History(space.names, problem.target_names), values, e,
+                                            method="multi-fidelity", tol=tol, wall_time=0.0, evaluations=0)
+                report.append({"model": fwd.name, "action": "accepted", "evaluations": problem.evaluations,
+                               "wall_time": time.perf_counter() - t0, "max_error": float(problem.max_errors(e).max()),
+                               "errors": problem.signed_errors(e)})
+                total += problem.evaluations
+                continue
+        res = calibrate_level(problem, tol=tol, shortcut=shortcut, progress=progress, adam_options=adam_options)
+        history.extend(res.history)
+        values = np.asarray([res.values[n] for n in space.names])
+        notes += [f"{fwd.name}: {n}" for n in res.notes]
+        final = res
+        report.append({"model": fwd.name, "action": "calibrated" if i == 0 else "escalated",
+                       "method": res.method, "evaluations": problem.evaluations, "wall_time": time.perf_counter() - t0,
+                       "max_error": res.max_error, "errors": res.errors})
+        total += problem.evaluations
+    result = CalibrationResult(values=space.describe(values), params=final.params, errors=final.errors,
+                               converged=bool(final.max_error <= tol), method="multi-fidelity",
+                               model=report[-1]["model"], evaluations=total,
+                               iterations=sum(r["kind"] != "prediction" for r in history.rows),
+                               wall_time=time.perf_counter() - t_start, tol=tol,
+                               history=history, notes=notes, levels=report,
+                               info={"levels": [lv["model"] for lv in report]})
+    return result

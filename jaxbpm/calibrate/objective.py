@@ -1,0 +1,623 @@
+"""What a calibration aims at and what it changes: targets, the parameter space, the forward model, the objective.
+
+* :class:`Target`: one measured quantity of a scene (stiffness, Young's modulus, Poisson ratio, the points of a
+  stress-strain curve, or any observable a custom model returns), its weight and how its error is normalised.
+* :class:`Parameter` / :class:`ParameterSpace`: the free entries of the parameter pytree
+  (``{"bond_E": [n_materials], "bond_nu": [n_materials]}``) with bounds, mapped to an optimisation variable ``z`` in
+  log form (``z = log(p / p_ref)``) or target-scaled form (``z = p / scale``, seed 003 Eq. 10-11).
+* :class:`Forward`: the model behind the objective: any solver of :func:`jaxbpm.solve` (``"ste"``, ``"dsm"``,
+  ``"dem"``) on one or several scenes, or a plain function. Where the solver module offers a pure
+  ``stiffness_function(sample, scene)`` (``params -> K``), elastic targets use it: batches of parameter sets go
+  through ``jax.vmap`` and gradients through ``jax.grad``.
+* :class:`Problem`: targets + parameters + model. Weights are normalised to sum 1 and the objective is
+  ``L = sum_k w_k mean((y_k - t_k)^2 / s_k^2)`` (seed 003, Eq. 3), ``s_k`` the target's scale (``|t|`` for a scalar,
+  ``max |t|`` for a vector unless given). It counts every solve (one parameter set on one scene).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import time
+from typing import Any, Callable, Mapping, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxbpm.errors import JaxbpmError
+
+__all__ = ["CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward", "forward_model", "Problem",
+           "ELASTIC_OBSERVABLES", "as_targets"]
+
+ELASTIC_OBSERVABLES = ("stiffness", "youngs_modulus")
+"""Observables that are homogeneous of degree one in the bond Young's moduli of a bonds-only linear scene."""
+
+_SOLVER_OBSERVABLES = ("stiffness", "youngs_modulus", "poisson_ratio", "stress")
+DEFAULT_SCENE = "main"
+
+
+class CalibrationError(JaxbpmError, ValueError):
+    """A calibration is ill-posed (bad targets, parameters or options) or cannot proceed."""
+
+
+def _finite_array(name: str, value) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{name} must be a number or a list of numbers, got {value!r}") from None
+    if arr.ndim > 1 or arr.size == 0:
+        raise CalibrationError(f"{name} must be a number or a 1-D list of numbers, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise CalibrationError(f"{name} must be finite, got {arr.tolist()}")
+    return arr
+
+
+# ---------------------------------------------------------------------------------------------------- targets
+@dataclasses.dataclass(frozen=True)
+class Target:
+    """A calibration target.
+
+    observable: ``"stiffness"`` [N/m], ``"youngs_modulus"`` [Pa], ``"poisson_ratio"`` (when the model reports one),
+      ``"stress"`` (the stress-strain curve sampled at the strains ``at``, [Pa]) or any key a custom model returns.
+    value: the measured value (a number, or one number per point of ``at`` / element of a vector observable).
+    weight: relative weight (> 0); a :class:`Problem` normalises the weights to sum 1 (seed 003, Eq. 3).
+    scene: key of the scene it is measured on (when a model has several scenes, e.g. ``{"ucs": ..., "tpb": ...}``).
+    at: strains at which a ``"stress"`` target samples the curve.
+    scale: error normaliser ``s`` (relative error ``(y - t) / s``); default ``|t|`` (scalar) or ``max |t|`` (vector).
+    name: label in tables and histories; default the observable (prefixed by the scene unless it is the default).
+    """
+
+    observable: str
+    value: Any
+    weight: float = 1.0
+    scene: str = DEFAULT_SCENE
+    at: Any = None
+    scale: float | None = None
+    name: str | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.observable, str) or not self.observable:
+            raise CalibrationError(f"target observable must be a non-empty string, got {self.observable!r}")
+        value = _finite_array(f"target {self.observable!r} value", self.value)
+        object.__setattr__(self, "value", value if value.ndim else float(value))
+        if not (isinstance(self.weight, (int, float, np.number)) and np.isfinite(self.weight) and self.weight > 0):
+            raise CalibrationError(f"target {self.observable!r}: weight must be a finite number > 0, "
+                                   f"got {self.weight!r}")
+        if self.observable == "stress":
+            if self.at is None:
+                raise CalibrationError("a 'stress' target needs 'at': the strains of its curve points")
+            at = _finite_array("target 'stress' at", self.at).reshape(-1)
+            if at.size != np.size(value):
+                raise CalibrationError(f"target 'stress': {at.size} strains in 'at' but {np.size(value)} values")
+            object.__setattr__(self, "at", tuple(float(a) for a in at))
+        elif self.at is not None:
+            raise CalibrationError(f"'at' applies to 'stress' targets only, not {self.observable!r}")
+        if self.observable in ("stiffness", "youngs_modulus") and np.any(value <= 0):
+            raise CalibrationError(f"target {self.observable!r} must be > 0, got {value.tolist()}")
+        scale = self.scale if self.scale is not None else float(np.max(np.abs(value)))
+        if not (np.isfinite(scale) and scale > 0):
+            raise CalibrationError(f"target {self.observable!r}: the error scale must be > 0 (a target of zero "
+                                   "needs an explicit 'scale')")
+        object.__setattr__(self, "scale", float(scale))
+        if self.name is None:
+            label = self.observable if self.scene == DEFAULT_SCENE else f"{self.scene}.{self.observable}"
+            object.__setattr__(self, "name", label)
+
+    @property
+    def size(self) -> int:
+        return int(np.size(self.value))
+
+    @property
+    def elastic(self) -> bool:
+        return self.observable in ELASTIC_OBSERVABLES
+
+    def extract(self, observations: Mapping[str, Mapping[str, Any]]):
+        """This target's model value ``[size]`` from ``{scene: {observable: value}}`` (NumPy or JAX arrays)."""
+        try:
+            obs = observations[self.scene]
+        except KeyError:
+            raise CalibrationError(f"target {self.name!r}: the model has no scene {self.scene!r} "
+                                   f"(scenes: {sorted(observations)})") from None
+        xp = jnp if any(isinstance(v, jax.Array) for v in obs.values()) else np
+        if self.observable == "stress":
+            if "strain" not in obs or "stress" not in obs:
+                raise CalibrationError(f"target {self.name!r}: the model gives no stress-strain curve")
+            return xp.interp(xp.asarray(self.at), obs["strain"], obs["stress"])
+        if self.observable not in obs:
+            raise CalibrationError(f"target {self.name!r}: the model does not report {self.observable!r} "
+                                   f"(it reports {sorted(obs)})")
+        return xp.reshape(xp.asarray(obs[self.observable], dtype=xp.float64), (-1,))
+
+    def relative_error(self, y):
+        """``(y - t) / s`` per element."""
+        xp = jnp if isinstance(y, jax.Array) else np
+        return (y - xp.reshape(xp.asarray(self.value), (-1,))) / self.scale
+
+
+def as_targets(targets) -> list[Target]:
+    """Targets from a :class:`Target`, a list of them, or a mapping ``{observable: value}``."""
+    if isinstance(targets, Target):
+        return [targets]
+    if isinstance(targets, Mapping):
+        return [Target(k, v) for k, v in targets.items()]
+    if isinstance(targets, (list, tuple)) and targets and all(isinstance(t, Target) for t in targets):
+        return list(targets)
+    raise CalibrationError("targets must be a Target, a non-empty list of Targets or a mapping "
+                           f"{{observable: value}}, got {targets!r}")
+
+
+# ---------------------------------------------------------------------------------------------------- parameters
+@dataclasses.dataclass(frozen=True)
+class Parameter:
+    """One free parameter: an entry of the parameter pytree.
+
+    key: the pytree entry (``"bond_E"``, ``"bond_nu"``, ...).
+    index: the material component; ``None`` = one value for every component, multiplied by ``ratio``
+      (e.g. ``ratio=(1, 4)``: two components whose moduli keep the ratio 1:4; the value is that of ratio 1).
+    bounds: ``(lo, hi)``; default ``(initial / 100, initial * 100)`` for positive parameters.
+    initial: starting value; default the sample's current value.
+    scale: scale of the target-scaled form (seed 003, Eq. 10); default the value of the target it is tied to,
+      else its initial value.
+    """
+
+    key: str = "bond_E"
+    index: int | None = None
+    bounds: tuple[float, float] | None = None
+    initial: float | None = None
+    ratio: tuple[float, ...] | None = None
+    scale: float | None = None
+    name: str | None = None
+
+    def __post_init__(self):
+        if self.name is None:
+            object.__setattr__(self, "name", self.key if self.index is None else f"{self.key}[{self.index}]")
+        if self.index is not None and self.ratio is not None:
+            raise CalibrationError(f"parameter {self.name!r}: 'ratio' applies to index=None only")
+        if self.ratio is not None:
+            r = _finite_array(f"parameter {self.name!r} ratio", self.ratio).reshape(-1)
+            if np.any(r <= 0):
+                raise CalibrationError(f"parameter {self.name!r}: ratio must be > 0, got {r.tolist()}")
+            object.__setattr__(self, "ratio", tuple(float(v) for v in r))
+        if self.bounds is not None:
+            b = _finite_array(f"parameter {self.name!r} bounds", self.bounds)
+            if b.shape != (2,) or not b[0] < b[1]:
+                raise CalibrationError(f"parameter {self.name!r}: bounds must be (lo, hi) with lo < hi, "
+                                       f"got {self.bounds!r}")
+            object.__setattr__(self, "bounds", (float(b[0]), float(b[1])))
+        for what in ("initial", "scale"):
+            v = getattr(self, what)
+            if v is not None and not (isinstance(v, (int, float, np.number)) and np.isfinite(v)):
+                raise CalibrationError(f"parameter {self.name!r}: {what} must be a finite number, got {v!r}")
+        if self.scale is not None and self.scale <= 0:
+            raise CalibrationError(f"parameter {self.name!r}: scale must be > 0, got {self.scale!r}")
+
+
+class ParameterSpace:
+    """Free parameters on top of a base pytree; maps values ``v [n]`` to full parameter pytrees.
+
+    scaling: ``"log"`` (``z = log(v / v0)``, v0 the initial values; positive parameters only) or ``"target"``
+    (``z = v / scale``, seed 003 Eq. 10-11). ``to_params`` is traceable (``grad``/``vmap``).
+    """
+
+    def __init__(self, parameters: Sequence[Parameter], base: Mapping[str, Any], *, scaling: str = "log",
+                 scales: Sequence[float] | None = None):
+        parameters = list(parameters)
+        if not parameters or not all(isinstance(p, Parameter) for p in parameters):
+            raise CalibrationError("parameters must be a non-empty list of Parameter")
+        if scaling not in ("log", "target"):
+            raise CalibrationError(f"scaling must be 'log' or 'target', got {scaling!r}")
+        self.base = {k: jnp.asarray(v) for k, v in base.items()}
+        seen = {}
+        names = [p.name for p in parameters]
+        if len(set(names)) != len(names):
+            raise CalibrationError(f"parameter names must be unique, got {names}")
+        for p in parameters:
+            if p.key not in self.base:
+                raise CalibrationError(f"parameter {p.name!r}: no entry {p.key!r} in the parameter pytree "
+                                       f"(entries: {sorted(self.base)})")
+            n_comp = int(np.size(self.base[p.key]))
+            comps = range(n_comp) if p.index is None else [p.index]
+            if p.index is not None and not (0 <= p.index < n_comp):
+                raise CalibrationError(f"parameter {p.name!r}: index {p.index} out of range "
+                                       f"({p.key} has {n_comp} components)")
+            if p.ratio is not None and len(p.ratio) != n_comp:
+                raise CalibrationError(f"parameter {p.name!r}: ratio has {len(p.ratio)} entries, {p.key} has "
+                                       f"{n_comp} components")
+            for c in comps:
+                if (p.key, c) in seen:
+                    raise CalibrationError(f"parameters {seen[(p.key, c)]!r} and {p.name!r} both set "
+                                           f"{p.key}[{c}]")
+                seen[(p.key, c)] = p.name
+        self.parameters = parameters
+        self.scaling = scaling
+        init, lo, hi = [], [], []
+        for p in parameters:
+            base_v = np.asarray(self.base[p.key], dtype=np.float64).reshape(-1)
+            v0 = p.initial if p.initial is not None else (
+                float(base_v[p.index]) if p.index is not None else float(base_v[0] / (p.ratio or (1.0,))[0]))
+            if p.bounds is not None:
+                b = p.bounds
+            elif v0 > 0:
+                b = (v0 / 100.0, v0 * 100.0)
+            else:
+                raise CalibrationError(f"parameter {p.name!r}: give bounds (its initial value {v0!r} is not > 0)")
+            if not b[0] <= v0 <= b[1]:
+                raise CalibrationError(f"parameter {p.name!r}: initial value {v0:.6g} outside its bounds {b}")
+            if scaling == "log" and b[0] <= 0:
+                raise CalibrationError(f"parameter {p.name!r}: the log form needs positive bounds, got {b}")
+            init.append(v0)
+            lo.append(b[0])
+            hi.append(b[1])
+        self.initial = np.asarray(init)
+        self.lower, self.upper = np.asarray(lo), np.asarray(hi)
+        if scales is None:
+            scales = [p.scale if p.scale is not None else v for p, v in zip(parameters, init)]
+        self.scales = np.asarray(scales, dtype=np.float64)
+        if self.scales.shape != (len(parameters),) or np.any(~(self.scales > 0)):
+            raise CalibrationError(f"scales must be {len(parameters)} numbers > 0, got {scales!r}")
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.parameters]
+
+    @property
+    def n(self) -> int:
+        return len(self.parameters)
+
+    def with_scales(self, scales) -> "ParameterSpace":
+        return ParameterSpace(self.parameters, self.base, scaling=self.scaling, scales=scales)
+
+    def with_initial(self, values) -> "ParameterSpace":
+        values = self.clip(values)
+        params = [dataclasses.replace(p, initial=float(v)) for p, v in zip(self.parameters, values)]
+        return ParameterSpace(params, self.base, scaling=self.scaling, scales=self.scales)
+
+    def subspace(self, names: Sequence[str], fixed_values) -> "ParameterSpace":
+        """The space of the parameters ``names`` only; the others fixed at ``fixed_values`` (all ``n`` values)."""
+        base = self.to_params(np.asarray(fixed_values, dtype=np.float64))
+        keep = [i for i, p in enumerate(self.parameters) if p.name in names]
+        params = [dataclasses.replace(self.parameters[i], initial=float(np.clip(fixed_values[i], self.lower[i],
+                                                                                self.upper[i])))
+                  for i in keep]
+        return ParameterSpace(params, base, scaling=self.scaling, scales=self.scales[keep])
+
+    def clip(self, values) -> np.ndarray:
+        return np.clip(np.asarray(values, dtype=np.float64), self.lower, self.upper)
+
+    # the optimisation variable z
+    def to_z(self, values):
+        xp = jnp if isinstance(values, jax.Array) else np
+        if self.scaling == "log":
+            return xp.log(values / self.initial)
+        return values / self.scales
+
+    def from_z(self, z, initial=None, scales=None):
+        xp = jnp if isinstance(z, jax.Array) else np
+        if self.scaling == "log":
+            return (self.initial if initial is None else initial) * xp.exp(z)
+        return z * (self.scales if scales is None else scales)
+
+    @property
+    def structure(self) -> tuple:
+        """What the mapping ``values -> params`` depends on besides the base values (a compilation key)."""
+        return tuple((p.key, p.index, p.ratio) for p in self.parameters) + (self.scaling,)
+
+    def to_params(self, values, base=None) -> dict:
+        """The full parameter pytree for values ``[n]`` (traceable; ``base`` overrides the base pytree)."""
+        out = dict(self.base if base is None else base)
+        for i, p in enumerate(self.parameters):
+            v = values[i]
+            arr = jnp.asarray(out[p.key])
+            if p.index is None:
+                ratio = jnp.asarray(p.ratio if p.ratio is not None else np.ones(arr.size), arr.dtype)
+                arr = jnp.reshape(v * ratio, arr.shape).astype(arr.dtype)
+            else:
+                arr = arr.at[p.index].set(v)
+            out[p.key] = arr
+        return out
+
+    def describe(self, values) -> dict[str, float]:
+        return {name: float(v) for name, v in zip(self.names, np.asarray(values))}
+
+
+# ---------------------------------------------------------------------------------------------------- models
+@dataclasses.dataclass
+class Forward:
+    """A model the calibrators can run.
+
+    evaluate: one parameter pytree -> ``{scene: {observable: value}}`` (any solver; NumPy values).
+    pure: optional JAX function with the same signature, traceable (``jit``/``grad``/``vmap``); it may report fewer
+      observables (``pure_observables``; ``None`` = the same as ``evaluate``).
+    scenes: the scene keys. homogeneous: its elastic observables are homogeneous of degree one in ``bond_E``
+      (a bonds-only scene on a linear model: scaling every bond modulus scales K), so the closed form applies.
+    """
+
+    name: str
+    evaluate: Callable[[dict], dict]
+    pure: Callable[[dict], dict] | None = None
+    scenes: tuple[str, ...] = (DEFAULT_SCENE,)
+    pure_observables: tuple[str, ...] | None = None
+    homogeneous: bool = False
+    _compiled: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
+
+    @classmethod
+    def from_function(cls, fn: Callable[[dict], Mapping[str, Any]], *, name: str = "function", pure: bool = True,
+                      homogeneous: bool = False) -> "Forward":
+        """Wrap ``fn(params) -> {observable: value}`` (one scene). ``pure=True``: ``fn`` is a JAX function (traced,
+        ``vmap``-ped and differentiated); else it is called with NumPy values, one parameter set at a time."""
+        if not callable(fn):
+            raise CalibrationError(f"a model function must be callable, got {fn!r}")
+
+        def evaluate(params):
+            out = fn(params)
+            return {DEFAULT_SCENE: {k: np.asarray(v) for k, v in out.items()}}
+
+        pure_fn = None
+        if pure:
+            jitted = jax.jit(fn)
+
+            def pure_fn(params):
+                return {DEFAULT_SCENE: dict(jitted(params))}
+
+        return cls(name=name, evaluate=evaluate, pure=pure_fn, homogeneous=homogeneous)
+
+
+def _observations(result) -> dict:
+    obs = {"stiffness": float(result.stiffness), "youngs_modulus": float(result.youngs_modulus),
+           "strain": np.asarray(result.strain), "stress": np.asarray(result.stress)}
+    nu = getattr(result, "poisson_ratio", None)
+    if nu is None:
+        stats = result.stats if isinstance(result.stats, dict) else {}
+        nu = stats.get("poisson_ratio", stats.get("nu_iso"))
+    if nu is not None:
+        obs["poisson_ratio"] = float(nu)
+    return obs
+
+
+def _linear_scene(scene) -> bool:
+    return not (getattr(scene, "contacts", False) or getattr(scene, "uses_walls", False))
+
+
+_FORWARDS: dict = {}  # recent forward models: repeated calibrations of one sample share their compiled functions
+_FORWARDS_MAX = 8
+
+
+def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forward:
+    """The :class:`Forward` of ``jaxbpm.solve(sample, scene, method=model, params=..., **solve_options)``.
+
+    scenes: a scene or a mapping ``{key: scene}``. When ``jaxbpm.<model>`` has a ``stiffness_function`` and every
+    scene is linear (bonds only, clamped layers), elastic targets use that pure function (batched and
+    differentiable). ``solve_options`` go to ``jaxbpm.solve`` only.
+    """
+    solve_mod = importlib.import_module("jaxbpm.solve")
+    from jaxbpm.sample import Sample
+
+    if not isinstance(sample, Sample):
+        raise CalibrationError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    if not isinstance(model, str) or model not in solve_mod.METHODS:
+        raise CalibrationError(f"unknown model {model!r}; choose one of {solve_mod.METHODS}")
+    scene_map = dict(scenes) if isinstance(scenes, Mapping) else {DEFAULT_SCENE: scenes}
+    if not scene_map:
+        raise CalibrationError("no scene given")
+    for key, sc in scene_map.items():
+        if not hasattr(sc, "geometry") or not hasattr(sc, "model"):
+            raise CalibrationError(f"scene {key!r} is not a jaxbpm scene (got {type(sc).__name__})")
+    try:
+        cache_key = (id(sample), model, tuple((k, repr(sc)) for k, sc in scene_map.items()),
+                     repr(sorted(solve_options.items())))
+    except TypeError:
+        cache_key = None
+    hit = _FORWARDS.get(cache_key)
+    if hit is not None and hit[0]() is sample:
+        return hit[1]
+    fwd = _forward_model(sample, scene_map, model, solve_mod, solve_options)
+    if cache_key is not None:
+        import weakref
+
+        while len(_FORWARDS) >= _FORWARDS_MAX:
+            _FORWARDS.pop(next(iter(_FORWARDS)))
+        try:
+            _FORWARDS[cache_key] = (weakref.ref(sample), fwd)
+        except TypeError:
+            pass
+    return fwd
+
+
+def _forward_model(sample, scene_map, model, solve_mod, solve_options) -> Forward:
+
+    def evaluate(params):
+        return {key: _observations(solve_mod.solve(sample, sc, method=model, params=params, **solve_options))
+                for key, sc in scene_map.items()}
+
+    pure = None
+    linear = all(_linear_scene(sc) for sc in scene_map.values())
+    factory = None
+    if linear and model != "dem":
+        try:
+            factory = getattr(importlib.import_module(f"jaxbpm.{model}"), "stiffness_function", None)
+        except ImportError:
+            factory = None
+    if factory is not None:
+        fns = {}
+        for key, sc in scene_map.items():
+            length, area = sc.geometry(sample)
+            fns[key] = (factory(sample, sc), length / area)
+
+        def pure(params):
+            out = {}
+            for key, (f, l_over_a) in fns.items():
+                k = f(params)
+                out[key] = {"stiffness": k, "youngs_modulus": k * l_over_a}
+            return out
+
+    return Forward(name=model, evaluate=evaluate, pure=pure, scenes=tuple(scene_map),
+                   pure_observables=ELASTIC_OBSERVABLES if pure is not None else None,
+                   homogeneous=linear and sample.n_bonds > 0)
+
+
+# ---------------------------------------------------------------------------------------------------- problem
+class Problem:
+    """Targets, parameters and a model: evaluates the relative errors and the weighted objective (seed 003, Eq. 3)
+    and counts the solves (``evaluations``: one parameter set on one scene)."""
+
+    def __init__(self, forward: Forward, targets, space: ParameterSpace):
+        if not isinstance(forward, Forward):
+            raise CalibrationError(f"forward must be a Forward, got {type(forward).__name__}")
+        if not isinstance(space, ParameterSpace):
+            raise CalibrationError(f"space must be a ParameterSpace, got {type(space).__name__}")
+        self.forward, self.targets, self.space = forward, as_targets(targets), space
+        names = [t.name for t in self.targets]
+        if len(set(names)) != len(names):
+            raise CalibrationError(f"target names must be unique, got {names}")
+        for t in self.targets:
+            if t.scene not in forward.scenes:
+                raise CalibrationError(f"target {t.name!r}: the model has no scene {t.scene!r} "
+                                       f"(scenes: {list(forward.scenes)})")
+        w = np.asarray([t.weight for t in self.targets], dtype=np.float64)
+        self.weights = w / w.sum()
+        sizes = [t.size for t in self.targets]
+        self.slices = [slice(a, a + s) for a, s in zip(np.cumsum([0] + sizes[:-1]), sizes)]
+        self.use_pure = forward.pure is not None and (
+            forward.pure_observables is None or all(t.observable in forward.pure_observables
+                                                    for t in self.targets))
+        self.evaluations = 0
+        self.solve_time = 0.0
+        self._last = None  # (values, outputs) of the last single point: a repeated point costs no new solve
+
+    # -------------------------------------------------------------- pieces
+    @property
+    def n_scenes(self) -> int:
+        return len({t.scene for t in self.targets}) if self.use_pure else len(self.forward.scenes)
+
+    @property
+    def target_names(self) -> list[str]:
+        return [t.name for t in self.targets]
+
+    @property
+    def differentiable(self) -> bool:
+        return self.use_pure
+
+    def closed_form_applies(self) -> tuple[bool, str]:
+        """Whether the closed form applies (bonds-only elasticity, K homogeneous in the bond moduli) and why not."""
+        if not self.forward.homogeneous:
+            return False, f"the {self.forward.name} model is not linear in the bond moduli (contacts or walls)"
+        if not all(t.elastic for t in self.targets):
+            return False, "a target is not an elastic stiffness or Young's modulus"
+        if not all(p.key == "bond_E" for p in self.space.parameters):
+            return False, "a free parameter is not a bond Young's modulus"
+        covered = sum(int(np.size(self.space.base["bond_E"])) if p.index is None else 1
+                      for p in self.space.parameters)
+        if covered != int(np.size(self.space.base["bond_E"])):
+            return False, "some bond moduli are held fixed (K is then not proportional to the free ones)"
+        return True, "stiffness is linear in a common factor on the bond moduli (bonds-only elasticity)"
+
+    def _compiled(self, what):
+        """Jitted pure functions, cached on the model per parameter and target structure: problems that differ only
+        in values (targets, initial values, bases) share one compilation."""
+        targets, space, pure = self.targets, self.space, self.forward.pure
+        key = (what, space.structure, tuple((t.observable, t.scene, t.at, t.size) for t in targets))
+        cache = self.forward._compiled
+        if key not in cache:
+            def vector(values, base):
+                obs = pure(space.to_params(values, base))
+                return jnp.concatenate([jnp.reshape(t.extract(obs), (-1,)) for t in targets])
+
+            if what == "vector":
+                fn = vector
+            elif what == "batch":
+                fn = jax.vmap(vector, in_axes=(0, None))
+            elif what == "jacobian":
+                def fn(values, base):
+                    return vector(values, base), jax.jacfwd(vector)(values, base)
+            else:  # value_and_grad of the loss in z
+                def loss_z(z, base, initial, scales, tvals, tscale, wel):
+                    y = vector(space.from_z(z, initial, scales), base)
+                    return jnp.sum(wel * jnp.square((y - tvals) / tscale)), y
+
+                fn = jax.value_and_grad(loss_z, has_aux=True)
+            cache[key] = jax.jit(fn)
+        return cache[key]
+
+    def _element_arrays(self):
+        tvals = np.concatenate([np.reshape(t.value, -1) for t in self.targets])
+        tscale = np.concatenate([np.full(t.size, t.scale) for t in self.targets])
+        wel = np.concatenate([np.full(t.size, w / t.size) for t, w in zip(self.targets, self.weights)])
+        return tvals, tscale, wel
+
+    # -------------------------------------------------------------- evaluation
+    def outputs(self, values_batch) -> np.ndarray:
+        """Model values of all target elements ``[B, m]`` for parameter values ``[B, n]`` (vmap when pure)."""
+        vb = np.atleast_2d(np.asarray(values_batch, dtype=np.float64))
+        if len(vb) == 1 and self._last is not None and np.array_equal(self._last[0], vb[0]):
+            return self._last[1][None].copy()
+        t0 = time.perf_counter()
+        if self.use_pure:
+            base = self.space.base
+            if len(vb) > 1:
+                y = np.asarray(self._compiled("batch")(jnp.asarray(vb), base))
+            else:
+                y = np.asarray(self._compiled("vector")(jnp.asarray(vb[0]), base))[None]
+        else:
+            rows = []
+            for v in vb:
+                obs = self.forward.evaluate(self.space.to_params(jnp.asarray(v)))
+                rows.append(np.concatenate([np.reshape(np.asarray(t.extract(obs)), (-1,)) for t in self.targets]))
+            y = np.stack(rows)
+        self.evaluations += len(vb) * self.n_scenes
+        self.solve_time += time.perf_counter() - t0
+        if len(vb) == 1:
+            self._last = (vb[0].copy(), y[0].copy())
+        return y
+
+    def jacobian(self, values) -> tuple[np.ndarray, np.ndarray]:
+        """Outputs ``[m]`` and their Jacobian ``[m, n]`` by forward-mode autodiff (pure models only)."""
+        t0 = time.perf_counter()
+        y, j = self._compiled("jacobian")(jnp.asarray(values, dtype=jnp.float64), self.space.base)
+        self.evaluations += self.n_scenes
+        self.solve_time += time.perf_counter() - t0
+        return np.asarray(y), np.asarray(j)
+
+    def value_and_grad(self, z) -> tuple[float, np.ndarray, np.ndarray]:
+        """Loss, its gradient with respect to ``z`` (reverse-mode autodiff) and the outputs (pure models only)."""
+        if not self.use_pure:
+            raise CalibrationError(f"autodiff gradients need a pure model; the {self.forward.name} model with "
+                                   f"targets {self.target_names} has none (use gradient='fd-forward')")
+        t0 = time.perf_counter()
+        sp = self.space
+        (loss, y), g = self._compiled("value_and_grad")(jnp.asarray(z, dtype=jnp.float64), sp.base,
+                                                        jnp.asarray(sp.initial), jnp.asarray(sp.scales),
+                                                        *map(jnp.asarray, self._element_arrays()))
+        self.evaluations += self.n_scenes
+        self.solve_time += time.perf_counter() - t0
+        return float(loss), np.asarray(g), np.asarray(y)
+
+    # -------------------------------------------------------------- objective
+    def errors_of(self, y):
+        """Relative errors ``[m]`` of all target elements for outputs ``y [m]``."""
+        xp = jnp if isinstance(y, jax.Array) else np
+        return xp.concatenate([t.relative_error(y[s]) for t, s in zip(self.targets, self.slices)])
+
+    def target_losses(self, e):
+        """Each target's weighted term ``w_k mean(e_k^2)``."""
+        xp = jnp if isinstance(e, jax.Array) else np
+        return xp.stack([w * xp.mean(xp.square(e[s])) for w, s in zip(self.weights, self.slices)])
+
+    def loss_of(self, e):
+        xp = jnp if isinstance(e, jax.Array) else np
+        return xp.sum(self.target_losses(e))
+
+    def max_errors(self, e) -> np.ndarray:
+        """Each target's largest relative error magnitude."""
+        e = np.asarray(e)
+        return np.array([np.max(np.abs(e[s])) for s in self.slices])
+
+    def signed_errors(self, e) -> dict[str, Any]:
+        e = np.asarray(e)
+        return {t.name: (float(e[s][0]) if t.size == 1 else e[s].copy()) for t, s in zip(self.targets, self.slices)}
+
+    def per_target(self, e) -> np.ndarray:
+        """One error per target: signed for a scalar target, the largest magnitude for a vector target."""
+        e = np.asarray(e)
+        return np.array([float(e[s][0]) if t.size == 1 else float(np.max(np.abs(e[s])))
+                         for t, s in zip(self.targets, self.slices)])

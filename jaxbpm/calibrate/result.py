@@ -1,0 +1,192 @@
+"""What a calibration returns: the answer, its errors, its cost and the full history (HDF5, plot)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from typing import Any
+
+import numpy as np
+
+__all__ = ["History", "CalibrationResult", "plot_history", "load_history"]
+
+
+@dataclasses.dataclass
+class History:
+    """One row per evaluated point: ``iteration`` (1-based), ``kind`` (``"initial"``, ``"estimate-1"``,
+    ``"estimate-2"``, ``"adam"``, ``"closed-form"``, ``"check"``, ...), ``level`` (the model), parameter
+    ``values``, ``loss``, each target's relative ``errors`` (signed for a scalar target, the largest magnitude for a
+    vector target), cumulative ``evaluations`` and the ``time`` [s]
+    the iteration took."""
+
+    parameter_names: list[str]
+    target_names: list[str]
+    rows: list[dict] = dataclasses.field(default_factory=list)
+
+    def append(self, *, kind: str, level: str, values, loss: float, errors: np.ndarray, evaluations: int,
+               time: float) -> dict:
+        row = {"iteration": len(self.rows) + 1, "kind": kind, "level": level,
+               "values": np.asarray(values, dtype=np.float64).copy(), "loss": float(loss),
+               "errors": np.asarray(errors, dtype=np.float64).copy(), "evaluations": int(evaluations),
+               "time": float(time)}
+        self.rows.append(row)
+        return row
+
+    def extend(self, other: "History") -> None:
+        for r in other.rows:
+            self.rows.append({**r, "iteration": len(self.rows) + 1})
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def column(self, name: str) -> np.ndarray:
+        return np.asarray([r[name] for r in self.rows])
+
+    def save(self, path, extra: dict | None = None):
+        """Write the history to an HDF5 file atomically (``/values [T, n]``, ``/loss``, ``/errors [T, k]``
+        relative error per target), ``/evaluations``, ``/time``, ``/kind``, ``/level``; names and the
+        result summary as JSON attributes)."""
+        import h5py
+
+        from jaxbpm.io import _atomic_write
+
+        def write(tmp):
+            with h5py.File(tmp, "w") as f:
+                f.attrs["format"] = "jaxbpm-calibration-history"
+                f.attrs["parameter_names"] = json.dumps(self.parameter_names)
+                f.attrs["target_names"] = json.dumps(self.target_names)
+                if extra:
+                    f.attrs["extra"] = json.dumps(extra, default=_jsonable)
+                n = len(self.parameter_names)
+                f.create_dataset("iteration", data=self.column("iteration").astype(np.int64).reshape(-1))
+                f.create_dataset("values", data=np.asarray([r["values"] for r in self.rows]).reshape(-1, n))
+                f.create_dataset("loss", data=self.column("loss").astype(np.float64).reshape(-1))
+                f.create_dataset("errors", data=np.asarray([r["errors"] for r in self.rows]).reshape(
+                    -1, len(self.target_names)))
+                f.create_dataset("evaluations", data=self.column("evaluations").astype(np.int64).reshape(-1))
+                f.create_dataset("time", data=self.column("time").astype(np.float64).reshape(-1))
+                f.create_dataset("kind", data=np.asarray([r["kind"] for r in self.rows], dtype="S"))
+                f.create_dataset("level", data=np.asarray([r["level"] for r in self.rows], dtype="S"))
+
+        return _atomic_write(path, write)
+
+
+def _jsonable(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer, np.floating, np.bool_)):
+        return obj.item()
+    return str(obj)
+
+
+def load_history(path) -> History:
+    """Read a history written by :meth:`History.save`."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        h = History(json.loads(f.attrs["parameter_names"]), json.loads(f.attrs["target_names"]))
+        for i in range(len(f["loss"])):
+            h.rows.append({"iteration": int(f["iteration"][i]), "kind": f["kind"][i].decode(),
+                           "level": f["level"][i].decode(), "values": np.asarray(f["values"][i]),
+                           "loss": float(f["loss"][i]), "errors": np.asarray(f["errors"][i]),
+                           "evaluations": int(f["evaluations"][i]), "time": float(f["time"][i])})
+    return h
+
+
+@dataclasses.dataclass
+class CalibrationResult:
+    """Outcome of a calibration.
+
+    values: ``{parameter name: calibrated value}``; params: the full parameter pytree to pass to
+    :func:`jaxbpm.solve`. errors: ``{target name: signed relative error}`` at the answer (``(y - t) / s``; predicted
+    by the surrogate for ``method="surrogate"``); converged: every target within ``tol``. method: the calibrator
+    that produced the answer (``"closed-form"``, ``"adam"``, ``"surrogate"``, ``"multi-fidelity"``); model: the
+    solver it calibrated against. evaluations: solves (one parameter set on one scene); iterations: evaluated
+    points (rows of ``history``). levels: per-model cost of a multi-fidelity run. band: ``{name: (lo, hi)}``
+    (surrogate). notes: what was done and why (e.g. the closed-form shortcut). info: calibrator details.
+    """
+
+    values: dict[str, float]
+    params: dict
+    errors: dict[str, Any]
+    converged: bool
+    method: str
+    model: str
+    evaluations: int
+    iterations: int
+    wall_time: float
+    tol: float
+    history: History
+    notes: list[str] = dataclasses.field(default_factory=list)
+    levels: list[dict] = dataclasses.field(default_factory=list)
+    band: dict[str, tuple[float, float]] | None = None
+    info: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def max_error(self) -> float:
+        return float(max(np.max(np.abs(np.asarray(e))) for e in self.errors.values()))
+
+    def save(self, path):
+        """Write the history (and a summary of this result) to an HDF5 file atomically."""
+        extra = {"values": self.values, "errors": self.errors, "converged": self.converged, "method": self.method,
+                 "model": self.model, "evaluations": self.evaluations, "iterations": self.iterations,
+                 "wall_time": self.wall_time, "tol": self.tol, "notes": self.notes, "levels": self.levels,
+                 "band": self.band}
+        return self.history.save(path, extra=extra)
+
+    def plot(self, path=None):
+        return plot_history(self.history, path)
+
+    def table(self) -> str:
+        lines = [f"{'parameter':<16}{'value':>14}" + (f"{'band':>30}" if self.band else "")]
+        for name, v in self.values.items():
+            band = f"  [{self.band[name][0]:.5g}, {self.band[name][1]:.5g}]" if self.band else ""
+            lines.append(f"{name:<16}{v:>14.6g}{band:>30}" if self.band else f"{name:<16}{v:>14.6g}")
+        lines.append(f"{'target':<16}{'error':>14}")
+        for name, e in self.errors.items():
+            e = np.asarray(e)
+            txt = f"{100 * float(e):+.3f} %" if e.ndim == 0 else f"max {100 * float(np.max(np.abs(e))):.3f} %"
+            lines.append(f"{name:<16}{txt:>14}")
+        lines.append(f"method {self.method} on {self.model}: {'converged' if self.converged else 'NOT converged'} "
+                     f"(tol {100 * self.tol:g} %), {self.iterations} iterations, {self.evaluations} evaluations, "
+                     f"{self.wall_time:.2f} s")
+        for lv in self.levels:
+            lines.append(f"  level {lv['model']:<8} {lv['action']:<11} {lv['evaluations']:>3} evaluations "
+                         f"{lv['wall_time']:8.2f} s  max error {100 * lv['max_error']:.3f} %")
+        for note in self.notes:
+            lines.append(f"note: {note}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        vals = ", ".join(f"{k}={v:.6g}" for k, v in self.values.items())
+        return (f"CalibrationResult({vals}; method={self.method!r}, model={self.model!r}, "
+                f"max_error={self.max_error:.3g}, evaluations={self.evaluations}, iterations={self.iterations})")
+
+
+def plot_history(history: History, path=None):
+    """Plot loss, largest error per target and parameter values against the iteration; save to ``path`` if
+    given. Returns the matplotlib figure (Agg backend; matplotlib is imported here only)."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    it = history.column("iteration")
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
+    axes[0].semilogy(it, np.maximum(history.column("loss"), 1e-300), "o-")
+    axes[0].set(xlabel="iteration", ylabel="loss L", title="objective")
+    errs = np.abs(np.asarray([r["errors"] for r in history.rows]).reshape(len(it), -1))
+    for k, name in enumerate(history.target_names):
+        axes[1].semilogy(it, np.maximum(errs[:, k], 1e-300) * 100, "o-", label=name)
+    axes[1].set(xlabel="iteration", ylabel="|relative error| [%]", title="targets")
+    axes[1].legend(fontsize=8)
+    vals = np.asarray([r["values"] for r in history.rows])
+    for k, name in enumerate(history.parameter_names):
+        axes[2].plot(it, vals[:, k] / vals[0, k], "o-", label=name)
+    axes[2].set(xlabel="iteration", ylabel="value / first value", title="parameters")
+    axes[2].legend(fontsize=8)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig

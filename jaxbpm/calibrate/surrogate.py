@@ -1,0 +1,293 @@
+"""Random-forest surrogate calibration (seed 002, section 2).
+
+1. A run set: N parameter sets by optimised Latin hypercube sampling (``scipy.stats.qmc``) within the parameter
+   ranges, all solved as one batch (``jax.vmap`` for pure models). It is stored in HDF5 (:meth:`RunSet.save`) and
+   re-used for other targets on the same specimen without new runs.
+2. One :class:`sklearn.ensemble.RandomForestRegressor` per element of the output vector, trained on
+   ``err = y_target - y_run`` (seed 002, Eq. 1; divided by the target's scale when ``normalize``), 500 trees and a
+   third of the inputs per split by default; out-of-bag R^2 and the impurity importance of each parameter per element
+   and on average. Parameters whose mean importance is below ``importance_threshold`` can be dropped (held at their
+   initial value) and the run set re-sampled on the rest.
+3. Iterative range narrowing: start from the training ranges with the outer ``exclude`` (5 %) cut off; at iteration
+   ``it`` draw ``L_s`` combinations (LHS) in the current ranges, keep those whose predicted errors all lie within
+   ``I_e / it`` and shrink the ranges to them; stop at ``it_max`` or when no combination is admissible. The answer is
+   the median of the last admissible combinations and their ranges are its uncertainty band.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+
+import numpy as np
+
+from jaxbpm.calibrate import _common
+from jaxbpm.calibrate.objective import CalibrationError, Problem
+from jaxbpm.calibrate.result import CalibrationResult, History
+
+__all__ = ["RunSet", "run_set", "fit_forests", "surrogate", "latin_hypercube"]
+
+RUNSET_FORMAT = "jaxbpm-runset"
+
+
+def latin_hypercube(n: int, lower, upper, *, seed=0, optimize: bool = True) -> np.ndarray:
+    """``n`` points ``[n, d]`` of a (centred-discrepancy optimised) Latin hypercube within ``[lower, upper]``."""
+    from scipy.stats import qmc
+
+    lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    d = lower.size
+    engine = qmc.LatinHypercube(d, optimization="random-cd" if optimize and d >= 2 else None, rng=seed)
+    return qmc.scale(engine.random(n), lower, upper) if d else np.zeros((n, 0))
+
+
+@dataclasses.dataclass
+class RunSet:
+    """Solved parameter sets: inputs ``X [N, n]`` (named ``parameter_names``, sampled in ``[lower, upper]``) and
+    outputs ``Y [N, m]``, the model values of the named outputs (``output_names``, each ``output_sizes`` long;
+    a target re-uses an output of the same name and size)."""
+
+    parameter_names: list[str]
+    X: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    output_names: list[str]
+    output_sizes: list[int]
+    Y: np.ndarray
+    model: str = ""
+    info: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def n_runs(self) -> int:
+        return int(self.X.shape[0])
+
+    def output(self, name: str, size: int) -> np.ndarray:
+        if name not in self.output_names:
+            raise CalibrationError(f"the run set has no output {name!r} (outputs: {self.output_names}); a second "
+                                   "target must be of a quantity the runs recorded")
+        k = self.output_names.index(name)
+        if self.output_sizes[k] != size:
+            raise CalibrationError(f"output {name!r} of the run set has {self.output_sizes[k]} values, the target "
+                                   f"{size}")
+        a = int(np.sum(self.output_sizes[:k]))
+        return self.Y[:, a:a + size]
+
+    def save(self, path):
+        """Write the run set to an HDF5 file atomically."""
+        import h5py
+
+        from jaxbpm.io import _atomic_write
+
+        def write(tmp):
+            with h5py.File(tmp, "w") as f:
+                f.attrs["format"] = RUNSET_FORMAT
+                f.attrs["parameter_names"] = json.dumps(self.parameter_names)
+                f.attrs["output_names"] = json.dumps(self.output_names)
+                f.attrs["output_sizes"] = json.dumps([int(s) for s in self.output_sizes])
+                f.attrs["model"] = self.model
+                f.attrs["info"] = json.dumps(self.info, default=float)
+                for name in ("X", "lower", "upper", "Y"):
+                    f.create_dataset(name, data=np.asarray(getattr(self, name), dtype=np.float64))
+
+        return _atomic_write(path, write)
+
+    @classmethod
+    def load(cls, path) -> "RunSet":
+        import h5py
+
+        try:
+            with h5py.File(path, "r") as f:
+                if f.attrs.get("format") != RUNSET_FORMAT:
+                    raise CalibrationError(f"{path}: not a jaxbpm run set file")
+                return cls(parameter_names=json.loads(f.attrs["parameter_names"]), X=np.asarray(f["X"]),
+                           lower=np.asarray(f["lower"]), upper=np.asarray(f["upper"]),
+                           output_names=json.loads(f.attrs["output_names"]),
+                           output_sizes=json.loads(f.attrs["output_sizes"]), Y=np.asarray(f["Y"]),
+                           model=str(f.attrs["model"]), info=json.loads(f.attrs["info"]))
+        except OSError as exc:
+            raise CalibrationError(f"{path}: not a readable run set file ({exc})") from exc
+
+
+def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None) -> RunSet:
+    """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` (within its bounds, or ``lower``/``upper``)
+    as one batch and record the outputs its targets need."""
+    n_runs = _common.check_count("n_runs", n_runs, 2)
+    space = problem.space
+    lower = space.lower if lower is None else np.asarray(lower, dtype=np.float64)
+    upper = space.upper if upper is None else np.asarray(upper, dtype=np.float64)
+    if lower.shape != (space.n,) or upper.shape != (space.n,) or np.any(~(lower < upper)):
+        raise CalibrationError(f"ranges must be {space.n} pairs with lower < upper")
+    t0 = time.perf_counter()
+    evals0 = problem.evaluations
+    X = latin_hypercube(n_runs, lower, upper, seed=seed)
+    Y = problem.outputs(X)
+    return RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
+                  output_sizes=[t.size for t in problem.targets], Y=np.asarray(Y), model=problem.forward.name,
+                  info={"seed": seed, "wall_time": time.perf_counter() - t0,
+                        "evaluations": problem.evaluations - evals0})
+
+
+def _errors(problem: Problem, runs: RunSet, normalize: bool) -> np.ndarray:
+    cols = []
+    for t in problem.targets:
+        y = runs.output(t.name, t.size)
+        err = np.reshape(t.value, (1, -1)) - y
+        cols.append(err / t.scale if normalize else err)
+    return np.concatenate(cols, axis=1)
+
+
+def fit_forests(X, err, *, n_trees=500, max_features=1 / 3, seed=0, n_jobs=None):
+    """One random forest per column of ``err [N, m]``; returns ``(forests, oob_r2 [m], importance [m, n])``."""
+    from sklearn.ensemble import RandomForestRegressor
+
+    forests, r2, imp = [], [], []
+    for j in range(err.shape[1]):
+        rf = RandomForestRegressor(n_estimators=n_trees, max_features=max_features, oob_score=True,
+                                   random_state=seed + j, n_jobs=n_jobs)
+        rf.fit(X, err[:, j])
+        forests.append(rf)
+        r2.append(float(rf.oob_score_))
+        imp.append(rf.feature_importances_)
+    return forests, np.asarray(r2), np.asarray(imp)
+
+
+def _predict(forests, X) -> np.ndarray:
+    return np.stack([f.predict(X) for f in forests], axis=1)
+
+
+def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100, I_e: float = 0.2, L_s: int = 1000,
+              it_max: int = 50, n_trees: int = 500, max_features: float = 1 / 3, exclude: float = 0.05,
+              normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
+              seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None,
+              progress=None) -> CalibrationResult:
+    """Calibrate with the random-forest surrogate of seed 002 (see the module docstring).
+
+    runs: a stored :class:`RunSet` to re-use (no new runs); else ``n_runs`` are solved. I_e: initial admissible
+    error (relative to each target's scale when ``normalize``, else in the output's units); L_s: combinations per
+    iteration; it_max: iterations at most. n_trees, max_features: the forests (seed 002: 500 and 1/3).
+    importance_threshold: drop parameters whose mean importance is below it; resample_runs: then solve that many new
+    runs on the remaining parameters. verify: solve once at the answer and report the measured errors (else the
+    surrogate's prediction). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
+    ``mean_importance``, ``dropped``, ``narrowing`` (per iteration: admissible count, error bound, ranges) and the
+    run set (``runs``).
+    """
+    t_start = time.perf_counter()
+    tol = _common.check_tol(tol)
+    L_s = _common.check_count("L_s", L_s, 2)
+    it_max = _common.check_count("it_max", it_max)
+    n_trees = _common.check_count("n_trees", n_trees)
+    if not (isinstance(I_e, (int, float)) and np.isfinite(I_e) and I_e > 0):
+        raise CalibrationError(f"I_e must be a number > 0, got {I_e!r}")
+    if not (isinstance(exclude, (int, float)) and 0 <= exclude < 0.5):
+        raise CalibrationError(f"exclude must lie in [0, 0.5), got {exclude!r}")
+    if not (isinstance(max_features, (int, float)) and 0 < max_features <= 1):
+        raise CalibrationError(f"max_features must be a fraction in (0, 1], got {max_features!r}")
+    progress = _common.progress_fn(progress)
+    evals0 = problem.evaluations
+    notes = []
+    space = problem.space
+    if runs is None:
+        runs = run_set(problem, n_runs, seed=seed)
+    else:
+        if not isinstance(runs, RunSet):
+            raise CalibrationError(f"runs must be a RunSet, got {type(runs).__name__}")
+        if runs.parameter_names != space.names:
+            raise CalibrationError(f"the run set varies {runs.parameter_names}, the problem {space.names}")
+        notes.append(f"re-used a stored run set of {runs.n_runs} runs (no new runs for training)")
+    err = _errors(problem, runs, normalize)
+    forests, r2, imp = fit_forests(runs.X, err, n_trees=n_trees, max_features=max_features, seed=seed,
+                                   n_jobs=n_jobs)
+    mean_imp = imp.mean(axis=0)
+    dropped = []
+    active = np.ones(space.n, bool)
+    fixed = space.clip(space.initial)
+    if importance_threshold is not None:
+        active = mean_imp >= importance_threshold
+        if not active.any():
+            raise CalibrationError(f"every parameter's mean importance is below {importance_threshold}")
+        dropped = [n for n, a in zip(space.names, active) if not a]
+        if dropped:
+            notes.append(f"dropped parameters of low importance {dropped} (held at {fixed[~active].tolist()})")
+            if resample_runs:
+                sub = space.subspace([n for n, a in zip(space.names, active) if a], fixed)
+                sub_problem = Problem(problem.forward, problem.targets, sub)
+                sub_problem.evaluations = problem.evaluations
+                sub_runs = run_set(sub_problem, resample_runs, seed=seed + 1, lower=runs.lower[active],
+                                   upper=runs.upper[active])
+                problem.evaluations = sub_problem.evaluations
+                X_full = np.repeat(fixed[None, :], sub_runs.n_runs, axis=0)
+                X_full[:, active] = sub_runs.X
+                runs = RunSet(space.names, X_full, runs.lower, runs.upper, sub_runs.output_names,
+                              sub_runs.output_sizes, sub_runs.Y, runs.model,
+                              {**sub_runs.info, "resampled_from": runs.n_runs})
+                err = _errors(problem, runs, normalize)
+                forests, r2, imp_active = fit_forests(runs.X[:, active], err, n_trees=n_trees,
+                                                      max_features=max_features, seed=seed, n_jobs=n_jobs)
+                imp = np.zeros((err.shape[1], space.n))
+                imp[:, active] = imp_active
+                notes.append(f"re-sampled {resample_runs} runs on the remaining parameters")
+
+    reduced = bool(dropped and resample_runs)  # forests trained on the active parameters only
+
+    def predict(Xa):
+        if reduced:
+            return _predict(forests, Xa)
+        full = np.repeat(fixed[None, :], len(Xa), axis=0)
+        full[:, active] = Xa
+        return _predict(forests, full)
+
+    lo, hi = runs.lower[active], runs.upper[active]
+    width = hi - lo
+    lo, hi = lo + exclude * width, hi - exclude * width
+    history = History(space.names, problem.target_names)
+    narrowing = []
+    kept = None
+    stop = "it_max reached"
+    for it in range(1, it_max + 1):
+        t0 = time.perf_counter()
+        Xp = latin_hypercube(L_s, lo, hi, seed=seed + 1000 + it, optimize=False)
+        P = predict(Xp)
+        bound = I_e / it
+        adm = np.all(np.abs(P) <= bound, axis=1)
+        narrowing.append({"iteration": it, "bound": bound, "admissible": int(adm.sum()),
+                          "lower": lo.tolist(), "upper": hi.tolist()})
+        if not adm.any():
+            if kept is None:
+                raise CalibrationError(f"no parameter combination is admissible at the initial error I_e={I_e:g}; "
+                                       "widen the ranges or raise I_e")
+            stop = f"no admissible combination at iteration {it} (bound {bound:.4g})"
+            break
+        kept = Xp[adm]
+        lo, hi = kept.min(axis=0), kept.max(axis=0)
+        med = np.median(kept, axis=0)
+        full = fixed.copy()
+        full[active] = med
+        pred_err = predict(med[None, :])[0]
+        rel = -pred_err if normalize else -pred_err / np.concatenate([np.full(t.size, t.scale)
+                                                                        for t in problem.targets])
+        _common.record(history, problem, progress, kind="narrow", values=full, errors=rel,
+                       time=time.perf_counter() - t0, level=f"{problem.forward.name}-surrogate")
+    values = fixed.copy()
+    values[active] = np.median(kept, axis=0)
+    band = {}
+    for i, name in enumerate(space.names):
+        if active[i]:
+            j = int(np.sum(active[:i]))
+            band[name] = (float(kept[:, j].min()), float(kept[:, j].max()))
+        else:
+            band[name] = (float(values[i]), float(values[i]))
+    pred_err = predict(values[active][None, :])[0]
+    e = -pred_err if normalize else -pred_err / np.concatenate([np.full(t.size, t.scale) for t in problem.targets])
+    if verify:
+        t0 = time.perf_counter()
+        e = np.asarray(problem.errors_of(problem.outputs(values[None, :])[0]))
+        _common.record(history, problem, progress, kind="verify", values=values, errors=e,
+                       time=time.perf_counter() - t0)
+    else:
+        notes.append("errors at the answer are the surrogate's prediction")
+    notes.append(f"range narrowing stopped: {stop}")
+    info = {"oob_r2": r2, "importance": imp, "mean_importance": imp.mean(axis=0), "dropped": dropped,
+            "narrowing": narrowing, "runs": runs, "n_runs": runs.n_runs, "stop": stop, "normalize": normalize}
+    return _common.make_result(problem, history, values, e, method="surrogate", tol=tol,
+                               wall_time=time.perf_counter() - t_start, evaluations=problem.evaluations - evals0,
+                               notes=notes, info=info, band=band)
