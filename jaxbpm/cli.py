@@ -76,18 +76,24 @@ def _cmd_export_vtk(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: bool = True) -> dict[str, Any]:
+def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: bool = True,
+             calibrate: bool = True, target_factor: float = 1.25) -> dict[str, Any]:
     """The demo: generate a random box sample of ``n`` particles, save it to ``out_dir/demo_sample.h5``, then
-    compress it uniaxially (0.2 % strain, clamped layers) with the explicit DEM (the reference) and the direct
-    stiffness method, and report each method's stiffness, its difference to the DEM and its cost. The table is also
-    written to ``out_dir/demo_results.json``.
+    compress it uniaxially (0.2 % strain, clamped layers) with the three methods -- the explicit DEM (the
+    reference), the direct stiffness method (at its default tolerance and with ``stiffness_tol=1e-3``) and the
+    stiffness tensor estimate -- and report each one's stiffness, difference to the DEM and cost; then calibrate the
+    bond modulus to a target Young's modulus (``target_factor`` x the DEM's) with the multi-fidelity path, checked
+    by one DEM run. Writes ``demo_results.json`` and the speed-against-accuracy chart ``demo_speed_accuracy.png``.
 
     Returns:
-      ``{"out_dir": Path, "sample_path": Path, "sample": Sample, "results": {method: Result}}``.
+      ``{"out_dir": Path, "sample_path": Path, "sample": Sample, "results": {label: Result},
+      "calibration": CalibrationResult or None}``.
     """
+    import numpy as np
+
     import jaxbpm
     from jaxbpm import generate
-    from jaxbpm.io import save_sample
+    from jaxbpm.io import save_sample, write_json
 
     out_dir = pathlib.Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -96,41 +102,84 @@ def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: 
     path = save_sample(out_dir / "demo_sample.h5", sample)
     print(sample.summary())
     print(f"wrote {path}  ({time.perf_counter() - start:.2f} s)")
-    out: dict[str, Any] = {"out_dir": out_dir, "sample_path": path, "sample": sample, "results": {}}
+    out: dict[str, Any] = {"out_dir": out_dir, "sample_path": path, "sample": sample, "results": {},
+                           "calibration": None}
     if not solve:
         return out
     body = sample.largest_cluster() if sample.summary().n_clusters > 1 else sample
     if body.n_particles < sample.n_particles:
         print(f"solving on the largest bonded cluster ({body.n_particles} of {sample.n_particles} particles)")
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.002)
-    rows = []
-    for method, options in (("dem", {"progress": not quiet}), ("dsm", {})):
-        print(f"\nuniaxial compression, method {method} ...", flush=True)
-        res = jaxbpm.solve(body, scene, method=method, **options)
-        out["results"][method] = res
-        rows.append(res)
-    ref = out["results"]["dem"].stiffness
+    runs = (("dem", "dem", {"progress": not quiet}), ("dsm", "dsm", {}),
+            ("dsm stol 1e-3", "dsm", {"stiffness_tol": 1e-3}), ("ste", "ste", {}))
+    for label, method, options in runs:
+        print(f"\nuniaxial compression, {label} ...", flush=True)
+        out["results"][label] = jaxbpm.solve(body, scene, method=method, **options)
+    dem = out["results"]["dem"]
     table = []
-    print(f"\n{'method':<8}{'K [N/m]':>14}{'E [Pa]':>14}{'vs DEM':>10}{'compile [s]':>13}{'run [s]':>10}"
+    print(f"\n{'method':<15}{'K [N/m]':>13}{'E [Pa]':>13}{'vs DEM':>10}{'compile [s]':>13}{'run [s]':>10}"
           f"{'speed-up':>10}")
-    for res in rows:
-        diff = res.stiffness / ref - 1.0
-        speedup = out["results"]["dem"].run_time / res.run_time if res.run_time > 0 else float("nan")
-        print(f"{res.method:<8}{res.stiffness:>14.6g}{res.youngs_modulus:>14.6g}{100 * diff:>9.3f}%"
-              f"{res.compile_time:>13.3f}{res.run_time:>10.3f}{speedup:>10.1f}")
-        table.append({"method": res.method, "stiffness": res.stiffness, "youngs_modulus": res.youngs_modulus,
+    for label, res in out["results"].items():
+        diff = res.stiffness / dem.stiffness - 1.0
+        speedup = dem.run_time / res.run_time if res.run_time > 0 else float("nan")
+        print(f"{label:<15}{res.stiffness:>13.6g}{res.youngs_modulus:>13.6g}{100 * diff:>9.3f}%"
+              f"{res.compile_time:>13.3f}{res.run_time:>10.4f}{speedup:>10.1f}")
+        table.append({"method": label, "stiffness": res.stiffness, "youngs_modulus": res.youngs_modulus,
                       "difference_to_dem": diff, "compile_time": res.compile_time, "run_time": res.run_time,
                       "wall_time": res.wall_time, "speedup_run": speedup})
-    from jaxbpm.io import write_json
+    report: dict[str, Any] = {"particles": body.n_particles, "bonds": body.n_bonds, "strain": scene.strain,
+                              "results": table}
+    if calibrate:
+        from jaxbpm.calibrate import calibrate as run_calibration
 
-    write_json(out_dir / "demo_results.json", {"particles": body.n_particles, "bonds": body.n_bonds,
-                                               "strain": scene.strain, "results": table})
-    print(f"wrote {out_dir / 'demo_results.json'}")
+        target = target_factor * dem.youngs_modulus
+        print(f"\ncalibrating the bond modulus to E = {target:.4g} Pa (multi-fidelity, checked by the DEM) ...",
+              flush=True)
+        cal = run_calibration(body, scene, {"youngs_modulus": target}, method="auto", tol=0.01, check="dem")
+        out["calibration"] = cal
+        print(cal.table())
+        check = cal.info.get("check", {})
+        report["calibration"] = {"target_youngs_modulus": target, "values": cal.values, "method": cal.method,
+                                 "evaluations": cal.evaluations, "levels": cal.levels, "wall_time": cal.wall_time,
+                                 "errors": {k: float(np.max(np.abs(v))) for k, v in cal.errors.items()},
+                                 "check": check, "notes": cal.notes}
+    path_json = write_json(out_dir / "demo_results.json", report)
+    print(f"wrote {path_json}")
+    png = _demo_chart(out_dir / "demo_speed_accuracy.png", table, body)
+    print(f"wrote {png}")
     return out
 
 
+def _demo_chart(path, table, sample):
+    """Run time against difference to the DEM, one point per method (log-log)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxbpm.io import _atomic_write
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for row in table:
+        err = max(abs(row["difference_to_dem"]) * 100, 1e-3)
+        ax.scatter(row["run_time"], err, s=60)
+        ax.annotate(f"{row['method']}\n{row['speedup_run']:.0f}x", (row["run_time"], err), fontsize=8,
+                    xytext=(6, 4), textcoords="offset points")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("run time [s] (compilation excluded)")
+    ax.set_ylabel("|stiffness difference to DEM| [%] (DEM: floor 1e-3)")
+    ax.set_title(f"speed against accuracy: {sample.n_particles} particles, {sample.n_bonds} bonds")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    plt.close(fig)
+    return path
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
-    run_demo(args.out, n=args.n, seed=args.seed, quiet=args.quiet, solve=not args.no_solve)
+    run_demo(args.out, n=args.n, seed=args.seed, quiet=args.quiet, solve=not args.no_solve,
+             calibrate=not args.no_calibrate)
     return 0
 
 
@@ -222,6 +271,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--no-solve", action="store_true", dest="no_solve",
                    help="only generate and save the sample (skip the DEM/DSM comparison)")
+    p.add_argument("--no-calibrate", action="store_true", dest="no_calibrate",
+                   help="skip the calibration step")
     p.set_defaults(func=_cmd_demo)
 
     from jaxbpm._interop_cli import add_parsers as _add_interop  # convert, params
