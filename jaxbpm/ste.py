@@ -56,7 +56,11 @@ Conventions and choices:
 
 Everything that depends on the bond parameters is vectorised (per-interaction Jacobians, ``segment_sum`` per
 particle, batched 3x3 / 6x6 inverses), differentiable and ``vmap``-able over parameter sets; neighbour searches and
-the choice of interactions are done once, in NumPy, when the :class:`Estimator` is built.
+the choice of interactions are done once, in NumPy, when the :class:`Estimator` is built. With 3 DOF (the default)
+the Estimator also holds each bond's ``K^nm`` per unit stiffness (``jax.jacfwd`` of the bond law, which is linear
+in its stiffnesses), so a parameter set costs ``K^nm = k_n G_n + k_t G_t`` per bond, and the algebra runs on the
+pairs (one 3x3 block each) with the body tensor as a few matrix products over pairs and particles; the cost is
+linear in the number of bonds.
 """
 
 from __future__ import annotations
@@ -99,8 +103,11 @@ class Estimator:
     ``nb`` bonds first, then the active contacts; d ``[P, 3]``: ``x_j - x_i`` at rest; contact_d ``[C, 3]``: the
     contact vectors shortened to their linearisation overlap. volume ``[n]``: V^n [m^3]; valid ``[n]``: not
     singular; include ``[n]``: valid and not at the surface (enters the averages). layer ``[n]``: layer index of
-    each particle along the scene axis (for ``layered``).
-    Static: ``dofs`` (3 or 6), ``first_neighbour``, ``n_layers``, ``axis``.
+    each particle along the scene axis (for ``layered``). With ``dofs=3``: geometry ``[S, nb, 9]``, the bond's
+    ``K^nm`` (row-major 3x3) per unit value of each stiffness that enters it (``terms``, indices into
+    (k_n, k_t, k_tw, k_b)): the Jacobian of the bond law at rest is linear in the stiffnesses, so
+    ``K^nm = sum_s k_s geometry[s]``; contact_k ``[C, 9]``: the contacts' ``K^nm`` (parameter-free).
+    Static: ``dofs`` (3 or 6), ``first_neighbour``, ``n_layers``, ``axis``, ``terms``.
     """
 
     model: Model
@@ -113,10 +120,13 @@ class Estimator:
     valid: Any
     include: Any
     layer: Any
+    geometry: Any = None
+    contact_k: Any = None
     dofs: int = 3
     first_neighbour: bool = False
     n_layers: int = 1
     axis: int = 2
+    terms: tuple = ()
 
     @property
     def n(self) -> int:
@@ -143,8 +153,8 @@ class Estimator:
 
 jax.tree_util.register_dataclass(
     Estimator, data_fields=["model", "pairs", "d", "contact_d", "contact_radii", "contact_params", "volume", "valid",
-                            "include", "layer"],
-    meta_fields=["dofs", "first_neighbour", "n_layers", "axis"])
+                            "include", "layer", "geometry", "contact_k"],
+    meta_fields=["dofs", "first_neighbour", "n_layers", "axis", "terms"])
 
 
 def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: bool = False, contacts=None,
@@ -231,12 +241,18 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
     pm = sample.particle_material
     cparams = contact_mod.contact_params(jnp.asarray(pm.E, dtype), jnp.asarray(pm.nu, dtype),
                                          jnp.asarray(jnp.inf, dtype), jnp.asarray(pm.restitution, dtype))
-    return Estimator(model=model, pairs=jnp.asarray(pairs), d=jnp.asarray(d, dtype),
-                     contact_d=jnp.asarray(cd, dtype), contact_radii=jnp.asarray(rad[cpairs], dtype).reshape(-1, 2),
-                     contact_params=cparams, volume=jnp.asarray(vol, dtype), valid=jnp.asarray(valid),
-                     include=jnp.asarray(include),
-                     layer=jnp.asarray(layer, jnp.int32), dofs=int(dofs), first_neighbour=bool(first_neighbour),
-                     n_layers=int(n_layers), axis=axis)
+    est = Estimator(model=model, pairs=jnp.asarray(pairs), d=jnp.asarray(d, dtype),
+                    contact_d=jnp.asarray(cd, dtype), contact_radii=jnp.asarray(rad[cpairs], dtype).reshape(-1, 2),
+                    contact_params=cparams, volume=jnp.asarray(vol, dtype), valid=jnp.asarray(valid),
+                    include=jnp.asarray(include),
+                    layer=jnp.asarray(layer, jnp.int32), dofs=int(dofs), first_neighbour=bool(first_neighbour),
+                    n_layers=int(n_layers), axis=axis)
+    if dofs == 3:
+        geometry, terms = _bond_geometry(model)
+        ck = (-_contact_jacobians_jit(est)[:, :3, 3:].reshape(-1, 9) if len(cpairs)
+              else jnp.zeros((0, 9), dtype))
+        est = dataclasses.replace(est, geometry=geometry, terms=terms, contact_k=ck.astype(dtype))
+    return est
 
 
 def _bond_model(sample: Sample, dofs: int) -> Model:
@@ -297,6 +313,36 @@ def _active_contacts(sample: Sample, model: Model, axis: int, strain: float):
 
 
 # ---------------------------------------------------------------------------------------------------- stiffness
+@jax.jit
+def _unit_jacobians(r0):
+    """``[4, nb, 9]``: ``d f_i / d d`` of every bond at rest with (k_n, k_t, k_tw, k_b) = each unit vector."""
+    q = jnp.array([1.0, 0.0, 0.0, 0.0], r0.dtype)
+
+    def one(r, s):
+        k = [jnp.where(s == t, 1.0, 0.0).astype(r.dtype) for t in range(4)]
+        return jax.jacfwd(lambda d: bond_mod.bond_law(d, r, q, q, *k).f_i)(r).reshape(9)
+
+    return jnp.stack([jax.vmap(one, (0, None))(r0, s) for s in range(4)])
+
+
+def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
+    """``K^nm`` of every bond at rest (3 DOF, ``[S, nb, 9]``) per unit value of each stiffness that enters it.
+
+    ``K^nm = d f^n / d u^m`` is ``jax.jacfwd`` of the bond law with respect to the bond vector (3 DOF: the law sees
+    the displacements only through ``d = r0 + u^j - u^i``, and ``f_j = -f_i``), evaluated once per stiffness with
+    that stiffness set to one and the others to zero; the law is linear in its stiffnesses, so any parameter set
+    gives ``K^nm = sum_s k_s G_s``. Terms that vanish identically (twisting and bending without rotations) are
+    dropped.
+    """
+    r0 = model.r0
+    nb = int(r0.shape[0])
+    if nb == 0:
+        return jnp.zeros((0, 0, 9), r0.dtype), ()
+    g = _unit_jacobians(r0)
+    terms = tuple(s for s in range(4) if bool(jnp.any(g[s] != 0)))
+    return g[np.array(terms, int)], terms
+
+
 def _bond_jacobians(est: Estimator, params) -> jnp.ndarray:
     """Per-bond stiffness ``[nb, 2nd, 2nd]`` at rest, DOF order (u_i, theta_i, u_j, theta_j): minus the Jacobian of
     the bond law (the same function the DEM and the DSM integrate)."""
@@ -345,6 +391,9 @@ def _contact_jacobians(est: Estimator) -> jnp.ndarray:
         return -jax.jacfwd(f)(jnp.zeros(2 * nd, dtype))
 
     return jax.vmap(one)(est.contact_d, est.contact_radii)
+
+
+_contact_jacobians_jit = jax.jit(_contact_jacobians)
 
 
 def pair_stiffness(est: Estimator, params) -> jnp.ndarray:
@@ -401,6 +450,113 @@ def _edge_forces(est: Estimator, params) -> tuple[_Edges, jnp.ndarray]:
     return e, f
 
 
+# Three DOF per particle (the paper's form, the default): every pair has one coupling block K = K^nm = d f^i / d u^j
+# (the same for both directions; the self block of the pair on either end is K as well). The algebra below is written
+# on [P, ...] rows of the pairs and [n, ...] rows of the particles: broadcast products summed term by term
+# (elementwise loops, no tiny batched matrix products, which XLA on CPU runs one small dot at a time), per-particle
+# sums as scatters of materialised rows, and every sum over all pairs or particles that the body tensor needs as one
+# matrix product with the pairs (particles) as the contracted dimension.
+def _mul(a, b):
+    """``[..., p, q] x [..., q, r] -> [..., p, r]`` as a sum of ``q`` broadcast products."""
+    out = a[..., :, 0, None] * b[..., None, 0, :]
+    for c in range(1, a.shape[-1]):
+        out = out + a[..., :, c, None] * b[..., None, c, :]
+    return out
+
+
+def _inverse3(D):
+    """Inverse of ``[n, 3, 3]`` matrices by cofactors (elementwise)."""
+    a = [[D[:, r, c] for c in range(3)] for r in range(3)]
+    cof = [[a[(r + 1) % 3][(c + 1) % 3] * a[(r + 2) % 3][(c + 2) % 3]
+            - a[(r + 1) % 3][(c + 2) % 3] * a[(r + 2) % 3][(c + 1) % 3] for c in range(3)] for r in range(3)]
+    inv_det = 1.0 / (a[0][0] * cof[0][0] + a[0][1] * cof[0][1] + a[0][2] * cof[0][2])
+    return jnp.stack([jnp.stack([cof[c][r] * inv_det for c in range(3)], axis=-1) for r in range(3)], axis=1)
+
+
+def _coupling(est: Estimator, params) -> jnp.ndarray:
+    """``K^nm [P, 3, 3]`` of every pair (3 DOF): ``sum_s k_s G_s`` for the bonds, then the contacts."""
+    k = est.model.stiffness(params)
+    ks = (k.kn, k.kt, k.ktw, k.kb)
+    nb = est.n_bonds
+    K = jnp.zeros((nb, 9), est.d.dtype)
+    for t, s in enumerate(est.terms):
+        K = K + jnp.broadcast_to(ks[s], (nb,))[:, None] * est.geometry[t]
+    if est.n_contacts:
+        K = jnp.concatenate([K, est.contact_k.astype(K.dtype)])
+    return K.reshape(-1, 3, 3)
+
+
+class _Fluct3(NamedTuple):
+    K: Any       # [P, 3, 3] K^nm
+    B: Any       # [n, 3, 3, 3] sum_m K^nm[a, l] d^nm_k (a, l, k); also the lever sum M^n[i, j, a] = B[j, a, i]
+    N: Any       # [n, 3, 3, 3] sum over the pairs into m of w^n d^nm_i K^nm[j, b] (i, j, b), weighted only
+    gamma: Any   # [n, 3, 9] Gamma^n per G_lk (l * 3 + k)
+    phi: Any     # [n, 3, 9] fluctuation of n
+    q_i: Any     # [P, 3, 9] K Gamma^j (neighbour term on i), None in the first-neighbour form
+    q_j: Any     # [P, 3, 9] K Gamma^i (neighbour term on j)
+
+
+def _fluctuations3(est: Estimator, params, weighted: bool = False) -> _Fluct3:
+    K = _coupling(est, params)
+    n, d = est.n, est.d
+    i, j = est.pairs[:, 0], est.pairs[:, 1]
+    valid = est.valid[:, None, None]
+    kd = (K[:, :, :, None] * d[:, None, None, :]).reshape(-1, 27)  # K[a, l] d_k
+    rows = jnp.concatenate([K.reshape(-1, 9), kd], axis=1)
+    s_i = jax.ops.segment_sum(rows, i, n)
+    s_j = jax.ops.segment_sum(rows, j, n)  # d^nm = -d on the j end
+    D = jnp.where(valid, (s_i[:, :9] + s_j[:, :9]).reshape(n, 3, 3), jnp.eye(3, dtype=d.dtype))
+    B = (s_i[:, 9:] - s_j[:, 9:]).reshape(n, 3, 9)
+    N = None
+    if weighted and not est.first_neighbour:  # N^m: on m = j from the edge (i -> j), weight w^i; on i, -w^j
+        w = est.include.astype(d.dtype)
+        N = (jax.ops.segment_sum(w[i][:, None] * kd, j, n) - jax.ops.segment_sum(w[j][:, None] * kd, i, n))
+        N = N.reshape(n, 3, 3, 3).transpose(0, 3, 1, 2)
+    A = _inverse3(D)
+    gamma = jnp.where(valid, _mul(A, B), 0.0)  # Eq. 23
+    B = B.reshape(n, 3, 3, 3)
+    if est.first_neighbour:
+        return _Fluct3(K, B, N, gamma, gamma, None, None)
+    q_i, q_j = _mul(K, gamma[j]), _mul(K, gamma[i])
+    hat = (jax.ops.segment_sum(q_i.reshape(-1, 27), i, n) + jax.ops.segment_sum(q_j.reshape(-1, 27), j, n))
+    hat = jnp.where(valid, _mul(A, hat.reshape(n, 3, 9)), 0.0)  # Eq. 24 + 29
+    return _Fluct3(K, B, N, gamma, gamma + hat, q_i, q_j)
+
+
+def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
+    """``sum_n w^n sum_m d_i f^nm[j; l, k]`` with ``f^nm = K^nm G d - K phi^n + K Gamma^m``: the affine term as one
+    matrix product over the pairs (both ends), the self term ``-w^n M^n phi^n`` and the neighbour term
+    ``sum_m N^m Gamma^m`` (regrouped by the neighbour) over the particles."""
+    fl = _fluctuations3(est, params, weighted=True)
+    n, d = est.n, est.d
+    i, j = est.pairs[:, 0], est.pairs[:, 1]
+    w = est.include.astype(d.dtype)
+    dd = ((w[i] + w[j])[:, None, None] * d[:, :, None] * d[:, None, :]).reshape(-1, 9)  # (i, k)
+    t = jnp.dot(dd.T, fl.K.reshape(-1, 9)).reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
+    t = t - jnp.einsum("njai,nalk->ijkl", w[:, None, None, None] * fl.B, fl.phi.reshape(n, 3, 3, 3))
+    if fl.N is not None:
+        t = t + jnp.einsum("nijb,nblk->ijkl", fl.N, fl.gamma.reshape(n, 3, 3, 3))
+    return t / (2.0 * jnp.sum(jnp.where(est.include, est.volume, 0.0)))
+
+
+def _local_tensors3(est: Estimator, params) -> jnp.ndarray:
+    fl = _fluctuations3(est, params)
+    n, d = est.n, est.d
+    i, j = est.pairs[:, 0], est.pairs[:, 1]
+    kd = fl.K[:, :, :, None] * d[:, None, None, :]  # [P, j, l, k]
+    g_i, g_j = kd, kd  # d_i f on the i end; on the j end (-d_i) (-K d + K Gamma^i) = d_i (K d - K Gamma^i)
+    if fl.q_i is not None:
+        g_i, g_j = kd + fl.q_i.reshape(-1, 3, 3, 3), kd - fl.q_j.reshape(-1, 3, 3, 3)
+
+    def edge(g):
+        return voigt(_symmetrise(d[:, :, None, None, None] * jnp.swapaxes(g, -2, -1)[:, None])).reshape(-1, 36)
+
+    c = jax.ops.segment_sum(edge(g_i), i, n) + jax.ops.segment_sum(edge(g_j), j, n)
+    s = jnp.einsum("njai,nalk->nijkl", fl.B, fl.phi.reshape(n, 3, 3, 3))
+    c = c.reshape(n, 6, 6) - voigt(_symmetrise(s))
+    return c / (2.0 * est.volume[:, None, None])
+
+
 def _symmetrise(c):
     """Minor-symmetrise ``[..., 3, 3, 3, 3]``."""
     c = 0.5 * (c + jnp.swapaxes(c, -4, -3))
@@ -410,6 +566,14 @@ def _symmetrise(c):
 def raw_body_tensor(est: Estimator, params) -> jnp.ndarray:
     """The body tensor ``[3, 3, 3, 3]`` before minor symmetrisation: ``C[i,j,k,l] = d sigma_ij / d G_lk``, the
     V-weighted mean of Eq. 32 over the included particles (non-singular, not at the surface)."""
+    if est.dofs == 3:
+        return _raw_body_tensor3(est, params)
+    return _raw_body_tensor_edges(est, params)
+
+
+def _raw_body_tensor_edges(est: Estimator, params) -> jnp.ndarray:
+    """:func:`raw_body_tensor` through the per-edge forces, for any ``dofs`` (the 6-DOF path; with 3 DOF the
+    reference the pair form is checked against)."""
     e, f = _edge_forces(est, params)
     w = est.include[e.src].astype(f.dtype)
     t = jnp.einsum("ei,ejlk->ijkl", e.d * w[:, None], f)
@@ -431,6 +595,12 @@ def body_tensor(est: Estimator, params) -> jnp.ndarray:
 def local_tensors(est: Estimator, params) -> jnp.ndarray:
     """Local stiffness tensors ``C^n`` in Voigt form ``[n, 6, 6]`` [Pa] (Eq. 32, or Eq. 33-35 with
     ``first_neighbour``), minor-symmetrised; NaN for singular (skipped) particles."""
+    if est.dofs == 3:
+        return jnp.where(est.valid[:, None, None], _local_tensors3(est, params), jnp.nan)
+    return _local_tensors_edges(est, params)
+
+
+def _local_tensors_edges(est: Estimator, params) -> jnp.ndarray:
     e, f = _edge_forces(est, params)
     vi = np.array([p[0] for p in VOIGT])
     vj = np.array([p[1] for p in VOIGT])

@@ -137,21 +137,46 @@ def test_ste_matches_dsm_bonds_only(packing, plain):
 
 def test_gradient_matches_finite_differences_and_vmap(lattice):
     s = jaxbpm.generate.mix_materials(lattice, [0.4, 0.6], seed=1, materials={"E": [1e9, 2e9], "nu": 0.3})
-    f = jax.jit(ste.stiffness_function(s, UniaxialCompression(strain=0.002)))
+    f = ste.stiffness_function(s, UniaxialCompression(strain=0.002))
     p = default_params(s)
-    g = jax.grad(f)(p)
-    for c in range(2):
-        h = 1e-4 * p["bond_E"][c]
-        up = {**p, "bond_E": p["bond_E"].at[c].add(h)}
-        dn = {**p, "bond_E": p["bond_E"].at[c].add(-h)}
-        np.testing.assert_allclose(g["bond_E"][c], (f(up) - f(dn)) / (2 * h), rtol=1e-6)
-        assert float(g["bond_E"][c]) > 0
+    g = jax.jit(jax.grad(f))(p)
+    # every evaluation in one vmapped call: central differences in E (per material) and nu, and a scaled batch
+    h = 1e-4 * p["bond_E"]
     hn = 1e-5
-    fd_nu = (f({**p, "bond_nu": p["bond_nu"] + hn}) - f({**p, "bond_nu": p["bond_nu"] - hn})) / (2 * hn)
-    np.testing.assert_allclose(jnp.sum(g["bond_nu"]), fd_nu, rtol=1e-5)
-    batch = {"bond_E": p["bond_E"][None, :] * jnp.array([[1.0], [2.0], [3.0]]),
-             "bond_nu": jnp.broadcast_to(p["bond_nu"], (3, 2))}
-    np.testing.assert_allclose(jax.vmap(f)(batch), f(p) * np.array([1.0, 2.0, 3.0]), rtol=1e-10)
+    E0 = p["bond_E"][None, :]
+    E = jnp.concatenate([E0 + jnp.diag(h), E0 - jnp.diag(h), jnp.tile(p["bond_E"], (2, 1)),
+                         E0 * jnp.array([[1.0], [2.0], [3.0]])])
+    nu = jnp.concatenate([jnp.tile(p["bond_nu"], (4, 1)), p["bond_nu"][None, :] + jnp.array([[hn], [-hn]]),
+                          jnp.tile(p["bond_nu"], (3, 1))])
+    k = np.asarray(jax.jit(jax.vmap(f))({"bond_E": E, "bond_nu": nu}))
+    for c in range(2):
+        np.testing.assert_allclose(g["bond_E"][c], (k[c] - k[2 + c]) / (2 * h[c]), rtol=1e-6)
+        assert float(g["bond_E"][c]) > 0
+    np.testing.assert_allclose(jnp.sum(g["bond_nu"]), (k[4] - k[5]) / (2 * hn), rtol=1e-5)
+    np.testing.assert_allclose(k[6:], k[6] * np.array([1.0, 2.0, 3.0]), rtol=1e-10)
+
+
+def test_pair_form_matches_edge_form(packing):
+    # the 3-DOF pair form (K^nm from the stored unit-stiffness Jacobians, sums regrouped into matrix products) gives
+    # the per-edge computation of Eq. 23-32 to round-off, bonds and contacts, full and first-neighbour forms
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    p = default_params(packing)
+
+    def full(est, p):
+        return (ste.raw_body_tensor(est, p), ste._raw_body_tensor_edges(est, p), ste.local_tensors(est, p),
+                ste._local_tensors_edges(est, p), ste._coupling(est, p), ste.pair_stiffness(est, p))
+
+    est = ste.estimator(packing, scene)
+    assert est.n_contacts > 0 and est.terms == (0, 1)
+    fast, ref, loc, loc_ref, k, jac = jax.jit(full)(est, p)
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * float(jnp.abs(ref).max()))
+    np.testing.assert_array_equal(np.isnan(loc), np.isnan(loc_ref))
+    np.testing.assert_allclose(loc, loc_ref, rtol=0, atol=1e-12 * float(jnp.nanmax(jnp.abs(loc_ref))))
+    # K^nm = sum_s k_s G_s is the Jacobian of the bond law with the actual stiffnesses (and of the contact law)
+    np.testing.assert_allclose(k, -jac[:, :3, 3:], rtol=0, atol=1e-12 * float(jnp.abs(k).max()))
+    first = ste.estimator(packing, scene, first_neighbour=True)
+    fast, ref = jax.jit(lambda e, p: (ste.raw_body_tensor(e, p), ste._raw_body_tensor_edges(e, p)))(first, p)
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * float(jnp.abs(ref).max()))
 
 
 def test_walls_in_series(packing):
