@@ -6,7 +6,7 @@ jaxbpm never changes JAX's global settings at import. Stiffness solves want floa
 
 from jaxbpm import errors, generate, io, scenes
 from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, SampleError, SampleFileError,
-                           SceneError)
+                           SceneError, SimulationInterrupted)
 from jaxbpm.result import Result
 from jaxbpm.sample import BondMaterials, Domain, ParticleMaterial, Sample, SampleSummary
 from jaxbpm.solve import solve
@@ -17,4 +17,5 @@ __all__ = [
     "Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary",
     "generate", "io", "errors", "scenes", "solve", "Result",
     "JaxbpmError", "SampleError", "SampleFileError", "SceneError", "InstabilityError", "ConvergenceError",
+    "SimulationInterrupted",
 ]

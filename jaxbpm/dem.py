@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax_md import partition, space
 
-from jaxbpm.errors import InstabilityError
+from jaxbpm.errors import InstabilityError, SimulationInterrupted
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model
@@ -68,7 +68,9 @@ class DEMState:
     """Integrator state (a pytree): positions/velocities ``[n, 3]``, orientations ``[n, 4]``, angular velocities
     ``[n, 3]``, current forces and moments ``[n, 3]``, bond ``intact`` mask ``[nb]``, how and when each bond broke
     (``broken`` ``[nb]`` int8: 0 intact, 1 tensile, 2 shear; ``broken_time`` ``[nb]`` [s], NaN while intact),
-    contact ``spring`` ``[C, 3]`` and the jax-md neighbour list (``None`` without contacts), simulated ``time``."""
+    contact ``spring`` ``[C, 3]`` and the jax-md neighbour list (``None`` without contacts), simulated ``time``;
+    with the cohesive contact law the per-contact cohesion history ``cohesion`` ``[C]`` [Pa] (see
+    :mod:`jaxbpm.physics.cohesive`; ``None`` otherwise) and ``spring`` holds the elastic tangential force [N]."""
 
     positions: Any
     velocities: Any
@@ -82,11 +84,12 @@ class DEMState:
     time: Any
     broken: Any = None
     broken_time: Any = None
+    cohesion: Any = None
 
 
 jax.tree_util.register_dataclass(DEMState, data_fields=["positions", "velocities", "orientations", "omegas", "force",
                                                         "moment", "intact", "spring", "nbrs", "time", "broken",
-                                                        "broken_time"],
+                                                        "broken_time", "cohesion"],
                                  meta_fields=[])
 
 
@@ -130,7 +133,8 @@ class _Neighbors:
         self.origin = lo - pad
         box = tuple(float(v) for v in (hi - lo + 2 * pad))
         cutoff = 2 * r_max + self.settings.skin
-        self.fns = _neighbor_fns(box, cutoff, self.settings.skin, self.settings.capacity_multiplier)
+        self.key = (box, cutoff, self.settings.skin, self.settings.capacity_multiplier)
+        self.fns = _neighbor_fns(*self.key)
         self.lo, self.hi = self.origin + 0.05 * pad, self.origin + np.asarray(box) - 0.05 * pad
 
     def inside(self, pos_min, pos_max) -> bool:
@@ -142,8 +146,16 @@ class _Neighbors:
         if not self.inside(pos.min(axis=0), pos.max(axis=0)):
             self._setup(pos)
         with _jax_md_context():
-            return self.fns.allocate(jnp.asarray(positions) - jnp.asarray(self.origin)[None, :],
+            nbrs = self.fns.allocate(jnp.asarray(positions) - jnp.asarray(self.origin)[None, :],
                                      extra_capacity=extra_per_particle)
+        if getattr(nbrs, "cell_list_fn", None) is not None:
+            # jax-md makes new cell-list functions (static pytree metadata) at every allocation, which would compile
+            # the DEM chunk again for every run; those of one box, cell size and multiplier are interchangeable
+            nbrs = nbrs.set(cell_list_fn=_CELL_LIST_FNS.setdefault(self.key, nbrs.cell_list_fn))
+        return nbrs
+
+
+_CELL_LIST_FNS: dict = {}  # cell-list functions by neighbour-list settings (see _Neighbors.allocate)
 
 
 def _contact_pairs(model: Model, nbrs, intact=None):
@@ -157,6 +169,20 @@ def _contact_pairs(model: Model, nbrs, intact=None):
 
 def _remap_springs(old_pairs, old_spring, new_pairs, n):
     """Carry tangential springs across a neighbour-list rebuild by matching pair keys."""
+    take, found = _remap_index(old_pairs, new_pairs, n)
+    return jnp.where(found[:, None], old_spring[take], 0.0)
+
+
+def _remap_history(old_pairs, new_pairs, n, spring, cohesion):
+    """Carry the per-contact state (springs and, with the cohesive law, the cohesion history) across a rebuild; a
+    pair new to the list starts with an empty spring and zero cohesion (a new contact)."""
+    take, found = _remap_index(old_pairs, new_pairs, n)
+    spring = jnp.where(found[:, None], spring[take], 0.0)
+    return spring, (None if cohesion is None else jnp.where(found, cohesion[take], 0.0))
+
+
+def _remap_index(old_pairs, new_pairs, n):
+    """For each new pair: the index of the same pair in the old list, and whether it was there."""
     key_t = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
     big = jnp.asarray(jnp.iinfo(key_t).max, key_t)
     old_key = jnp.where(old_pairs[:, 0] < n, old_pairs[:, 0].astype(key_t) * n + old_pairs[:, 1].astype(key_t), big)
@@ -165,7 +191,7 @@ def _remap_springs(old_pairs, old_spring, new_pairs, n):
     new_key = new_pairs[:, 0].astype(key_t) * n + new_pairs[:, 1].astype(key_t)
     pos = jnp.clip(jnp.searchsorted(sorted_key, new_key), 0, sorted_key.shape[0] - 1)
     found = (sorted_key[pos] == new_key) & (new_pairs[:, 0] < n)
-    return jnp.where(found[:, None], old_spring[order[pos]], 0.0)
+    return order[pos], found
 
 
 def _walls(load: Loading, t):
@@ -177,13 +203,16 @@ def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, 
     if model.contacts:
         pairs, valid = _contact_pairs(model, state.nbrs, state.intact) if pairs_valid is None else pairs_valid
         contacts = (pairs, valid, state.spring, dxi, v_rel)
+        if model.contact_law == "cohesive":
+            contacts = contacts + (state.cohesion,)
     points, normals = _walls(load, state.time)
     return model.forces(state.positions, state.orientations, params, state.intact, contacts,
                         points if model.walls else None, normals if model.walls else None)
 
 
-def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, dt):
-    """Forces and moments, wall reactions and the new tangential springs ``[C, 3]`` of a DEM step with contacts.
+def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, dt, cohesion=None):
+    """Forces and moments, wall reactions, the new tangential springs ``[C, 3]``, the new intact mask and break
+    modes and (cohesive law) the new cohesion history ``[C]`` of a DEM step with contacts.
 
     Most candidate pairs of the neighbour list are padding or not touching, and the contact law costs the same for
     every pair it is given: when the touching pairs fit in half the buffer, only those are handed to the law (packed
@@ -195,6 +224,9 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
     i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)
     # the contact law's own test (so that no pair it would find in contact is left out)
     touching = valid & (model.radii[i] + model.radii[j] - jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0)
+
+    if model.contact_law == "cohesive":
+        return _cohesive_step(model, params, load, state, spring, cohesion, dt, pairs, valid, touching, size)
 
     def evaluate(pairs, valid, spring):
         dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
@@ -214,6 +246,45 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
                 broken)
 
     return jax.lax.cond(jnp.sum(touching.astype(jnp.int32)) <= size, packed, lambda: evaluate(pairs, valid, spring))
+
+
+def _cohesive_step(model: Model, params, load, state, spring, cohesion, dt, pairs, valid, touching, size):
+    """:func:`_contact_step` for the cohesive law: the same packing of touching pairs, with the cohesion history
+    packed alongside the springs (pairs left out are not in contact: their history is reset, see
+    :func:`jaxbpm.physics.cohesive.update_cohesion`)."""
+    capacity = pairs.shape[0]
+
+    def evaluate(pairs, valid, spring, cohesion):
+        dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
+        force, moment, parts = _evaluate(model, params, dataclasses.replace(state, spring=spring, cohesion=cohesion),
+                                         load, dxi, v_rel, (pairs, valid))
+        cf = parts["contacts"]
+        return force, moment, parts["walls"], cf.spring, parts["intact"], parts["broken"], cf.cohesion
+
+    def packed():
+        slot = jax.lax.associative_scan(jnp.add, touching.astype(jnp.int32)) - 1
+        take = jnp.full(size, capacity, jnp.int32).at[jnp.where(touching, slot, size)].set(
+            jnp.arange(capacity, dtype=jnp.int32), mode="drop")
+        force, moment, walls, packed_spring, intact, broken, packed_cohesion = evaluate(
+            pairs.at[take].get(mode="fill", fill_value=model.n), take < capacity,
+            spring.at[take].get(mode="fill", fill_value=0.0), cohesion.at[take].get(mode="fill", fill_value=0.0))
+        rest = jnp.where(cohesion < 0, cohesion, 0.0)  # out of contact: pending initial contacts stay, others reset
+        return (force, moment, walls, jnp.zeros_like(spring).at[take].set(packed_spring, mode="drop"), intact,
+                broken, rest.at[take].set(packed_cohesion, mode="drop"))
+
+    return jax.lax.cond(jnp.sum(touching.astype(jnp.int32)) <= size, packed,
+                        lambda: evaluate(pairs, valid, spring, cohesion))
+
+
+def initial_cohesion(model: Model, state: DEMState):
+    """Cohesion history at the start of a run: ``-c_0`` (an initial contact, see
+    :mod:`jaxbpm.physics.cohesive`) for the candidate pairs that overlap or whose surface gap is at most the law's
+    ``initial_gap``, 0 for the others."""
+    pairs, valid = _contact_pairs(model, state.nbrs, state.intact)
+    i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)
+    gap = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - model.radii[i] - model.radii[j]
+    c = model.cohesive
+    return jnp.where(valid & (gap <= c.initial_gap), -c.c0, 0.0)
 
 
 def _contact_motion(model: Model, state: DEMState, pairs, valid, dt):
@@ -247,6 +318,8 @@ def init_state(model: Model, params, load: Loading, nbrs=None) -> DEMState:
         broken=jnp.zeros(model.bonds.shape[0], jnp.int8),
         broken_time=jnp.full(model.bonds.shape[0], jnp.nan, dtype),
     )
+    if model.contacts and model.contact_law == "cohesive":
+        state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
     zeros = jnp.zeros((capacity, 3), dtype)
     force, moment, _ = _evaluate(model, params, state, load, zeros, zeros)
     return dataclasses.replace(state, force=force, moment=moment)
@@ -274,7 +347,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
 
     new = DEMState(positions=x, velocities=v, orientations=q, omegas=w, force=state.force, moment=state.moment,
                    intact=state.intact, spring=state.spring, nbrs=state.nbrs, time=t, broken=state.broken,
-                   broken_time=state.broken_time)
+                   broken_time=state.broken_time, cohesion=state.cohesion)
     if model.contacts:
         # the pairs gather x, v and w about 20 times each: an exact division by a run-time one makes XLA compute them
         # once, not again inside every gather
@@ -283,10 +356,19 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
         with _jax_md_context():
             nbrs = state.nbrs.update(x - origin[None, :])
         rebuilt = jnp.any(nbrs.reference_position != state.nbrs.reference_position)
-        spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n),
-                              lambda: state.spring)
         new = dataclasses.replace(new, positions=x, velocities=v, omegas=w, nbrs=nbrs)
-        force, moment, walls, spring, intact, broken = _contact_step(model, params, load, new, spring, dt)
+        if model.contact_law == "cohesive":
+            spring, cohesion = jax.lax.cond(
+                rebuilt, lambda: _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion),
+                lambda: (state.spring, state.cohesion))
+            force, moment, walls, spring, intact, broken, cohesion = _contact_step(model, params, load, new, spring,
+                                                                                   dt, cohesion)
+            new = dataclasses.replace(new, cohesion=cohesion)
+        else:
+            spring = jax.lax.cond(rebuilt,
+                                  lambda: _remap_springs(state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n),
+                                  lambda: state.spring)
+            force, moment, walls, spring, intact, broken = _contact_step(model, params, load, new, spring, dt)
     else:
         force, moment, parts = _evaluate(model, params, new, load, None, None)
         walls, spring, intact, broken = parts["walls"], state.spring, parts["intact"], parts["broken"]
@@ -344,13 +426,23 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
 
     omega_max^2 of the bonds is found by power iteration on ``M^-1/2 K M^-1/2`` (K v from a Jacobian-vector
     product of the bond forces, translations and rotations). Contacts and walls add ``z k_c / m`` with the Hertz
-    stiffness at an overlap of ``contact_overlap`` times the smallest radius (z = 12 neighbours, 1 wall).
+    (or cohesive-law) stiffness at an overlap of ``contact_overlap`` times the smallest radius (z = 12 neighbours,
+    1 wall).
     """
     omega2 = float(_bond_omega2(model, params, iterations)) if model.bonds.shape[0] else 0.0
     r_min = float(jnp.min(model.radii))
     m_min = float(jnp.min(model.mass))
     delta = contact_overlap * r_min
-    if model.contacts:
+    if model.contacts and model.contact_law == "cohesive":
+        # linear spring-dashpot: k_N at the reference overlap; the dashpot lowers the stable step of an explicit
+        # scheme by sqrt(1 + gamma^2) - gamma
+        from jaxbpm.physics import cohesive as cohesive_mod
+
+        c = model.cohesive
+        k_c = float(cohesive_mod.normal_stiffness(r_min, r_min, delta, c.E))
+        gamma = float(cohesive_mod.restitution_damping(c.restitution))
+        omega2 += 12 * k_c / m_min / (np.sqrt(1.0 + gamma**2) - gamma) ** 2
+    elif model.contacts:
         k_c = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r_min * delta)
         omega2 += 12 * k_c / m_min
     if model.walls == "hertz":
@@ -395,14 +487,22 @@ def _bond_omega2(model: Model, params, iterations):
 
 def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, alpha: float = 0.0,
              chunk: int = 1000, neighbors: NeighborSettings | None = None, progress: bool | Callable = False,
-             dt_crit: float | None = None, state: DEMState | None = None):
+             dt_crit: float | None = None, state: DEMState | None = None,
+             on_chunk: Callable[[int, DEMState, dict], Any] | None = None):
     """Run ``n_steps`` DEM steps (rounded up to whole chunks). Returns ``(final_state, records, stats)``.
 
-    records: dict of per-step arrays (``reaction [steps, W+2, 3]``, ``vmax [steps]``, ``time [steps]``).
+    records: dict of per-step arrays (``reaction [steps, W+2, 3]``, ``vmax [steps]``, ``time [steps]``; with
+    breakage ``broken [steps, 2]``, the cumulative tensile and shear counts).
     stats: compile time (first chunk minus a typical chunk; NaN for a one-chunk run) and run time [s], steps,
     steps per second, number of neighbour-list re-allocations.
+    progress: ``True`` prints progress (:func:`progress_printer`); a callable is called as
+    ``progress(steps_done, steps_total, elapsed_s)`` after every chunk.
+    on_chunk: called as ``on_chunk(steps_done, state, chunk_records)`` after every chunk (records of that chunk
+    only, NumPy arrays), e.g. to write them to a file as they arrive.
     Raises :class:`InstabilityError` on NaN or a runaway (a particle moving over a quarter of the smallest radius in
-    one step), naming the time step and the critical one.
+    one step), naming the time step and the critical one. A ``KeyboardInterrupt`` (Ctrl-C, or raised by a callback)
+    raises :class:`~jaxbpm.errors.SimulationInterrupted` carrying the state, records and stats of the chunks
+    completed so far (a chunk in flight is dropped).
     """
     t0 = time.perf_counter()
     r_min = float(jnp.min(model.radii))
@@ -411,10 +511,14 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
         nb_owner = _Neighbors(model, neighbors or NeighborSettings(skin=0.5 * r_min), model.positions0)
         nbrs = nb_owner.allocate(model.positions0 if state is None else state.positions)
         origin = jnp.asarray(nb_owner.origin, model.positions0.dtype)
-        if state is not None:
-            state = dataclasses.replace(state, nbrs=nbrs, spring=_remap_springs(
-                state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n) if state.nbrs is not None else
-                jnp.zeros((nbrs.idx.shape[1], 3), model.positions0.dtype))
+        if state is not None and state.nbrs is not None:
+            spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion)
+            state = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
+        elif state is not None:
+            state = dataclasses.replace(state, nbrs=nbrs, spring=jnp.zeros((nbrs.idx.shape[1], 3),
+                                                                           model.positions0.dtype))
+            if model.contact_law == "cohesive":
+                state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
     else:
         nbrs = None
     if state is None:
@@ -423,39 +527,55 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     n_chunks = -(-n_steps // chunk)  # every chunk has the same length, so the chunk function compiles once
     records, times, reallocs = [], [], 0
     report = _progress_fn(progress)
-    while len(records) < n_chunks:
-        tc = time.perf_counter()
-        new, rec, overflow, pmin, pmax = _run_chunk(model, params, load, state, dt, alpha, origin, chunk)
-        jax.block_until_ready(new.positions)
-        elapsed = time.perf_counter() - tc
-        if model.contacts and (bool(overflow) or not nb_owner.inside(pmin, pmax)):
-            # re-allocate from the chunk's start and run it again: no contact is ever dropped
-            reallocs += 1
-            extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if bool(overflow) else 0
-            nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra)
-            origin = jnp.asarray(nb_owner.origin, model.positions0.dtype)
-            spring = _remap_springs(state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n)
-            state = dataclasses.replace(state, nbrs=nbrs, spring=spring)
-            times = []  # the new buffer size compiles again
-            continue
-        times.append(elapsed)
-        vmax = float(jnp.max(rec["vmax"]))
-        if not np.isfinite(vmax) or not bool(jnp.all(jnp.isfinite(new.positions))) or vmax * dt > 0.25 * r_min:
-            crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
-            raise InstabilityError(
-                f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
-                f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
-                f"time step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
-        state = new
-        records.append(jax.device_get(rec))
-        report(len(records) * chunk, n_chunks * chunk, time.perf_counter() - t0)
-    per_chunk = float(np.median(times[1:])) if len(times) > 1 else times[0]
-    compile_time = max(times[0] - per_chunk, 0.0) if len(times) > 1 else float("nan")
-    out = {k: np.concatenate([r[k] for r in records]) for k in records[0]}
-    stats = {"compile_time": compile_time, "run_time": per_chunk * len(times), "wall_time": time.perf_counter() - t0,
-             "steps": n_chunks * chunk, "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
-             "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0}
+    done = state  # the state after the last completed chunk
+    try:
+        while len(records) < n_chunks:
+            tc = time.perf_counter()
+            new, rec, overflow, pmin, pmax = _run_chunk(model, params, load, state, dt, alpha, origin, chunk)
+            jax.block_until_ready(new.positions)
+            elapsed = time.perf_counter() - tc
+            if model.contacts and (bool(overflow) or not nb_owner.inside(pmin, pmax)):
+                # re-allocate from the chunk's start and run it again: no contact is ever dropped
+                reallocs += 1
+                extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if bool(overflow) else 0
+                nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra)
+                origin = jnp.asarray(nb_owner.origin, model.positions0.dtype)
+                spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring,
+                                                  state.cohesion)
+                state = done = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
+                times = []  # the new buffer size compiles again
+                continue
+            times.append(elapsed)
+            vmax = float(jnp.max(rec["vmax"]))
+            if not np.isfinite(vmax) or not bool(jnp.all(jnp.isfinite(new.positions))) or vmax * dt > 0.25 * r_min:
+                crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
+                raise InstabilityError(
+                    f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
+                    f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
+                    f"time step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
+            state = done = new
+            rec = jax.device_get(rec)
+            records.append(rec)
+            if on_chunk is not None:
+                on_chunk(len(records) * chunk, state, rec)
+            report(len(records) * chunk, n_chunks * chunk, time.perf_counter() - t0)
+    except KeyboardInterrupt as err:
+        out, stats = _collect(model, done, records, times, chunk, reallocs, t0)
+        stats.update(interrupted=True, steps_planned=n_chunks * chunk)
+        raise SimulationInterrupted(done, out, stats) from err
+    out, stats = _collect(model, state, records, times, chunk, reallocs, t0)
     return state, out, stats
+
+
+def _collect(model, state, records, times, chunk, reallocs, t0):
+    """The records of the completed chunks, concatenated, and the run's statistics."""
+    per_chunk = float(np.median(times[1:])) if len(times) > 1 else (times[0] if times else float("nan"))
+    compile_time = max(times[0] - per_chunk, 0.0) if len(times) > 1 else float("nan")
+    out = {k: np.concatenate([r[k] for r in records]) for k in records[0]} if records else {}
+    stats = {"compile_time": compile_time, "run_time": per_chunk * len(times), "wall_time": time.perf_counter() - t0,
+             "steps": len(records) * chunk, "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
+             "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0}
+    return out, stats
 
 
 def progress_printer(strain_per_step: float | None = None):

@@ -7,6 +7,7 @@ __all__ = [
     "InstabilityError",
     "ConvergenceError",
     "SceneError",
+    "SimulationInterrupted",
 ]
 
 
@@ -36,3 +37,18 @@ class ConvergenceError(JaxbpmError, RuntimeError):
 
 class ConventionError(JaxbpmError, ValueError):
     """Bond parameters of another code's convention have no counterpart in jaxbpm's bond law (or are malformed)."""
+
+
+class SimulationInterrupted(KeyboardInterrupt):
+    """A DEM run was interrupted (Ctrl-C, or a ``KeyboardInterrupt`` raised by a progress or chunk callback).
+
+    It is a ``KeyboardInterrupt`` (an uncaught one still stops a script), carrying what was computed: ``state`` (the
+    DEM state after the last completed chunk), ``records`` (the per-step records of the completed chunks) and
+    ``stats`` (with ``interrupted=True``, ``steps`` done and ``steps_planned``). :func:`jaxbpm.solve` adds
+    ``result``, a :class:`~jaxbpm.result.Result` of the part that was run (``result.interrupted`` is True).
+    """
+
+    def __init__(self, state, records, stats, result=None):
+        super().__init__(f"DEM run interrupted after {stats.get('steps', 0)} of {stats.get('steps_planned', '?')} "
+                         "steps; the exception carries the state and records so far")
+        self.state, self.records, self.stats, self.result = state, records, stats, result

@@ -18,6 +18,8 @@ class Result:
     displacement, force: the loading curve [m], [N] (compression positive); strain, stress: the same over l and A.
     gauge_length l [m], area A [m^2]. wall_time, compile_time, run_time [s]. stats: solver details (steps, time
     step, critical time step, iterations, ...). state: the solver's final state (for restarts and inspection).
+    interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
+    stats cover the part that was run (stiffness NaN when the fit range was not reached).
     """
 
     method: str
@@ -32,6 +34,7 @@ class Result:
     run_time: float
     stats: dict = dataclasses.field(default_factory=dict)
     state: Any = None
+    interrupted: bool = False
 
     @property
     def strain(self) -> np.ndarray:
@@ -40,6 +43,16 @@ class Result:
     @property
     def stress(self) -> np.ndarray:
         return self.force / self.area
+
+    def stress_at(self, strains) -> np.ndarray:
+        """The stress [Pa] at the given strains, interpolated linearly on the loading curve (a stress-strain vector
+        target, e.g. seed 002's 17 equispaced strains). Strains beyond the curve are an error."""
+        strains = np.asarray(strains, np.float64)
+        e = self.strain
+        if len(e) == 0 or np.any(strains < min(e[0], 0.0) - 1e-12) or np.any(strains > e[-1] * (1 + 1e-9)):
+            raise ValueError(f"stress_at: strains must lie within the loading curve [0, {e[-1] if len(e) else 0:.4g}]")
+        return np.interp(strains, np.r_[0.0, e] if e[0] > 0 else e, np.r_[self.stress[0], self.stress]
+                         if e[0] > 0 else self.stress)
 
     def summary(self) -> str:
         lines = [

@@ -9,6 +9,7 @@ modulus E = K l / A.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -40,7 +41,12 @@ class UniaxialCompression:
     gauge_length, area: explicit l [m] and A [m^2]; defaults: l = distance between the mean centres of the clamped
       layers (walls: the initial wall gap), A = cross-section of the sample's domain (or the bounding box of its
       spheres) normal to the axis.
-    contacts: Hertz-Mindlin particle contacts on (True) or off. rotations: None = the Model decides.
+    contacts: particle contacts on (True) or off. rotations: None = the Model decides.
+    contact_law: ``"hertz"`` (Hertz-Mindlin, default) or ``"cohesive"`` (the stress-dependent cohesive law of seed
+      002, for cohesive granular samples; DEM only), with its parameters in ``cohesive`` (a
+      :class:`~jaxbpm.physics.cohesive.CohesiveLaw` or a mapping of its fields: ``c0``, ``kc``, ``c_max``, and
+      optionally ``E``, ``nu``, ``friction``, ``restitution``, ``initial_gap``). ``contact_law`` may also be a
+      ``CohesiveLaw`` itself.
     wall_law, wall_stiffness: see :func:`jaxbpm.physics.model.build_model`.
     fit_range: the part of the loading (fractions of the target strain) over which K is fitted.
     breakage: bonds break in the DEM when their stresses exceed their strengths (``None``: when the sample's material
@@ -62,6 +68,8 @@ class UniaxialCompression:
     wall_stiffness: float | None = None
     fit_range: tuple[float, float] = (0.25, 1.0)
     breakage: bool | None = None
+    contact_law: Any = "hertz"
+    cohesive: Any = None
 
     @classmethod
     def to_failure(cls, strain: float = 0.02, **kw) -> "UniaxialCompression":
@@ -83,6 +91,15 @@ class UniaxialCompression:
         lo, hi = self.fit_range
         if not (0 <= lo < hi <= 1):
             raise SceneError(f"fit_range must satisfy 0 <= lo < hi <= 1, got {self.fit_range!r}")
+        if self.cohesive_law is not None and not self.contacts:
+            raise SceneError("contact_law='cohesive' needs contacts=True")
+
+    @property
+    def cohesive_law(self):
+        """The :class:`~jaxbpm.physics.cohesive.CohesiveLaw` of the scene, or ``None`` (Hertz contacts)."""
+        from jaxbpm.physics.cohesive import resolve_contact_law
+
+        return resolve_contact_law(self.contact_law, self.cohesive)
 
     # ------------------------------------------------------------------ geometry
     def layers(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
@@ -136,6 +153,9 @@ class UniaxialCompression:
 
         kw = dict(contacts=self.contacts, walls=self.wall_law if self.uses_walls else None, rotations=self.rotations,
                   wall_stiffness=self.wall_stiffness)
+        law = self.cohesive_law
+        if law is not None and overrides.get("contacts", True):
+            kw["contact_law"] = law
         kw.update(overrides)
         return build_model(sample, **kw)
 

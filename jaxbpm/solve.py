@@ -22,8 +22,16 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     options for ``"dem"``: ``dt`` (time step [s], default ``safety`` x critical), ``safety`` (0.5), ``damping`` (local
     damping coefficient alpha, 0.7), ``loading_time`` [s] (default ``transits`` x the time a wave needs to cross the
     sample along the axis, estimated from the mean bond; ``transits`` = 40), ``chunk`` (steps per jitted chunk),
-    ``progress`` (print progress), ``neighbors`` (:class:`~jaxbpm.dem.NeighborSettings`), ``max_records`` (points
-    kept in the returned curve, 2000).
+    ``progress`` (print progress, or a callable ``progress(steps_done, steps_total, elapsed_s)``), ``neighbors``
+    (:class:`~jaxbpm.dem.NeighborSettings`), ``max_records`` (points kept in the returned curve, 2000),
+    ``record_to`` (an ``.h5`` path: every step's time, displacement, force, reactions and broken-bond counts are
+    appended chunk by chunk as they arrive, see :mod:`jaxbpm.records`), ``snapshots`` and ``vtu`` (``snapshots=K``
+    frames evenly spaced in time, the first at rest, written to the ParaView series ``vtu="dir/run.pvd"`` as the run
+    goes: displacement, velocity, force and broken bonds (tensile, shear) per particle; per bond ``intact``,
+    ``break_mode`` and ``broken_time``). A ``KeyboardInterrupt`` during the run (Ctrl-C, or raised by the
+    ``progress`` callable) raises :class:`~jaxbpm.errors.SimulationInterrupted`, whose ``result`` is the
+    :class:`Result` of the part that was run (``interrupted=True``; the record file is kept, status
+    ``"interrupted"``).
     options for ``"dsm"``: ``dofs`` (3 or 6 per particle; default: the Model's choice, 6 with bonds), ``nonlinear``
     (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
@@ -40,6 +48,9 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    if method != "dem" and getattr(scene, "contacts", False) and getattr(scene, "cohesive_law", None) is not None:
+        raise SceneError(f"the cohesive contact law depends on the loading history: it needs method='dem', not "
+                         f"{method!r}")
     if method == "dsm":
         from jaxbpm import dsm
 
@@ -52,8 +63,10 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
 
 
 def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
-               chunk=None, progress=False, neighbors=None, max_records=2000) -> Result:
+               chunk=None, progress=False, neighbors=None, max_records=2000, record_to=None, snapshots=None,
+               vtu=None) -> Result:
     from jaxbpm import dem
+    from jaxbpm.errors import SimulationInterrupted
     from jaxbpm.physics.model import default_params
 
     from jaxbpm.scenes import sample_breaks
@@ -62,6 +75,10 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     breaks = sample_breaks(sample, getattr(scene, "breakage", False))
     model = scene.model(sample, breakage=breaks)
     params = default_params(sample) if params is None else params
+    if (snapshots is None) != (vtu is None):
+        raise SceneError("snapshots=K and vtu='dir/run.pvd' go together: give both or neither")
+    if snapshots is not None and not (isinstance(snapshots, (int, np.integer)) and snapshots >= 1):
+        raise SceneError(f"snapshots must be a whole number >= 1 of VTU frames, got {snapshots!r}")
     dt_crit = dem.critical_time_step(model, params)
     if dt is None:
         if not (0 < safety <= 1):
@@ -77,33 +94,126 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
         loading_time = transits * _transit_time(model, params, path)
     n_steps = int(np.ceil(loading_time / dt))
     speed = target / (n_steps * dt)
-    chunk = chunk or int(np.clip(n_steps // 20, 50, 5000))
+    if chunk is None:
+        chunk = int(np.clip(n_steps // 20, 50, 5000))
+        if snapshots is not None and snapshots > 1:  # at least one chunk per frame after the first
+            chunk = max(1, min(chunk, n_steps // (snapshots - 1)))
     n_steps = -(-n_steps // chunk) * chunk
+    n_chunks = n_steps // chunk
     load = scene.loading(sample, speed)
     if progress is True:
         progress = dem.progress_printer(strain_per_step=speed * dt / length)
-    state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping, chunk=chunk,
-                                     neighbors=neighbors, progress=progress, dt_crit=dt_crit)
-    disp = speed * rec["time"]
-    force = scene.compressive_force(rec["reaction"])
-    stiffness = scene.fit_stiffness(disp, force, target)
-    keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
-    stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
-                 damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks)
-    peak = int(np.argmax(force))
-    stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]))
-    if hasattr(scene, "strength"):
-        stats["strength"] = float(scene.strength(float(force[peak]), sample))
-    if breaks:
-        counts = rec["broken"]  # [steps, 2]: tensile, shear (cumulative)
-        stats.update(broken_tensile=int(counts[-1, 0]), broken_shear=int(counts[-1, 1]),
-                     broken_curve=counts[keep], broken_at_peak=int(counts[peak].sum()))
-        # the curve points are the loading's; peaks inside the first or last record mean the run stopped too early
-        stats["past_peak"] = bool(peak < len(force) - 1 and force[-1] < force[peak])
-    modulus = scene.modulus(stiffness, sample) if hasattr(scene, "modulus") else stiffness * length / area
-    return Result(method="dem", stiffness=stiffness, youngs_modulus=modulus, gauge_length=length,
-                  area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
-                  compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state)
+    run_attrs = dict(method="dem", scene=type(scene).__name__, dt=float(dt), dt_crit=float(dt_crit),
+                     speed=float(speed), gauge_length=length, area=area, target_displacement=target,
+                     damping=float(damping), chunk=chunk, contact_law=model.contact_law, breakage=breaks)
+
+    writers = []
+    recorder = None
+    if record_to is not None:
+        from jaxbpm.records import RecordFile
+
+        recorder = RecordFile(record_to, run_attrs, steps_planned=n_steps)
+
+        def write_records(done, state, rec):
+            rows = {"time": rec["time"], "displacement": speed * rec["time"],
+                    "force": scene.compressive_force(rec["reaction"]), "reaction": rec["reaction"],
+                    "vmax": rec["vmax"]}
+            if "broken" in rec:
+                rows["broken"] = rec["broken"]
+            recorder.append(rows)
+
+        writers.append(write_records)
+    if snapshots is not None:
+        series, frames = _snapshot_writer(sample, model, vtu, snapshots, n_chunks, chunk)
+        if snapshots > 1:  # the first frame: the sample at rest
+            _write_frame(series, model, None, sample, 0.0)
+        writers.append(lambda done, state, rec: _write_frame(series, model, state, sample, float(state.time))
+                       if done // chunk in frames else None)
+
+    def on_chunk(done, state, rec):
+        for w in writers:
+            w(done, state, rec)
+
+    def finish(state, rec, stats, interrupted):
+        disp = speed * rec["time"] if rec else np.zeros(0)
+        force = scene.compressive_force(rec["reaction"]) if rec else np.zeros(0)
+        try:
+            stiffness = scene.fit_stiffness(disp, force, target)
+        except SceneError:
+            if not interrupted:
+                raise
+            stiffness = float("nan")  # the run stopped before the fit range was loaded
+        keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
+        stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
+                     damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks,
+                     contact_law=model.contact_law, interrupted=interrupted)
+        if record_to is not None:
+            stats["record_file"] = str(record_to)
+        if snapshots is not None:
+            stats["vtu"] = str(series.path)
+            stats["vtu_frames"] = len(series.steps)
+        if len(force):
+            peak = int(np.argmax(force))
+            stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]))
+            if hasattr(scene, "strength"):
+                stats["strength"] = float(scene.strength(float(force[peak]), sample))
+            if breaks:
+                counts = rec["broken"]  # [steps, 2]: tensile, shear (cumulative)
+                stats.update(broken_tensile=int(counts[-1, 0]), broken_shear=int(counts[-1, 1]),
+                             broken_curve=counts[keep], broken_at_peak=int(counts[peak].sum()))
+                # the curve points are the loading's; peaks inside the first or last record mean the run stopped
+                # too early
+                stats["past_peak"] = bool(peak < len(force) - 1 and force[-1] < force[peak])
+        modulus = scene.modulus(stiffness, sample) if hasattr(scene, "modulus") else stiffness * length / area
+        if recorder is not None:
+            recorder.finish("interrupted" if interrupted else "complete",
+                            {k: v for k, v in stats.items() if k != "broken_curve"})
+        return Result(method="dem", stiffness=stiffness, youngs_modulus=modulus, gauge_length=length,
+                      area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
+                      compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state,
+                      interrupted=interrupted)
+
+    try:
+        state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping,
+                                         chunk=chunk, neighbors=neighbors, progress=progress, dt_crit=dt_crit,
+                                         on_chunk=on_chunk if writers else None)
+    except SimulationInterrupted as stop:
+        stop.result = finish(stop.state, stop.records, stop.stats, True)
+        raise
+    return finish(state, rec, stats, False)
+
+
+def _snapshot_writer(sample, model, vtu, snapshots, n_chunks, chunk):
+    """The VTU series and the chunk numbers after which a frame is written: ``snapshots`` frames evenly spaced in
+    time, the first the sample at rest and the last the end of the run (one frame: the end only)."""
+    from jaxbpm.formats import VTUSeries
+
+    if snapshots - 1 > n_chunks:
+        raise SceneError(f"snapshots={snapshots} needs at least {snapshots - 1} chunks, the run has {n_chunks} of "
+                         f"{chunk} steps; give a smaller chunk")
+    series = VTUSeries(vtu, sample)
+    if snapshots == 1:
+        return series, {n_chunks}
+    return series, set(np.round(np.linspace(0, n_chunks, snapshots)).astype(int)[1:].tolist())
+
+
+def _write_frame(series, model, state, sample, t):
+    """One VTU frame: positions, velocity and force per particle, broken bonds per particle by mode, and per bond
+    ``intact``, ``break_mode`` (0 intact, 1 tensile, 2 shear) and ``broken_time`` (NaN while intact)."""
+    n, nb = sample.n_particles, sample.n_bonds
+    if state is None:  # at rest
+        pos, vel, frc = np.asarray(sample.positions), np.zeros((n, 3)), np.zeros((n, 3))
+        mode, when = np.zeros(nb, np.int32), np.full(nb, np.nan)
+    else:
+        pos, vel, frc = (np.asarray(a, np.float64) for a in (state.positions, state.velocities, state.force))
+        mode = np.asarray(state.broken, np.int32)
+        when = np.asarray(state.broken_time, np.float64)
+    b = np.asarray(sample.bonds)
+    point = {"velocity": vel, "force": frc,
+             "broken_tensile": np.bincount(b[mode == 1].ravel(), minlength=n).astype(np.int32),
+             "broken_shear": np.bincount(b[mode == 2].ravel(), minlength=n).astype(np.int32)}
+    series.write(t, positions=pos, intact=mode == 0, point_data=point,
+                 bond_data={"break_mode": mode, "broken_time": when})
 
 
 def _transit_time(model, params, length) -> float:
@@ -114,5 +224,11 @@ def _transit_time(model, params, length) -> float:
         kn, spacing = float(np.mean(k.kn)), float(np.mean(model.bond_length))
     else:
         r = float(np.mean(model.radii))
-        kn, spacing = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r), 2.0 * r
+        if model.contact_law == "cohesive":
+            from jaxbpm.physics.cohesive import normal_stiffness
+
+            kn = float(normal_stiffness(r, r, 0.01 * r, model.cohesive.E))
+        else:
+            kn = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r)
+        spacing = 2.0 * r
     return length / spacing * np.sqrt(m / kn)

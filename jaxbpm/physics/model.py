@@ -5,7 +5,9 @@ A :class:`Model` holds the sample's arrays in JAX form and a few static switches
 * ``rotations``: particles carry orientations (6 DOF each) or not (3 DOF: bonds then act on relative translation
   only, as in the 3N direct stiffness method of seed 000). Default: on whenever the sample has bonds (they transmit
   bending and twisting moments) or contacts with friction.
-* ``contacts``: Hertz-Mindlin particle contacts (with a neighbour list in the DEM) or none.
+* ``contacts``: particle contacts (with a neighbour list in the DEM) or none; ``contact_law``: ``"hertz"``
+  (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default) or ``"cohesive"`` (the stress-dependent cohesive law of
+  seed 002, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
 * ``walls``: the wall law (``"hertz"``/``"linear"``) or ``None``.
 
 Parameters that calibrators change live in a small pytree ``params = {"bond_E": [n_materials],
@@ -23,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm.physics import bond as bond_mod
+from jaxbpm.physics import cohesive as cohesive_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import wall as wall_mod
 from jaxbpm.sample import Sample
@@ -62,6 +65,8 @@ class Model:
     walls: str | None = None
     bond_contact: str = "superimpose"
     breakage: bool = False
+    cohesive: Any = None  # cohesive_mod.CohesiveParams with contact_law="cohesive"
+    contact_law: str = "hertz"
 
     @property
     def n(self) -> int:
@@ -95,10 +100,30 @@ class Model:
         return bond_mod.BondStrength(tensile=tensile, cohesion=cohesion, tan_phi=tan_phi, radius=self.bond_radius,
                                      area=self.bond_area, inertia=self.bond_I, polar=self.bond_J)
 
+    #: params keys that override the cohesive law's scalars (see :meth:`cohesive_params`)
+    COHESIVE_KEYS = {"contact_E": "E", "contact_nu": "nu", "friction": "friction", "restitution": "restitution",
+                     "cohesion_initial": "c0", "cohesion_from_stress": "kc", "cohesion_max": "c_max"}
+
+    def cohesive_params(self, params) -> cohesive_mod.CohesiveParams | None:
+        """The cohesive law's scalars (``None`` with Hertz contacts). ``params`` may override them with
+        ``"contact_E"``, ``"contact_nu"``, ``"friction"``, ``"restitution"``, ``"cohesion_initial"`` (c_0),
+        ``"cohesion_from_stress"`` (k_c) and ``"cohesion_max"`` (c_max), scalars."""
+        if self.contact_law != "cohesive":
+            return None
+        if not isinstance(params, dict):
+            return self.cohesive
+        if "_cohesive" in params:
+            return params["_cohesive"]
+        over = {field: jnp.asarray(params[key]) for key, field in self.COHESIVE_KEYS.items() if key in params}
+        return self.cohesive._replace(**over) if over else self.cohesive
+
     def precompute(self, params) -> dict:
-        """Per-bond stiffnesses and strengths computed once (a loop of force evaluations passes this instead of
-        ``params``)."""
-        return {"_stiffness": self.stiffness(params), "_strength": self.strength(params)}
+        """Per-bond stiffnesses and strengths (and the cohesive law's scalars) computed once (a loop of force
+        evaluations passes this instead of ``params``)."""
+        out = {"_stiffness": self.stiffness(params), "_strength": self.strength(params)}
+        if self.contact_law == "cohesive":
+            out["_cohesive"] = self.cohesive_params(params)
+        return out
 
     def bonded(self, pairs, intact=None):
         """Whether each candidate pair ``[C, 2]`` (i < j) is bonded (by an intact bond, when ``intact`` is given)."""
@@ -116,7 +141,8 @@ class Model:
                wall_normals=None):
         """Forces ``[n, 3]`` and moments ``[n, 3]`` on every particle, and the parts they came from.
 
-        contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``.
+        contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``; the
+          cohesive law takes a sixth entry, the cohesion history ``[C]`` (zeros, i.e. new contacts, when absent).
         wall_points, wall_normals: ``[W, 3]`` when the model has walls.
         Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
         "walls": [W, 3] reactions or None, "intact": the new intact mask (bonds that broke in this evaluation
@@ -128,7 +154,14 @@ class Model:
             positions, orientations if self.rotations else None, self.bonds, self.r0, k, intact,
             self.strength(params))
         parts = {"bonds": bf, "contacts": None, "walls": None, "intact": intact, "broken": broken}
-        if self.contacts and contacts is not None:
+        if self.contacts and contacts is not None and self.contact_law == "cohesive":
+            pairs, valid, spring, dxi, v_rel = contacts[:5]
+            history = contacts[5] if len(contacts) > 5 else jnp.zeros(pairs.shape[0], positions.dtype)
+            fc, mc, cf = cohesive_mod.pair_forces(positions, pairs, valid, self.radii, self.mass, spring, dxi, v_rel,
+                                                  history, self.cohesive_params(params))
+            force, moment = force + fc, moment + mc
+            parts["contacts"] = cf
+        elif self.contacts and contacts is not None:
             pairs, valid, spring, dxi, v_rel = contacts
             fc, mc, cf = contact_mod.pair_forces(positions, pairs, valid, self.radii, self.mass, spring, dxi, v_rel,
                                                  self.contact)
@@ -146,14 +179,14 @@ jax.tree_util.register_dataclass(
     Model,
     data_fields=["positions0", "radii", "mass", "inertia", "bonds", "r0", "bond_material", "bond_area", "bond_I",
                  "bond_J", "bond_length", "bond_keys", "bond_key_index", "bond_radius", "bond_tensile",
-                 "bond_cohesion", "contact", "wall_stiffness"],
-    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage"],
+                 "bond_cohesion", "contact", "wall_stiffness", "cohesive"],
+    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage", "contact_law"],
 )
 
 
 def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = None, rotations: bool | None = None,
                 contact_damping: bool = False, wall_stiffness: float | None = None,
-                breakage: bool = False) -> Model:
+                breakage: bool = False, contact_law="hertz", cohesive=None) -> Model:
     """A :class:`Model` of ``sample`` with just the interactions asked for.
 
     rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
@@ -161,10 +194,17 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
     ``"linear"`` (give ``wall_stiffness`` in N/m).
     breakage: bonds break when their stresses exceed the strengths of the material table (or of the params); off
     by default (the static solvers model the elastic range).
+    contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw`;
+    cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
+    ``contact_law="cohesive"``. Particles with cohesive contacts and no bonds do not rotate by default (seed 002).
     """
     pm = sample.particle_material
+    law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
     if rotations is None:
-        rotations = sample.n_bonds > 0 or (contacts and float(pm.friction) > 0)
+        if law is not None:
+            rotations = sample.n_bonds > 0
+        else:
+            rotations = sample.n_bonds > 0 or (contacts and float(pm.friction) > 0)
     dtype = jnp.asarray(1.0).dtype
     if dtype != jnp.float64:
         warnings.warn("jaxbpm: JAX is running in float32; bonded-particle stiffness solves lose precision. "
@@ -212,4 +252,6 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         walls=walls,
         bond_contact=sample.bond_contact,
         breakage=bool(breakage) and sample.n_bonds > 0,
+        cohesive=None if law is None else law.params(pm, dtype),
+        contact_law="hertz" if law is None else "cohesive",
     )

@@ -1,0 +1,119 @@
+"""Long DEM runs: records appended to HDF5 as they arrive, Ctrl-C without losing what was computed, VTU snapshots
+with broken bonds for ParaView, progress output."""
+
+import meshio
+import numpy as np
+import pytest
+
+import jaxbpm
+from jaxbpm import SampleFileError, SceneError, SimulationInterrupted, dem
+from jaxbpm.physics.model import default_params
+from jaxbpm.records import read_records
+from jaxbpm.scenes import UniaxialCompression
+
+R = 1e-3
+
+
+@pytest.fixture(scope="module")
+def weak():
+    """A small FCC block whose bonds break under compression (bonds only: quick)."""
+    return jaxbpm.generate.lattice("fcc", (2, 2, 2), R, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 2e6,
+                                                                   "shear_strength": 4e6})
+
+
+SCENE = UniaxialCompression(strain=0.03, breakage=True)
+
+
+def test_records_snapshots_and_progress(weak, tmp_path, capsys):
+    h5, pvd = tmp_path / "run.h5", tmp_path / "run.pvd"
+    res = jaxbpm.solve(weak, SCENE, "dem", transits=10, record_to=h5, snapshots=4, vtu=pvd, progress=True)
+    assert "DEM step" in capsys.readouterr().err  # progress still printed
+    rec, attrs = read_records(h5)
+    assert attrs["status"] == "complete" and attrs["steps"] == res.stats["steps"] == attrs["steps_planned"]
+    assert len(rec["time"]) == res.stats["steps"]
+    np.testing.assert_allclose(rec["displacement"], res.stats["speed"] * rec["time"])
+    np.testing.assert_array_equal(rec["force"], SCENE.compressive_force(rec["reaction"]))
+    assert np.all(np.isin(res.force, rec["force"]))  # the returned curve is a subset of every step's record
+    np.testing.assert_array_equal(rec["broken"][-1], [res.stats["broken_tensile"], res.stats["broken_shear"]])
+    assert rec["broken"][-1].sum() > 0 and attrs["peak_force"] == res.stats["peak_force"]
+
+    # four frames, the first at rest, the last the final state, bonds with their break mode
+    assert res.stats["vtu_frames"] == 4
+    files = sorted(tmp_path.glob("run_*.vtu"))
+    assert len(files) == 4 and pvd.read_text().count("<DataSet") == 4
+    first, last = meshio.read(files[0]), meshio.read(files[-1])
+    np.testing.assert_array_equal(first.point_data["displacement"], 0.0)
+    assert np.all(first.cell_data["intact"][1] == 1)
+    state = res.state
+    mode = np.asarray(state.broken)
+    np.testing.assert_array_equal(last.cell_data["intact"][1], (mode == 0).astype(np.int32))
+    np.testing.assert_array_equal(last.cell_data["break_mode"][1], mode)
+    np.testing.assert_allclose(last.points, np.asarray(state.positions))
+    np.testing.assert_allclose(last.point_data["velocity"], np.asarray(state.velocities))
+    b = np.asarray(weak.bonds)
+    assert last.point_data["broken_tensile"].sum() == 2 * np.sum(mode == 1)
+    assert last.point_data["broken_shear"].sum() == 2 * np.sum(mode == 2)
+    np.testing.assert_array_equal(last.point_data["broken_bonds"], np.bincount(b[mode > 0].ravel(),
+                                                                                minlength=weak.n_particles))
+    broken_t = last.cell_data["broken_time"][1]
+    assert np.all(np.isnan(broken_t[mode == 0])) and np.all(broken_t[mode > 0] > 0)
+
+
+def test_interrupt_keeps_what_was_computed(weak, tmp_path):
+    h5 = tmp_path / "cut.h5"
+    seen = []
+
+    def stop_after_three(done, total, elapsed):
+        # the record file is valid HDF5 between chunks and already holds every step done
+        seen.append((done, read_records(h5)[0]["time"].shape[0]))
+        if len(seen) == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(SimulationInterrupted) as info:
+        jaxbpm.solve(weak, SCENE, "dem", transits=10, chunk=20, record_to=h5, progress=stop_after_three)
+    err = info.value
+    assert isinstance(err, KeyboardInterrupt)
+    assert seen == [(20, 20), (40, 40), (60, 60)]
+    assert err.stats["interrupted"] and err.stats["steps"] == 60 and err.stats["steps_planned"] == 120
+    assert len(err.records["time"]) == 60
+    res = err.result
+    assert res.interrupted and res.stats["interrupted"] and len(res.force) == 60
+    rec, attrs = read_records(h5)
+    assert attrs["status"] == "interrupted" and attrs["steps"] == 60 and attrs["steps_planned"] == 120
+    np.testing.assert_array_equal(rec["time"], err.records["time"])
+    np.testing.assert_array_equal(rec["force"], res.force)
+    np.testing.assert_allclose(float(err.state.time), rec["time"][-1])
+
+
+def test_interrupted_simulation_resumes_to_the_same_state(weak):
+    model = SCENE.model(weak, breakage=True)
+    params = default_params(weak)
+    load = SCENE.loading(weak, 0.05)
+    dt = 0.5 * dem.critical_time_step(model, params)
+    full, full_rec, _ = dem.simulate(model, params, load, dt=dt, n_steps=300, chunk=50)
+    calls = []
+
+    def cut(done, total, elapsed):
+        calls.append(done)
+        if done == 100:
+            raise KeyboardInterrupt
+
+    with pytest.raises(SimulationInterrupted) as info:
+        dem.simulate(model, params, load, dt=dt, n_steps=300, chunk=50, progress=cut)
+    part = info.value
+    rest, rest_rec, _ = dem.simulate(model, params, load, dt=dt, n_steps=200, chunk=50, state=part.state)
+    np.testing.assert_allclose(rest.positions, full.positions, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(rest.broken, full.broken)
+    np.testing.assert_allclose(np.concatenate([part.records["reaction"], rest_rec["reaction"]]),
+                               full_rec["reaction"], rtol=1e-12, atol=1e-12)
+
+
+def test_output_options_are_checked(weak, tmp_path):
+    with pytest.raises(SceneError, match="snapshots"):
+        jaxbpm.solve(weak, SCENE, "dem", snapshots=3)
+    with pytest.raises(SceneError, match="snapshots"):
+        jaxbpm.solve(weak, SCENE, "dem", snapshots=0, vtu=tmp_path / "a.pvd")
+    with pytest.raises(SampleFileError, match=".h5"):
+        jaxbpm.solve(weak, SCENE, "dem", record_to=tmp_path / "run.txt")
+    with pytest.raises(SampleFileError, match="no such record file"):
+        read_records(tmp_path / "missing.h5")
