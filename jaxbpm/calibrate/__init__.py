@@ -11,6 +11,10 @@
   (:mod:`~jaxbpm.calibrate.surrogate`).
 * ``method="closed-form"``: the closed form, or an error saying why it does not apply.
 
+Strengths: :func:`calibrate_strength` calibrates the bond tensile and shear strengths against the UCS and the
+flexural strength (seed 003's original and simplified schemes, :mod:`~jaxbpm.calibrate.strength`); it is
+``calibrate`` with ``Target("strength", ..., scene="ucs"/"tpb")`` on DEM failure runs.
+
 Lower-level pieces (:class:`Target`, :class:`Parameter`, :class:`ParameterSpace`, :class:`Forward`,
 :class:`Problem` and the calibrator functions) compose the same way for custom models.
 """
@@ -26,15 +30,18 @@ from jaxbpm.calibrate.adam import GRADIENTS, adam, loss_and_gradient
 from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.multifidelity import calibrate_level, default_levels, multifidelity
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem, Target,
-                                        as_targets, forward_model)
+                                        as_targets, base_params, forward_model)
 from jaxbpm.calibrate.result import CalibrationResult, History, load_history, plot_history
+from jaxbpm.calibrate.strength import (STRENGTH_KEYS, STRENGTH_SCHEMES, calibrate_strength, format_strength_table,
+                                       strength_table)
 from jaxbpm.calibrate.surrogate import RunSet, run_set, surrogate
 
 __all__ = [
     "calibrate", "METHODS", "CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward", "Problem",
     "forward_model", "default_parameters", "adam", "GRADIENTS", "loss_and_gradient", "closed_form", "surrogate",
     "RunSet", "run_set", "multifidelity", "default_levels", "calibrate_level", "CalibrationResult", "History",
-    "plot_history", "load_history",
+    "plot_history", "load_history", "base_params", "calibrate_strength", "strength_table", "STRENGTH_KEYS",
+    "STRENGTH_SCHEMES", "format_strength_table",
 ]
 
 METHODS = ("auto", "adam", "surrogate", "closed-form")
@@ -55,7 +62,9 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
     """Calibrate the bond parameters of ``sample`` so that ``scene`` reproduces ``targets``.
 
     Args:
-      sample: a :class:`~jaxbpm.Sample`.
+      sample: a :class:`~jaxbpm.Sample`, or ``{scene key: Sample}`` when the tests use different specimens (e.g. a
+        cylinder for ``"ucs"``, a beam for ``"tpb"``; the free parameters are set on every sample, the rest of
+        each sample's table is its own).
       scene: a scene (e.g. :class:`~jaxbpm.scenes.UniaxialCompression`) or ``{key: scene}`` for targets measured on
         several tests (``Target(..., scene=key)``).
       targets: :class:`Target` s, or ``{observable: value}`` (e.g. ``{"youngs_modulus": 1.2e8}``).
@@ -74,17 +83,27 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
     """
     import time
 
-    from jaxbpm.physics.model import default_params
     from jaxbpm.sample import Sample
 
     if method not in METHODS:
         raise CalibrationError(f"unknown calibration method {method!r}; choose one of {METHODS}")
-    if not isinstance(sample, Sample):
-        raise CalibrationError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    several = isinstance(sample, Mapping)
+    for s in (sample.values() if several else [sample]):
+        if not isinstance(s, Sample):
+            raise CalibrationError(f"sample must be a jaxbpm.Sample or {{scene key: Sample}}, got {type(s).__name__}")
+    if several and not sample:
+        raise CalibrationError("no sample given")
+    first = next(iter(sample.values())) if several else sample
     targets = as_targets(targets)
     tol = _common.check_tol(tol)
-    parameters = default_parameters(sample) if parameters is None else list(parameters)
-    space = ParameterSpace(parameters, default_params(sample), scaling=scaling)
+    parameters = default_parameters(first) if parameters is None else list(parameters)
+    if not all(isinstance(p, Parameter) for p in parameters):
+        raise CalibrationError("parameters must be a list of Parameter")
+    keys = sorted({p.key for p in parameters})
+    base = base_params(first, keys)
+    if several:  # each sample keeps its own table; only the free entries are shared
+        base = {k: base[k] for k in keys}
+    space = ParameterSpace(parameters, base, scaling=scaling)
     solve_options = dict(solve_options or {})
     t0 = time.perf_counter()
     if method == "auto":

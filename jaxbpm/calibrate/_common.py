@@ -12,7 +12,8 @@ from jaxbpm.calibrate.result import CalibrationResult, History
 
 # parameter key -> observables measured in the same units (seed 003, Eq. 14: the macroscopic value is a first
 # estimate of the microscopic one)
-_SAME_UNITS = {"bond_E": ("youngs_modulus",), "bond_nu": ("poisson_ratio",)}
+_SAME_UNITS = {"bond_E": ("youngs_modulus",), "bond_nu": ("poisson_ratio",),
+               "bond_tensile_strength": ("strength",), "bond_shear_strength": ("strength",)}
 
 
 def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | None:

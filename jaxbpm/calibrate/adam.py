@@ -10,9 +10,13 @@ lies within ``tol`` the calibration stops, else the gradient of the objective (E
 * ``first_estimate``: start from the targets themselves (Eq. 14: a bond modulus starts at the target Young's
   modulus). ``second_estimate``: after the first point, scale each parameter by target / model value of the target
   it is tied to (Eq. 15).
-* ``simplified``: each parameter is tied to one target (``tie``); one perturbed point (all parameters perturbed at
-  once) per iteration replaces the n perturbed points, and the derivative of each parameter uses its tied target's
-  term of L only (Eq. 16-19).
+* ``simplified``: each parameter is tied to one target (``tie``) and the derivative of each parameter uses its tied
+  target's term of L only (Eq. 16-19: a test does not depend on the parameters tied to the other tests).
+  ``simplified=True`` (``"secant"``) runs one parameter set per iteration, as seed 003 counts it: the step from the
+  previous point perturbs every parameter at once, so the difference of each tied term between the two points over
+  the parameter's change is its derivative (where a parameter moved by less than ``fd_step / 10`` since the previous
+  point, or at the first point, one perturbed point is run instead). ``simplified="perturbed"`` always runs one
+  perturbed point (all parameters perturbed at once) next to the point itself.
 
 Gradients: ``"fd-forward"`` (n extra solves), ``"fd-central"`` (2n), run as one batch (``jax.vmap`` when the model
 is a pure function, else one after another; seed 003 Eq. 12-13), or ``"autodiff"`` (``jax.value_and_grad`` through
@@ -97,8 +101,10 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
     5.1.2: 5 %). max_iterations: evaluated points at most (estimates included). loss_scaled: Eq. 9.
     first_estimate / second_estimate: Eq. 14 / 15; ``None`` = on where they make sense (a tie exists; Eq. 14 only
     when each parameter and its target share units, e.g. bond E and Young's modulus). tie: ``{parameter: target}``
-    (default: the only parameter to the only scalar target). simplified: Eq. 16-19 (needs ties). fd_step: step in
-    ``z``. progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+    (default: the only parameter to the only scalar target). simplified: Eq. 16-19 (needs ties): ``True``/``"secant"``
+    (one parameter set per iteration) or ``"perturbed"`` (one perturbed set per iteration). fd_step: step in ``z``
+    (target-scaled form: a fraction of the target). progress: True (print), a callable
+    ``(row, parameter_names, target_names)`` or None.
     """
     t_start = time.perf_counter()
     if gradient not in GRADIENTS:
@@ -114,6 +120,9 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
                                f"{problem.forward.name} model has none for targets {problem.target_names} "
                                "(use 'fd-forward' or 'fd-central')")
     ties = _common.resolve_tie(problem, tie)
+    if simplified not in (False, True, "secant", "perturbed"):
+        raise CalibrationError(f"simplified must be False, True / 'secant' or 'perturbed', got {simplified!r}")
+    secant = simplified in (True, "secant")
     if simplified and ties is None:
         raise CalibrationError("simplified=True needs each parameter tied to one scalar target: pass "
                                "tie={parameter: target}")
@@ -145,6 +154,8 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
     history = History(space.names, problem.target_names)
     evals0 = problem.evaluations
     best = None
+    previous = None  # (z, errors) of the last evaluated point: the simplified scheme's secant
+    secants = 0
     for it in range(1, max_iterations + 1):
         t0 = time.perf_counter()
         last = it == max_iterations
@@ -170,12 +181,17 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
             if np.all(ratio > 0):
                 _common.record(history, problem, progress, kind=kind, values=values, errors=e,
                                time=time.perf_counter() - t0)
+                previous = (z.copy(), e.copy())
                 z = space.to_z(space.clip(values * ratio))
                 kind = "estimate-2"
                 if not any("Eq. 15" in n for n in notes):
                     notes.append("second estimate (seed 003, Eq. 15): parameters scaled by target / model value")
                 continue
             notes.append("second estimate skipped: a model value has the opposite sign of its target")
+        if g is None and secant and previous is not None and np.all(np.abs(z - previous[0]) >= 0.1 * fd_step):
+            parts, parts0 = problem.target_losses(e), problem.target_losses(previous[1])
+            g = np.array([(parts[k] - parts0[k]) / (z[i] - previous[0][i]) for i, k in enumerate(ties)])
+            secants += 1
         if g is None:
             _, g, _ = loss_and_gradient(problem, z, grad_method, step=fd_step, tie=ties, base=e)
         _common.record(history, problem, progress, kind=kind, values=values, errors=e,
@@ -185,16 +201,20 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         updates = np.asarray(updates)
         if loss_scaled:
             updates = updates * loss
+        previous = (z.copy(), e.copy())
         z = space.to_z(space.clip(space.from_z(z + updates)))
         kind = "adam"
     _, values, e = best
     if loss_scaled:
         notes.append("step scaled by the loss (seed 003, Eq. 9)")
     if simplified:
-        notes.append("simplified scheme (seed 003, Eq. 16-19): one perturbed point per iteration")
+        notes.append("simplified scheme (seed 003, Eq. 16-19): " + (
+            f"one parameter set per iteration ({secants} secant gradients between successive points)" if secant
+            else "one perturbed point per iteration"))
     info = {"gradient": grad_method, "learning_rate": learning_rate, "scaling": space.scaling,
             "first_estimate": bool(first_estimate), "second_estimate": bool(second_estimate),
-            "loss_scaled": bool(loss_scaled), "simplified": bool(simplified)}
+            "loss_scaled": bool(loss_scaled), "simplified": ("secant" if secant else "perturbed") if simplified
+            else False, "secant_gradients": secants, "fd_step": fd_step}
     return _common.make_result(problem, history, values, e, method="adam", tol=tol,
                                wall_time=time.perf_counter() - t_start,
                                evaluations=problem.evaluations - evals0, notes=notes, info=info)

@@ -28,7 +28,7 @@ import numpy as np
 from jaxbpm.errors import JaxbpmError
 
 __all__ = ["CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward", "forward_model", "Problem",
-           "ELASTIC_OBSERVABLES", "as_targets"]
+           "ELASTIC_OBSERVABLES", "STRENGTH_OBSERVABLES", "as_targets", "base_params"]
 
 ELASTIC_OBSERVABLES = ("stiffness", "youngs_modulus")
 """Observables that are homogeneous of degree one in the bond Young's moduli of a bonds-only linear scene."""
@@ -353,26 +353,51 @@ class Forward:
             out = fn(params)
             return {DEFAULT_SCENE: {k: np.asarray(v) for k, v in out.items()}}
 
-        pure_fn = None
-        if pure:
-            jitted = jax.jit(fn)
+        jitted = jax.jit(fn) if pure else None
 
-            def pure_fn(params):
-                return {DEFAULT_SCENE: dict(jitted(params))}
+        def pure_fn(params):
+            return {DEFAULT_SCENE: dict(jitted(params))}
 
-        return cls(name=name, evaluate=evaluate, pure=pure_fn, homogeneous=homogeneous)
+        return cls(name=name, evaluate=evaluate, pure=pure_fn if pure else None, homogeneous=homogeneous)
+
+
+STRENGTH_OBSERVABLES = ("strength", "peak_force", "broken_tensile", "broken_shear")
+"""Scalars a failure run (DEM with bond breakage) reports in ``Result.stats``: the strength (UCS or flexural strength
+[Pa]), the peak force [N] and the broken bond counts."""
 
 
 def _observations(result) -> dict:
     obs = {"stiffness": float(result.stiffness), "youngs_modulus": float(result.youngs_modulus),
            "strain": np.asarray(result.strain), "stress": np.asarray(result.stress)}
+    stats = result.stats if isinstance(result.stats, dict) else {}
     nu = getattr(result, "poisson_ratio", None)
     if nu is None:
-        stats = result.stats if isinstance(result.stats, dict) else {}
         nu = stats.get("poisson_ratio", stats.get("nu_iso"))
     if nu is not None:
         obs["poisson_ratio"] = float(nu)
+    for key in STRENGTH_OBSERVABLES:
+        if stats.get(key) is not None and np.size(stats[key]) == 1:
+            obs[key] = float(np.asarray(stats[key]).reshape(()))
     return obs
+
+
+def base_params(sample, keys=()) -> dict:
+    """The parameter pytree of ``sample`` (``bond_E``, ``bond_nu``) plus the entries ``keys`` that the material
+    table holds: ``"bond_tensile_strength"`` and ``"bond_shear_strength"`` (its tensile and shear strengths)."""
+    from jaxbpm.physics.model import default_params
+
+    out = dict(default_params(sample))
+    table = {"bond_tensile_strength": "tensile_strength", "bond_shear_strength": "shear_strength"}
+    for key in keys:
+        if key in out:
+            continue
+        if key not in table:
+            raise CalibrationError(f"no parameter entry {key!r} (entries: {sorted(out) + sorted(table)})")
+        value = getattr(sample.materials, table[key], None)
+        if value is None:
+            raise CalibrationError(f"the sample's material table has no {table[key]!r} for {key!r}")
+        out[key] = jnp.asarray(np.asarray(value, dtype=np.float64).reshape(-1))
+    return out
 
 
 def _linear_scene(scene) -> bool:
@@ -386,15 +411,15 @@ _FORWARDS_MAX = 8
 def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forward:
     """The :class:`Forward` of ``jaxbpm.solve(sample, scene, method=model, params=..., **solve_options)``.
 
-    scenes: a scene or a mapping ``{key: scene}``. When ``jaxbpm.<model>`` has a ``stiffness_function`` and every
-    scene is linear (bonds only, clamped layers), elastic targets use that pure function (batched and
-    differentiable). ``solve_options`` go to ``jaxbpm.solve`` only.
+    sample: a :class:`~jaxbpm.Sample`, or ``{key: sample}`` with one sample per scene key (e.g. a cylinder for
+    ``"ucs"`` and a beam for ``"tpb"``). scenes: a scene or a mapping ``{key: scene}``. Each solve gets the sample's
+    own parameters (``bond_E``, ``bond_nu``) overridden by the entries of the parameter pytree it is given. When
+    ``jaxbpm.<model>`` has a ``stiffness_function`` and every scene is linear (bonds only, clamped layers), elastic
+    targets use that pure function (batched and differentiable). ``solve_options`` go to ``jaxbpm.solve`` only.
     """
     solve_mod = importlib.import_module("jaxbpm.solve")
     from jaxbpm.sample import Sample
 
-    if not isinstance(sample, Sample):
-        raise CalibrationError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
     if not isinstance(model, str) or model not in solve_mod.METHODS:
         raise CalibrationError(f"unknown model {model!r}; choose one of {solve_mod.METHODS}")
     scene_map = dict(scenes) if isinstance(scenes, Mapping) else {DEFAULT_SCENE: scenes}
@@ -403,34 +428,47 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
     for key, sc in scene_map.items():
         if not hasattr(sc, "geometry") or not hasattr(sc, "model"):
             raise CalibrationError(f"scene {key!r} is not a jaxbpm scene (got {type(sc).__name__})")
+    if isinstance(sample, Mapping):
+        if set(sample) != set(scene_map):
+            raise CalibrationError(f"one sample per scene: samples for {sorted(sample)}, scenes {sorted(scene_map)}")
+        sample_map = {k: sample[k] for k in scene_map}
+    else:
+        sample_map = {k: sample for k in scene_map}
+    for key, s in sample_map.items():
+        if not isinstance(s, Sample):
+            raise CalibrationError(f"sample{'' if len(sample_map) == 1 else f' {key!r}'} must be a jaxbpm.Sample, "
+                                   f"got {type(s).__name__}")
     try:
-        cache_key = (id(sample), model, tuple((k, repr(sc)) for k, sc in scene_map.items()),
-                     repr(sorted(solve_options.items())))
+        cache_key = (tuple((k, id(s)) for k, s in sample_map.items()), model,
+                     tuple((k, repr(sc)) for k, sc in scene_map.items()), repr(sorted(solve_options.items())))
     except TypeError:
         cache_key = None
     hit = _FORWARDS.get(cache_key)
-    if hit is not None and hit[0]() is sample:
+    if hit is not None and all(ref() is sample_map[k] for k, ref in hit[0].items()):
         return hit[1]
-    fwd = _forward_model(sample, scene_map, model, solve_mod, solve_options)
+    fwd = _forward_model(sample_map, scene_map, model, solve_mod, solve_options)
     if cache_key is not None:
         import weakref
 
         while len(_FORWARDS) >= _FORWARDS_MAX:
             _FORWARDS.pop(next(iter(_FORWARDS)))
         try:
-            _FORWARDS[cache_key] = (weakref.ref(sample), fwd)
+            _FORWARDS[cache_key] = ({k: weakref.ref(s) for k, s in sample_map.items()}, fwd)
         except TypeError:
             pass
     return fwd
 
 
-def _forward_model(sample, scene_map, model, solve_mod, solve_options) -> Forward:
+def _forward_model(sample_map, scene_map, model, solve_mod, solve_options) -> Forward:
+    from jaxbpm.physics.model import default_params
+
+    own = {k: default_params(s) for k, s in sample_map.items()}
 
     def evaluate(params):
-        return {key: _observations(solve_mod.solve(sample, sc, method=model, params=params, **solve_options))
+        return {key: _observations(solve_mod.solve(sample_map[key], sc, method=model,
+                                                   params={**own[key], **params}, **solve_options))
                 for key, sc in scene_map.items()}
 
-    pure = None
     linear = all(_linear_scene(sc) for sc in scene_map.values())
     factory = None
     if linear and model != "dem":
@@ -438,22 +476,22 @@ def _forward_model(sample, scene_map, model, solve_mod, solve_options) -> Forwar
             factory = getattr(importlib.import_module(f"jaxbpm.{model}"), "stiffness_function", None)
         except ImportError:
             factory = None
+    fns = {}
     if factory is not None:
-        fns = {}
         for key, sc in scene_map.items():
-            length, area = sc.geometry(sample)
-            fns[key] = (factory(sample, sc), length / area)
+            length, area = sc.geometry(sample_map[key])
+            fns[key] = (factory(sample_map[key], sc), length / area)
 
-        def pure(params):
-            out = {}
-            for key, (f, l_over_a) in fns.items():
-                k = f(params)
-                out[key] = {"stiffness": k, "youngs_modulus": k * l_over_a}
-            return out
+    def pure(params):
+        out = {}
+        for key, (f, l_over_a) in fns.items():
+            k = f({**own[key], **params})
+            out[key] = {"stiffness": k, "youngs_modulus": k * l_over_a}
+        return out
 
-    return Forward(name=model, evaluate=evaluate, pure=pure, scenes=tuple(scene_map),
-                   pure_observables=ELASTIC_OBSERVABLES if pure is not None else None,
-                   homogeneous=linear and sample.n_bonds > 0)
+    return Forward(name=model, evaluate=evaluate, pure=pure if fns else None, scenes=tuple(scene_map),
+                   pure_observables=ELASTIC_OBSERVABLES if fns else None,
+                   homogeneous=linear and all(s.n_bonds > 0 for s in sample_map.values()))
 
 
 # ---------------------------------------------------------------------------------------------------- problem
@@ -546,16 +584,36 @@ class Problem:
         return tvals, tscale, wel
 
     # -------------------------------------------------------------- evaluation
-    def outputs(self, values_batch) -> np.ndarray:
-        """Model values of all target elements ``[B, m]`` for parameter values ``[B, n]`` (vmap when pure)."""
+    def outputs(self, values_batch, *, chunk: int | None = None) -> np.ndarray:
+        """Model values of all target elements ``[B, m]`` for parameter values ``[B, n]`` (vmap when pure).
+
+        chunk: for a pure model, solve at most this many sets in one ``vmap`` (bounds the memory of large batches:
+        each vmapped solve holds its own operator and workspace); the last chunk is padded so that every chunk
+        shares one compilation. ``None``: all at once."""
         vb = np.atleast_2d(np.asarray(values_batch, dtype=np.float64))
+        if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
+            raise CalibrationError(f"chunk must be a whole number >= 1, got {chunk!r}")
         if len(vb) == 1 and self._last is not None and np.array_equal(self._last[0], vb[0]):
             return self._last[1][None].copy()
         t0 = time.perf_counter()
         if self.use_pure:
             base = self.space.base
-            if len(vb) > 1:
-                y = np.asarray(self._compiled("batch")(jnp.asarray(vb), base))
+            if chunk is not None and len(vb) > chunk > 1:
+                fn, parts = self._compiled("batch"), []
+                for a in range(0, len(vb), chunk):
+                    part = vb[a:a + chunk]
+                    pad = np.concatenate([part, np.repeat(part[-1:], chunk - len(part), axis=0)])
+                    parts.append(np.asarray(fn(jnp.asarray(pad), base))[:len(part)])
+                y = np.concatenate(parts)
+            elif chunk == 1 and len(vb) > 1:
+                fn = self._compiled("vector")
+                y = np.stack([np.asarray(fn(jnp.asarray(v), base)) for v in vb])
+            elif len(vb) > 1:
+                # small batches are padded to a power of two (repeating the last set): the batch sizes of n-point
+                # finite differences (n + 1, 2n) then share compilations
+                size = 1 << (len(vb) - 1).bit_length() if len(vb) <= 8 else len(vb)
+                pad = np.concatenate([vb, np.repeat(vb[-1:], size - len(vb), axis=0)])
+                y = np.asarray(self._compiled("batch")(jnp.asarray(pad), base))[:len(vb)]
             else:
                 y = np.asarray(self._compiled("vector")(jnp.asarray(vb[0]), base))[None]
         else:

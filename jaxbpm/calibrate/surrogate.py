@@ -108,9 +108,11 @@ class RunSet:
             raise CalibrationError(f"{path}: not a readable run set file ({exc})") from exc
 
 
-def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None) -> RunSet:
+def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None,
+            chunk: int | None = None) -> RunSet:
     """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` (within its bounds, or ``lower``/``upper``)
-    as one batch and record the outputs its targets need."""
+    in batches of ``chunk`` (``None``: one batch; see :meth:`Problem.outputs`) and record the outputs its targets
+    need."""
     n_runs = _common.check_count("n_runs", n_runs, 2)
     space = problem.space
     lower = space.lower if lower is None else np.asarray(lower, dtype=np.float64)
@@ -120,10 +122,10 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     t0 = time.perf_counter()
     evals0 = problem.evaluations
     X = latin_hypercube(n_runs, lower, upper, seed=seed)
-    Y = problem.outputs(X)
+    Y = problem.outputs(X, chunk=chunk)
     return RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
                   output_sizes=[t.size for t in problem.targets], Y=np.asarray(Y), model=problem.forward.name,
-                  info={"seed": seed, "wall_time": time.perf_counter() - t0,
+                  info={"seed": seed, "chunk": chunk, "wall_time": time.perf_counter() - t0,
                         "evaluations": problem.evaluations - evals0})
 
 
@@ -158,7 +160,7 @@ def _predict(forests, X) -> np.ndarray:
 def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100, I_e: float = 0.2, L_s: int = 1000,
               it_max: int = 50, n_trees: int = 500, max_features: float = 1 / 3, exclude: float = 0.05,
               normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
-              seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None,
+              seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, chunk: int | None = None,
               progress=None) -> CalibrationResult:
     """Calibrate with the random-forest surrogate of seed 002 (see the module docstring).
 
@@ -166,8 +168,9 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     error (relative to each target's scale when ``normalize``, else in the output's units); L_s: combinations per
     iteration; it_max: iterations at most. n_trees, max_features: the forests (seed 002: 500 and 1/3).
     importance_threshold: drop parameters whose mean importance is below it; resample_runs: then solve that many new
-    runs on the remaining parameters. verify: solve once at the answer and report the measured errors (else the
-    surrogate's prediction). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
+    runs on the remaining parameters. chunk: solve the runs in batches of this many (bounds the memory of a
+    ``vmap`` of large solves; ``None``: one batch). verify: solve once at the answer and report the measured errors
+    (else the surrogate's prediction). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
     ``mean_importance``, ``dropped``, ``narrowing`` (per iteration: admissible count, error bound, ranges) and the
     run set (``runs``).
     """
@@ -187,7 +190,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     notes = []
     space = problem.space
     if runs is None:
-        runs = run_set(problem, n_runs, seed=seed)
+        runs = run_set(problem, n_runs, seed=seed, chunk=chunk)
     else:
         if not isinstance(runs, RunSet):
             raise CalibrationError(f"runs must be a RunSet, got {type(runs).__name__}")
@@ -212,7 +215,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
                 sub = space.subspace([n for n, a in zip(space.names, active) if a], fixed)
                 sub_problem = Problem(problem.forward, problem.targets, sub)
                 sub_problem.evaluations = problem.evaluations
-                sub_runs = run_set(sub_problem, resample_runs, seed=seed + 1, lower=runs.lower[active],
+                sub_runs = run_set(sub_problem, resample_runs, seed=seed + 1, chunk=chunk,
+                                   lower=runs.lower[active],
                                    upper=runs.upper[active])
                 problem.evaluations = sub_problem.evaluations
                 X_full = np.repeat(fixed[None, :], sub_runs.n_runs, axis=0)
