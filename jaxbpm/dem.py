@@ -393,9 +393,15 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
     return new, record
 
 
+@jax.jit
+def _precompute(model, params):
+    return model.precompute(params)
+
+
 @functools.partial(jax.jit, static_argnames=("n_steps",))
 def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps):
-    params = model.precompute(params)  # stiffnesses and strengths once per chunk, not per step
+    # ``params`` comes precomputed (stiffnesses and strengths, once per run, not per step): its structure is the
+    # same whatever entries the caller's dict had, so the chunk compiles once per model
 
     def body(s, _):
         return step(model, params, load, s, dt, alpha, origin)
@@ -525,13 +531,14 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
         state = init_state(model, params, load, nbrs)
     chunk = max(1, min(chunk, n_steps))
     n_chunks = -(-n_steps // chunk)  # every chunk has the same length, so the chunk function compiles once
+    pre = _precompute(model, params)
     records, times, reallocs = [], [], 0
     report = _progress_fn(progress)
     done = state  # the state after the last completed chunk
     try:
         while len(records) < n_chunks:
             tc = time.perf_counter()
-            new, rec, overflow, pmin, pmax = _run_chunk(model, params, load, state, dt, alpha, origin, chunk)
+            new, rec, overflow, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc
             if model.contacts and (bool(overflow) or not nb_owner.inside(pmin, pmax)):

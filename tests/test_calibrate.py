@@ -353,3 +353,16 @@ def test_clear_errors(one, dsm_forward):
     with pytest.raises(CalibrationError, match="simplified"):
         cal.adam(_analytic_problem([Target("youngs_modulus", 1.0), Target("stiffness", 1.0)], n=2),
                  simplified=True)
+
+
+def test_base_params_reads_particle_and_cohesive_entries():
+    s = jaxbpm.generate.lattice("sc", (2, 2, 2), 1e-3, particle_material={"E": 3e8, "friction": 0.3})
+    law = {"c0": 2e4, "kc": 0.25, "c_max": 6e4}
+    scene = UniaxialCompression(strain=0.01, contacts=True, contact_law="cohesive", cohesive=law)
+    base = cal.base_params(s, ["contact_E", "friction", "cohesion_initial", "cohesion_max"], scene)
+    assert float(base["contact_E"]) == 3e8 and float(base["friction"]) == 0.3
+    assert float(base["cohesion_initial"]) == 2e4 and float(base["cohesion_max"]) == 6e4
+    with pytest.raises(CalibrationError, match="cohesive contact law"):
+        cal.base_params(s, ["cohesion_max"], UniaxialCompression(strain=0.01))
+    with pytest.raises(CalibrationError, match="no parameter entry 'bond_colour'"):
+        cal.base_params(s, ["bond_colour"])

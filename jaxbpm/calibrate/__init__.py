@@ -100,7 +100,7 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
     if not all(isinstance(p, Parameter) for p in parameters):
         raise CalibrationError("parameters must be a list of Parameter")
     keys = sorted({p.key for p in parameters})
-    base = base_params(first, keys)
+    base = base_params(first, keys, scene)
     if several:  # each sample keeps its own table; only the free entries are shared
         base = {k: base[k] for k in keys}
     space = ParameterSpace(parameters, base, scaling=scaling)

@@ -381,22 +381,40 @@ def _observations(result) -> dict:
     return obs
 
 
-def base_params(sample, keys=()) -> dict:
-    """The parameter pytree of ``sample`` (``bond_E``, ``bond_nu``) plus the entries ``keys`` that the material
-    table holds: ``"bond_tensile_strength"`` and ``"bond_shear_strength"`` (its tensile and shear strengths)."""
+def base_params(sample, keys=(), scene=None) -> dict:
+    """The parameter pytree of ``sample`` (``bond_E``, ``bond_nu``) plus the entries ``keys`` asks for:
+
+    - ``"bond_tensile_strength"``, ``"bond_shear_strength"``: from the sample's bond material table;
+    - ``"contact_E"``, ``"contact_nu"``, ``"friction"``, ``"restitution"``: from its particle material (scalars);
+    - ``"cohesion_initial"``, ``"cohesion_from_stress"``, ``"cohesion_max"``: from the cohesive law of ``scene``
+      (a scene, or a mapping of scenes: the first with ``contact_law="cohesive"``).
+    """
     from jaxbpm.physics.model import default_params
 
     out = dict(default_params(sample))
     table = {"bond_tensile_strength": "tensile_strength", "bond_shear_strength": "shear_strength"}
+    particle = {"contact_E": "E", "contact_nu": "nu", "friction": "friction", "restitution": "restitution"}
+    cohesive = {"cohesion_initial": "c0", "cohesion_from_stress": "kc", "cohesion_max": "c_max"}
+    known = sorted(out) + sorted(table) + sorted(particle) + sorted(cohesive)
     for key in keys:
         if key in out:
             continue
-        if key not in table:
-            raise CalibrationError(f"no parameter entry {key!r} (entries: {sorted(out) + sorted(table)})")
-        value = getattr(sample.materials, table[key], None)
-        if value is None:
-            raise CalibrationError(f"the sample's material table has no {table[key]!r} for {key!r}")
-        out[key] = jnp.asarray(np.asarray(value, dtype=np.float64).reshape(-1))
+        if key in table:
+            value = getattr(sample.materials, table[key], None)
+            if value is None:
+                raise CalibrationError(f"the sample's material table has no {table[key]!r} for {key!r}")
+            out[key] = jnp.asarray(np.asarray(value, dtype=np.float64).reshape(-1))
+        elif key in particle:
+            out[key] = jnp.asarray(np.float64(getattr(sample.particle_material, particle[key])))
+        elif key in cohesive:
+            scenes = list(scene.values()) if isinstance(scene, Mapping) else [scene]
+            laws = [sc.cohesive_law for sc in scenes if getattr(sc, "cohesive_law", None) is not None]
+            if not laws:
+                raise CalibrationError(f"{key!r} is a parameter of the cohesive contact law, but no scene has "
+                                       "contact_law='cohesive'")
+            out[key] = jnp.asarray(np.float64(getattr(laws[0], cohesive[key])))
+        else:
+            raise CalibrationError(f"no parameter entry {key!r} (entries: {known})")
     return out
 
 
