@@ -532,7 +532,7 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     chunk = max(1, min(chunk, n_steps))
     n_chunks = -(-n_steps // chunk)  # every chunk has the same length, so the chunk function compiles once
     pre = _precompute(model, params)
-    records, times, reallocs = [], [], 0
+    records, times, reallocs, stalled = [], [], 0, 0
     report = _progress_fn(progress)
     done = state  # the state after the last completed chunk
     try:
@@ -541,9 +541,26 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
             new, rec, overflow, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc
+            # instability first: a blown-up chunk also overflows the neighbour buffer, and re-allocating for it
+            # would only run it again (and again)
+            vmax = float(jnp.max(rec["vmax"]))
+            if not np.isfinite(vmax) or not bool(jnp.all(jnp.isfinite(new.positions))) or vmax * dt > 0.25 * r_min:
+                crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
+                raise InstabilityError(
+                    f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
+                    f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
+                    f"time step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
             if model.contacts and (bool(overflow) or not nb_owner.inside(pmin, pmax)):
                 # re-allocate from the chunk's start and run it again: no contact is ever dropped
                 reallocs += 1
+                stalled += 1
+                if stalled > 4:
+                    crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
+                    raise InstabilityError(
+                        f"DEM run stalled within steps {len(records) * chunk}..{(len(records) + 1) * chunk}: the "
+                        f"neighbour list was re-allocated {stalled} times for the same chunk (particles moving too "
+                        f"far, too fast: max speed {vmax:.3g} m/s) with time step dt = {dt:.4g} s, critical time "
+                        f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
                 extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if bool(overflow) else 0
                 nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra)
                 origin = jnp.asarray(nb_owner.origin, model.positions0.dtype)
@@ -553,13 +570,7 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
                 times = []  # the new buffer size compiles again
                 continue
             times.append(elapsed)
-            vmax = float(jnp.max(rec["vmax"]))
-            if not np.isfinite(vmax) or not bool(jnp.all(jnp.isfinite(new.positions))) or vmax * dt > 0.25 * r_min:
-                crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
-                raise InstabilityError(
-                    f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
-                    f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
-                    f"time step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
+            stalled = 0
             state = done = new
             rec = jax.device_get(rec)
             records.append(rec)

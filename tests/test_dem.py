@@ -165,6 +165,17 @@ def test_time_step_above_critical_raises():
                      dt=3.0 * dem.critical_time_step(build_model(s), default_params(s)), damping=0.0)
 
 
+def test_unstable_run_with_contacts_raises_instead_of_reallocating():
+    # a blown-up chunk overflows the neighbour buffer too: the instability must be reported, not re-allocated for
+    s = jaxbpm.generate.box(150, seed=0, mean_radius=R, packing_fraction=0.5,
+                            particle_material={"E": 1e10, "nu": 0.25, "density": 2500.0, "friction": 0.5,
+                                               "restitution": 0.5})
+    scene = jaxbpm.scenes.UniaxialCompression(strain=0.01, contacts=True)
+    crit = dem.critical_time_step(build_model(s, contacts=True), default_params(s))
+    with pytest.raises(jaxbpm.InstabilityError, match=r"time step dt = .* critical time step estimate"):
+        jaxbpm.solve(s, scene, dt=2.0 * crit, transits=10)
+
+
 def test_neighbor_overflow_is_reallocated_and_matches_big_buffer():
     s = jaxbpm.generate.box(80, seed=1, mean_radius=R, packing_fraction=0.45)
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.05, contacts=True)
