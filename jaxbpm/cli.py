@@ -260,10 +260,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", type=pathlib.Path, help="VTK file to write (.vtu or .vtk)")
     p.set_defaults(func=_cmd_export_vtk)
 
-    p = sub.add_parser("demo", help="run the demo (generate a sample, compare DEM and DSM on it)",
+    p = sub.add_parser("demo", help="run the demo (a sample: STE, DSM and DEM stiffness, a calibration, a chart)",
                        description="Run the demo: generate a random box sample, save it to OUT/demo_sample.h5, "
-                                   "compress it with the DEM and the direct stiffness method and compare their "
-                                   "stiffness and cost (OUT/demo_results.json).")
+                                   "compute its stiffness by STE, DSM (two tolerances) and DEM, compare stiffness "
+                                   "and cost, calibrate the bond modulus to a target Young's modulus with the "
+                                   "multi-fidelity calibrator (checked by one DEM run) and write "
+                                   "OUT/demo_results.json and the speed-against-accuracy chart "
+                                   "OUT/demo_speed_accuracy.png.")
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path(_DEMO_DIR),
                    help=f"output directory (default: ./{_DEMO_DIR})")
     p.add_argument("--n", type=_positive_int, default=2000, help="number of particles (default: 2000)")

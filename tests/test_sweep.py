@@ -62,8 +62,15 @@ def test_sweep_over_two_host_devices_matches_the_unsharded_result(tmp_path):
         sharded = sweep.sweep(f, batch)
         plain = jax.vmap(f)(batch)
         single = [float(f({"bond_E": jnp.asarray(e), "bond_nu": jnp.full(2, 0.25)})) for e in E]
+        # the calibrators' batches (surrogate run sets, finite-difference points) go through the same sharding
+        from jaxbpm import calibrate as cal
+        obj = cal.Problem(cal.forward_model(s, UniaxialCompression(strain=0.002)),
+                          [cal.Target("stiffness", 1.0)],
+                          cal.ParameterSpace([cal.Parameter("bond_E", index=0), cal.Parameter("bond_E", index=1)],
+                                             cal.base_params(s)))
+        calib = obj.outputs(E)[:, 0]
         print(json.dumps({"sharded": np.asarray(sharded).tolist(), "plain": np.asarray(plain).tolist(),
-                          "single": single}))
+                          "single": single, "calibrate": np.asarray(calib).tolist()}))
     """))
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
     run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=300)
@@ -71,4 +78,5 @@ def test_sweep_over_two_host_devices_matches_the_unsharded_result(tmp_path):
     out = json.loads(run.stdout.strip().splitlines()[-1])
     np.testing.assert_allclose(out["sharded"], out["plain"], rtol=1e-12)
     np.testing.assert_allclose(out["sharded"], out["single"], rtol=1e-9)
+    np.testing.assert_allclose(out["calibrate"], out["single"], rtol=1e-9)
     assert len(set(np.round(out["sharded"], 3))) == 5  # five different stiffnesses

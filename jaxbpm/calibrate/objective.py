@@ -540,6 +540,7 @@ class Problem:
         self.evaluations = 0
         self.solve_time = 0.0
         self._last = None  # (values, outputs) of the last single point: a repeated point costs no new solve
+        self._sweep_fn = None  # the one-set model function that sharded batches run (see outputs)
 
     # -------------------------------------------------------------- pieces
     @property
@@ -616,7 +617,15 @@ class Problem:
         t0 = time.perf_counter()
         if self.use_pure:
             base = self.space.base
-            if chunk is not None and len(vb) > chunk > 1:
+            if len(vb) > 1 and jax.device_count() > 1:
+                # several devices (GPUs, or host devices): the batch is sharded over all of them
+                from jaxbpm.sweep import sweep
+
+                if self._sweep_fn is None:
+                    vector, space_base = self._compiled("vector"), base
+                    self._sweep_fn = lambda v: vector(v, space_base)  # one function: sweep compiles it once
+                y = np.asarray(sweep(self._sweep_fn, jnp.asarray(vb), chunk=chunk))
+            elif chunk is not None and len(vb) > chunk > 1:
                 fn, parts = self._compiled("batch"), []
                 for a in range(0, len(vb), chunk):
                     part = vb[a:a + chunk]
