@@ -56,3 +56,18 @@ def table(rows: list[dict], columns: list[str], file=sys.stdout) -> None:
     print("  ".join(c.rjust(w) for c, w in zip(columns, widths)), file=file)
     for row in cells:
         print("  ".join(v.rjust(w) for v, w in zip(row, widths)), file=file)
+
+
+def save_png(fig, path, note: str | None = None, dpi: int = 130):
+    """Lay out ``fig`` (with ``note``, e.g. the machine, in small print at the bottom), write it to ``path``
+    atomically (never a half-written image) and close it. Returns the path."""
+    import matplotlib.pyplot as plt
+
+    from jaxbpm.io import _atomic_write
+
+    if note:
+        fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
+    fig.tight_layout(rect=(0, 0.03, 1, 1) if note else None)
+    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    plt.close(fig)
+    return path

@@ -31,7 +31,7 @@ import os
 import sys
 import time
 
-from _common import enable_x64, machine_info, pin_threads, table, write_json
+from _common import enable_x64, machine_info, pin_threads, save_png, table, write_json
 
 CASES = ("1-porous", "2-agglomerate", "3-shaped")
 
@@ -171,13 +171,7 @@ def plot(summary, path, note):
     h2, l2 = ax2.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper left", ncol=2)
     ax.set_title("DEM vs DSM vs STE on three case types (seed 000, Fig. 4 style)")
-    fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    from jaxbpm.io import _atomic_write
-
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
-    plt.close(fig)
-    return path
+    return save_png(fig, path, note)
 
 
 def main(argv=None) -> int:

@@ -61,7 +61,7 @@ import sys
 import time
 import warnings
 
-from _common import enable_x64, machine_info, pin_threads, table, write_json
+from _common import enable_x64, machine_info, pin_threads, save_png, table, write_json
 
 FULL_SIZES = [1000, 2000, 5000, 10000, 20000, 50000, 100000, 200000]
 QUICK_SIZES = [1000, 2000, 4000, 8000]
@@ -184,8 +184,6 @@ def plot(results, fits, path, note, skipped):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from jaxbpm.io import _atomic_write
-
     fig, ax = plt.subplots(figsize=(8, 6))
     colours = {"dem": "C3", "dsm": "C0", "ste": "C2"}
     allx = [r["particles"] for r in results]
@@ -219,11 +217,7 @@ def plot(results, fits, path, note, skipped):
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title("Computation time against particle count, uniaxial compression, bonds only\n"
                  "(seed 000, Fig. 5 style; lines: power laws fitted to the run times)", fontsize=10)
-    fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
-    plt.close(fig)
-    return path
+    return save_png(fig, path, note)
 
 
 # ---------------------------------------------------------------------------------------------------- main

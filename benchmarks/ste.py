@@ -32,7 +32,7 @@ import argparse
 import sys
 import time
 
-from _common import enable_x64, machine_info, table, write_json
+from _common import enable_x64, machine_info, save_png, table, write_json
 
 
 def log(msg):
@@ -165,9 +165,7 @@ def _plot(rows, exponent, path):
     ax.set_ylabel("run time [s]")
     ax.set_title(f"STE scaling (exponent {exponent:.2f})" if exponent is not None else "STE scaling")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_png(fig, path, dpi=120)
 
 
 if __name__ == "__main__":
