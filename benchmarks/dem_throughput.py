@@ -26,8 +26,13 @@ def main(argv=None) -> int:
     ap.add_argument("--physics", nargs="+", default=["bonds", "bonds+contacts"],
                     choices=["bonds", "bonds+contacts"])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--quick", action="store_true", help="1k and 10k particles, 500 timed steps")
     ap.add_argument("--out", default="results/dem_throughput.json")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.sizes, args.steps = [1000, 10000], 500
+        if args.out == "results/dem_throughput.json":
+            args.out = "results/dem_throughput_quick.json"
     pin_threads(args.threads)
     enable_x64()
 

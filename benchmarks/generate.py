@@ -82,7 +82,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--fallback-step", type=float, default=0.02)
     parser.add_argument("--min-packing-fraction", type=float, default=0.5)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--quick", action="store_true", help="1k and 5k particles")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.sizes = [1000, 5000]
+        if args.out == "results/generate.json":
+            args.out = "results/generate_quick.json"
 
     import jax
 

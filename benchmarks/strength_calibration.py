@@ -35,8 +35,13 @@ def main(argv=None):
     ap.add_argument("--fd-step", type=float, default=0.2, dest="fd_step")
     ap.add_argument("--transits", type=float, default=30.0)
     ap.add_argument("--schemes", default="simplified,original")
+    ap.add_argument("--quick", action="store_true", help="the simplified scheme only (the full run takes ~2 min)")
     ap.add_argument("--out", default="results/strength_calibration.json")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.schemes = "simplified"
+        if args.out == "results/strength_calibration.json":
+            args.out = "results/strength_calibration_quick.json"
     enable_x64()
     import numpy as np
 

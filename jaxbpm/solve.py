@@ -93,12 +93,13 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
         path = scene.transit_length(sample) if hasattr(scene, "transit_length") else length
         loading_time = transits * _transit_time(model, params, path)
     n_steps = int(np.ceil(loading_time / dt))
-    speed = target / (n_steps * dt)
     if chunk is None:
         chunk = int(np.clip(n_steps // 20, 50, 5000))
         if snapshots is not None and snapshots > 1:  # at least one chunk per frame after the first
             chunk = max(1, min(chunk, n_steps // (snapshots - 1)))
     n_steps = -(-n_steps // chunk) * chunk
+    # the speed from the steps actually run (whole chunks): the run ends exactly at the target
+    speed = target / (n_steps * dt)
     n_chunks = n_steps // chunk
     load = scene.loading(sample, speed)
     if progress is True:
