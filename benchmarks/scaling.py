@@ -46,11 +46,12 @@ repeats: real 2m43s). Run-time exponents over 1k-8k: DEM 2.02, DSM 1.33, STE 0.9
 noisy (the 2k DSM run took 0.69 s, the 4k one 0.30 s): fixed overheads and other jobs dominate, so the quick
 exponents are not the asymptotic ones -- the full run fits over >= 10k.
 
-Expected full run: ``python benchmarks/scaling.py --cache-dir results/samples`` -- sizes 1k, 2k, 5k, 10k, 20k, 50k,
-100k, 200k; DEM up to 50k (``--dem-max``; its run time grows like N^(4/3), about 1 min at 50k and an estimated
-20-30 min at 200k on 2 cores), DSM and STE at every size, 3 repeats, exponents fitted over >= 10k, time cap 1800 s
-per predicted run. Roughly 30-60 min on 2 cores with an empty cache (generation of 100k and 200k takes minutes),
-less with the cache filled.
+Full run (``python benchmarks/scaling.py --cache-dir results/samples --threads 1``, empty cache, one core, the
+other core busy with another benchmark): 12 min 38 s. Sizes 1k, 2k, 5k, 10k, 20k, 50k, 100k, 200k; DEM up to 50k
+(``--dem-max``), DSM and STE at every size, 3 repeats, time cap 1800 s per predicted run. Run times at 1k / 10k / 50k
+/ 200k particles: DEM 0.34 s / 6.2 s / 71.6 s / skipped; DSM 0.046 s / 0.74 s / 6.5 s / 38.7 s; STE 3.8 ms /
+45 ms / 0.24 s / 1.37 s; generation 6.4 s / 8.9 s / 19.6 s / 96.7 s. Exponents over >= 10k (20k-200k): DEM 1.51
+(20k-50k only), DSM 1.25, STE 1.18, generation 1.10.
 """
 
 from __future__ import annotations
