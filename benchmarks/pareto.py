@@ -61,9 +61,15 @@ average 7-9 during the run): real 4m39s, user 2m13s (698 particles, 1899 bonds; 
 parts: the DEM reference with contacts (13 s run + 11 s compile) and the three nonlinear DSM points with contacts
 (10-21 s run each, 20 s compile for the first).
 
-Expected full run: ``python benchmarks/pareto.py`` -- 3000 particles, both cases, 12 DEM settings + the reference
-per case, 7 linear tolerances, all variants above; roughly 20-40 min on 2 cores (the DEM reference with contacts and
-the nonlinear DSM, which compiles in every call, dominate).
+Full run (``python benchmarks/pareto.py --threads 1``, 2994 particles, one core): 28 min 34 s, most of it in
+the nonlinear DSM with contacts (34-435 s per point). Fronts: bonds only -- STE 3 DOF surface 0 (9.6 ms, +3.5 %),
+STE 6 DOF surface 0 (42 ms, -3.4 %), linear DSM stiffness_tol 1e-2 / 1e-3 / 1e-4 (65-76 ms, +0.18 / +0.12 / +0.12 %),
+nonlinear DSM tol 1e-2 (0.20 s, +0.036 %), DEM safety 0.9 / 40 transits (0.45 s, -0.035 %), nonlinear DSM tol 1e-3
+(0.63 s, 8e-6 %); the careful DEM (safety 0.25, 160 transits) is -0.004 % from the reference. Hertz contacts at
+1 % strain -- STE 3 DOF variants (5-12 ms, +24 % to +81 %), DEM safety 0.9 / 10 transits (0.81 s, -0.29 %), 20
+transits (1.5 s, -0.016 %), 40 (3.0 s, -0.004 %); the linear DSM is -47 %, the nonlinear (no-slip) DSM +29 % to
++32 % in 34-435 s (most solves stop unconverged at the Newton cap), the default STE +65 % (3 DOF) / +48 % (6 DOF):
+with contacts the DEM is the only usable method here.
 """
 
 from __future__ import annotations
