@@ -139,6 +139,9 @@ def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: 
         out["calibration"] = cal
         print(cal.table())
         check = cal.info.get("check", {})
+        for name, err in check.get("errors", {}).items():
+            print(f"DEM check at the answer: {name} {100 * float(np.max(np.abs(err))) * np.sign(np.sum(err)):+.3f} % "
+                  f"({check.get('wall_time', float('nan')):.2f} s)", flush=True)
         report["calibration"] = {"target_youngs_modulus": target, "values": cal.values, "method": cal.method,
                                  "evaluations": cal.evaluations, "levels": cal.levels, "wall_time": cal.wall_time,
                                  "errors": {k: float(np.max(np.abs(v))) for k, v in cal.errors.items()},
