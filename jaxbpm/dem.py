@@ -533,6 +533,7 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     n_chunks = -(-n_steps // chunk)  # every chunk has the same length, so the chunk function compiles once
     pre = _precompute(model, params)
     records, times, reallocs, stalled = [], [], 0, 0
+    crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"  # for the error messages
     report = _progress_fn(progress)
     done = state  # the state after the last completed chunk
     try:
@@ -545,7 +546,6 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
             # would only run it again (and again)
             vmax = float(jnp.max(rec["vmax"]))
             if not np.isfinite(vmax) or not bool(jnp.all(jnp.isfinite(new.positions))) or vmax * dt > 0.25 * r_min:
-                crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
                 raise InstabilityError(
                     f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
                     f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
@@ -555,7 +555,6 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
                 reallocs += 1
                 stalled += 1
                 if stalled > 4:
-                    crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"
                     raise InstabilityError(
                         f"DEM run stalled within steps {len(records) * chunk}..{(len(records) + 1) * chunk}: the "
                         f"neighbour list was re-allocated {stalled} times for the same chunk (particles moving too "

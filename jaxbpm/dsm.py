@@ -647,19 +647,17 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
         guess[top, ax] = -(1.0 - 0.5 * beta) * frac0 * delta
         free_lin = np.asarray(free).copy()
         free_lin[bottom | top, ax] = False
-        bonds_only = dataclasses.replace(model, walls=None)
-        u = _linear_jit(bonds_only, params, jnp.asarray(free_lin), jnp.asarray(guess, u_p.dtype), linear_tol, None)[0]
+        start_args = (dataclasses.replace(model, walls=None), params, jnp.asarray(free_lin),
+                      jnp.asarray(guess, u_p.dtype), linear_tol, None)
     else:
-        u = _linear_jit(model, params, free, frac0 * u_p, linear_tol, None, "auto", None, coarse)[0]
+        start_args = (model, params, free, frac0 * u_p, linear_tol, None, "auto", None, coarse)
+    u = _linear_jit(*start_args)[0]
     jax.block_until_ready(_newton_evaluate(sys, u, walls_at(frac0)))
     jax.block_until_ready(_newton_step(sys, u, walls_at(frac0), 1e-3))
     compile_time = time.perf_counter() - tc
     tr = time.perf_counter()
     # the starting bond solution is part of the run: solved again, now compiled, inside the run-time window
-    if uses_walls:
-        u = _linear_jit(bonds_only, params, jnp.asarray(free_lin), jnp.asarray(guess, u_p.dtype), linear_tol, None)[0]
-    else:
-        u = _linear_jit(model, params, free, frac0 * u_p, linear_tol, None, "auto", None, coarse)[0]
+    u = _linear_jit(*start_args)[0]
     history, step_reactions, converged_all, iterations = [], [], True, 0
     prev = None
     for frac in fractions:
