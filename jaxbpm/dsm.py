@@ -37,7 +37,7 @@ from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model
 
-__all__ = ["bond_jacobians", "block_diagonal", "stiffness_product", "tangent_operator", "linear_solve", "solve_scene",
+__all__ = ["bond_jacobians", "reduced_jacobians", "block_diagonal", "stiffness_product", "tangent_operator", "linear_solve", "solve_scene",
            "stiffness_function", "load_cases"]
 
 
@@ -70,47 +70,101 @@ def _internal_forces(model: Model, params, u, contacts=None, walls=None):
     return gen, parts
 
 
+def reduced_jacobians(model: Model, params) -> jnp.ndarray:
+    """Per-bond force Jacobians at rest in the reduced form the solver stores, ``[ni, no, nb]`` (components first,
+    bonds last): ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` with 6 DOF per particle (9 x 9 per bond), ``d f_i /
+    d d`` with 3 (3 x 3), where ``d = r0 + u_j - u_i`` is the bond vector. The bond law sees the displacements only
+    through ``d`` and ``f_j = -f_i``, so these numbers give the whole 12 x 12 (6 x 6) tangent (:func:`bond_jacobians`)
+    in 56 % (25 %) of its memory.
+
+    Forward-mode derivatives (one ``jax.jvp`` per input component, batched with ``vmap``) of the same bond law the
+    DEM runs, on ``[nb]`` component arrays. A rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the
+    exact map to first order, which is all a Jacobian at rest sees.
+    """
+    k = model.stiffness(params)
+    r0 = tuple(model.r0.T)
+    nb = model.r0.shape[0]
+    dtype = model.positions0.dtype
+    ni = 9 if model.rotations else 3
+    one, zero = jnp.ones(nb, dtype), jnp.zeros(nb, dtype)
+
+    def law(z):
+        d = tuple(r0[c] + z[c] for c in range(3))
+        if model.rotations:
+            qi = (one,) + tuple(0.5 * z[3 + c] for c in range(3))
+            qj = (one,) + tuple(0.5 * z[6 + c] for c in range(3))
+        else:
+            qi = qj = (one, zero, zero, zero)
+        out = bond_mod._law(d, r0, qi, qj, k.kn, k.kt, k.ktw, k.kb)
+        parts = (out.f_i + out.m_i + out.m_j) if model.rotations else out.f_i
+        return jnp.stack(parts)
+
+    z0 = jnp.zeros((ni, nb), dtype)
+    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
+    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+
+
+def _full_jacobians(jr) -> jnp.ndarray:
+    """``[nb, 2nd, 2nd]`` stiffness (minus the force Jacobian), DOF order (u_i, theta_i, u_j, theta_j), from the
+    reduced form of :func:`reduced_jacobians`."""
+    J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
+    jd = J[:, :, :3]
+    if J.shape[1] == 3:  # f_i from d; f_j = -f_i
+        row = jnp.concatenate([-jd, jd], axis=2)
+        return -jnp.concatenate([row, -row], axis=1)
+    rows = jnp.concatenate([-jd, J[:, :, 3:6], jd, J[:, :, 6:9]], axis=2)  # rows f_i, m_i, m_j
+    f_i, m_i, m_j = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
+    return -jnp.concatenate([f_i, m_i, -f_i, m_j], axis=1)
+
+
 def bond_jacobians(model: Model, params) -> jnp.ndarray:
     """Per-bond tangent stiffness ``[nb, 12, 12]`` (or ``[nb, 6, 6]`` without rotations) at rest, in the global
-    frame, DOF order (u_i, theta_i, u_j, theta_j): ``jax.jacfwd`` of the same bond law, minus sign (stiffness)."""
-    k = model.stiffness(params)
-    nd = 6 if model.rotations else 3
-
-    def one(r0, kn, kt, ktw, kb):
-        def f(z):
-            ui, uj = z[:3], z[nd:nd + 3]
-            if model.rotations:
-                qi, qj = rotation.from_rotation_vector(z[3:6]), rotation.from_rotation_vector(z[9:12])
-            else:
-                qi = qj = jnp.array([1.0, 0.0, 0.0, 0.0], r0.dtype)
-            out = bond_mod.bond_law(r0 + uj - ui, r0, qi, qj, kn, kt, ktw, kb)
-            parts = [out.f_i, out.m_i, -out.f_i, out.m_j] if model.rotations else [out.f_i, -out.f_i]
-            return jnp.concatenate(parts)
-
-        return -jax.jacfwd(f)(jnp.zeros(2 * nd, r0.dtype))
-
-    return jax.vmap(one)(model.r0, k.kn, k.kt, k.ktw, k.kb)
+    frame, DOF order (u_i, theta_i, u_j, theta_j): forward-mode derivatives of the same bond law
+    (:func:`reduced_jacobians`), minus sign (stiffness)."""
+    return _full_jacobians(reduced_jacobians(model, params))
 
 
-def stiffness_product(model: Model, jac, v):
-    """``K v`` for the whole sample from per-bond Jacobians ``jac`` (:func:`bond_jacobians`), element by element:
-    gather both ends of every bond, one ``[nb, 2nd, 2nd] x [nb, 2nd]`` batched product, scatter-add to the
-    particles. No global matrix is formed; ``K`` is the positive (stiffness) sign of the force Jacobian."""
+def stiffness_product(model: Model, jr, v):
+    """``K v`` for the whole sample from the reduced per-bond Jacobians ``jr`` (:func:`reduced_jacobians`), element
+    by element: gather both ends of every bond, ``ni x no`` multiply-adds per bond on ``[nb]`` arrays, one scatter
+    of both ends' rows (padded to 4 or 8 numbers, which XLA on CPU scatters fastest). No global matrix is formed;
+    ``K`` is the positive (stiffness) sign of the force Jacobian."""
     b = model.bonds
-    nd = jac.shape[1] // 2
-    z = jnp.concatenate([v[b[:, 0]], v[b[:, 1]]], axis=1)
-    y = jnp.einsum("bij,bj->bi", jac, z)
-    return jax.ops.segment_sum(jnp.concatenate([y[:, :nd], y[:, nd:]]), jnp.concatenate([b[:, 0], b[:, 1]]),
-                               model.n)
+    i, j = b[:, 0], b[:, 1]
+    vt = v.T
+    z = [vt[c, j] - vt[c, i] for c in range(3)]
+    if model.rotations:
+        z += [vt[3 + c, i] for c in range(3)] + [vt[3 + c, j] for c in range(3)]
+    y = jr[0] * z[0][None]
+    for c in range(1, len(z)):
+        y = y + jr[c] * z[c][None]  # force (f_i [, m_i, m_j]) rates, [no, nb]
+    zero = jnp.zeros_like(y[0])
+    if model.rotations:
+        rows_i = jnp.stack([-y[0], -y[1], -y[2], zero, -y[3], -y[4], -y[5], zero], axis=1)
+        rows_j = jnp.stack([y[0], y[1], y[2], zero, -y[6], -y[7], -y[8], zero], axis=1)
+    else:
+        rows_i = jnp.stack([-y[0], -y[1], -y[2], zero], axis=1)
+        rows_j = jnp.stack([y[0], y[1], y[2], zero], axis=1)
+    total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), model.n)
+    return jnp.concatenate([total[:, :3], total[:, 4:7]], axis=1) if model.rotations else total[:, :3]
 
 
 def block_diagonal(model: Model, params, jac=None) -> jnp.ndarray:
-    """Each particle's self-stiffness block ``[n, nd, nd]`` summed over its bonds."""
-    jac = bond_jacobians(model, params) if jac is None else jac
-    nd = jac.shape[1] // 2
-    n = model.n
-    blocks = jax.ops.segment_sum(jac[:, :nd, :nd], model.bonds[:, 0], n)
-    return blocks + jax.ops.segment_sum(jac[:, nd:, nd:], model.bonds[:, 1], n)
+    """Each particle's self-stiffness block ``[n, nd, nd]`` summed over its bonds (``jac``: the reduced Jacobians
+    of :func:`reduced_jacobians`)."""
+    jr = reduced_jacobians(model, params) if jac is None else jac
+    J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
+    if J.shape[1] == 3:
+        return (jax.ops.segment_sum(J, model.bonds[:, 0], model.n)
+                + jax.ops.segment_sum(J, model.bonds[:, 1], model.n))
+    # K_ii = [[J(f_i, d), -J(f_i, th_i)], [J(m_i, d), -J(m_i, th_i)]]
+    # K_jj = [[J(f_i, d), J(f_i, th_j)], [-J(m_j, d), -J(m_j, th_j)]]
+    k_ii = jnp.concatenate([jnp.concatenate([J[:, 0:3, 0:3], -J[:, 0:3, 3:6]], axis=2),
+                            jnp.concatenate([J[:, 3:6, 0:3], -J[:, 3:6, 3:6]], axis=2)], axis=1)
+    k_jj = jnp.concatenate([jnp.concatenate([J[:, 0:3, 0:3], J[:, 0:3, 6:9]], axis=2),
+                            jnp.concatenate([-J[:, 6:9, 0:3], -J[:, 6:9, 6:9]], axis=2)], axis=1)
+    return jax.ops.segment_sum(k_ii, model.bonds[:, 0], model.n) + jax.ops.segment_sum(k_jj, model.bonds[:, 1],
+                                                                                       model.n)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,10 +225,12 @@ def coarse_space(model: Model, free, *, aggregate_size=None) -> CoarseSpace:
 
 
 def _coarse_factor(model: Model, jac, coarse: CoarseSpace):
-    """Cholesky factor of the Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na], assembled bond by bond."""
-    na, nd = coarse.count, jac.shape[1] // 2
+    """Cholesky factor of the Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na], assembled bond by bond from the
+    coupling bonds (``jac``: reduced Jacobians of every bond, :func:`reduced_jacobians`)."""
+    na = coarse.count
     sel = coarse.bonds
-    jb = jac[sel]
+    jb = _full_jacobians(jac[:, :, sel])
+    nd = jb.shape[1] // 2
     i, j = model.bonds[sel, 0], model.bonds[sel, 1]
     pi, pj = coarse.basis[i], coarse.basis[j]
     ai, aj = coarse.labels[i], coarse.labels[j]
@@ -206,7 +262,7 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
     """Block-Jacobi: inverse of each particle's self-stiffness on its free DOFs (identity on the rest); with a
     :class:`CoarseSpace`, plus the coarse correction ``P (P^T K_ff P)^-1 P^T`` (additive two-level)."""
     if jac is None and coarse is not None:
-        jac = bond_jacobians(model, params)
+        jac = reduced_jacobians(model, params)
     jac = None if jac is None else jax.lax.stop_gradient(jac)
     blocks = jax.lax.stop_gradient(block_diagonal(model, params, jac))
     nd = blocks.shape[1]
@@ -248,22 +304,22 @@ jax.tree_util.register_dataclass(Preconditioner, data_fields=["inv", "free", "fa
 
 # ---------------------------------------------------------------------------------------------------- linear solve
 def tangent_operator(model: Model, params, *, operator="auto", walls=None):
-    """The stiffness operator at rest, ``v -> K v`` on all DOFs (``[n, nd]`` in and out), and the per-bond Jacobians
-    it uses (``None`` for ``"jvp"``).
+    """The stiffness operator at rest, ``v -> K v`` on all DOFs (``[n, nd]`` in and out), and the reduced per-bond
+    Jacobians it uses (:func:`reduced_jacobians`; ``None`` for ``"jvp"``).
 
-    operator: ``"jacobians"`` (per-bond Jacobians of the bond law at rest, :func:`bond_jacobians`, applied element
-    by element: :func:`stiffness_product`; bonds only), ``"jvp"`` (a Jacobian-vector product of the whole force
-    function at every application; any interaction) or ``"auto"`` (``"jacobians"`` unless the model has walls or
-    contacts). Both give the same operator to round-off: the Jacobians are ``jax.jacfwd`` of the same bond law. The
-    element-by-element product is 2-7x cheaper per application and keeps ``[nb, 2nd, 2nd]`` numbers in memory
-    (1.15 kB per bond with 6 DOF per particle, 0.29 kB with 3).
+    operator: ``"jacobians"`` (per-bond Jacobians of the bond law at rest, applied element by element:
+    :func:`stiffness_product`; bonds only), ``"jvp"`` (a Jacobian-vector product of the whole force function at
+    every application; any interaction) or ``"auto"`` (``"jacobians"`` unless the model has walls or contacts). Both
+    give the same operator to round-off: the Jacobians are forward-mode derivatives of the same bond law. The
+    element-by-element product is several times cheaper per application and keeps ``ni x no`` numbers per bond in
+    memory (648 bytes with 6 DOF per particle, 72 with 3).
     """
     if operator == "auto":
         operator = "jvp" if (walls is not None or model.walls is not None or model.contacts) else "jacobians"
     if operator == "jacobians":
         if walls is not None or model.walls is not None or model.contacts:
             raise SceneError("the 'jacobians' operator covers bonds only; use operator='jvp' with walls or contacts")
-        jac = bond_jacobians(model, params)
+        jac = reduced_jacobians(model, params)
         return (lambda v: stiffness_product(model, jac, v)), jac
     if operator != "jvp":
         raise ValueError(f"operator must be 'auto', 'jacobians' or 'jvp', got {operator!r}")

@@ -118,11 +118,25 @@ def test_element_by_element_operator_equals_the_force_jvp(packing, dofs):
     v = jnp.asarray(np.random.default_rng(0).normal(size=(model.n, dofs)) * 1e-6)
     ebe, jac = dsm.tangent_operator(model, p, operator="jacobians")
     jvp, none = dsm.tangent_operator(model, p, operator="jvp")
-    assert jac.shape == (model.bonds.shape[0], 2 * dofs, 2 * dofs) and none is None
+    ni = 9 if dofs == 6 else 3
+    assert jac.shape == (ni, ni, model.bonds.shape[0]) and none is None
     a, b = ebe(v), jvp(v)
     np.testing.assert_allclose(a, b, atol=1e-12 * float(jnp.abs(b).max()))
-    # the per-bond Jacobians are symmetric (the bond law has a potential at rest)
-    np.testing.assert_allclose(jac, jnp.swapaxes(jac, 1, 2), atol=1e-9 * float(jnp.abs(jac).max()))
+    # the full per-bond Jacobians are symmetric (the bond law has a potential at rest) and give the same product
+    full = dsm.bond_jacobians(model, p)
+    assert full.shape == (model.bonds.shape[0], 2 * dofs, 2 * dofs)
+    np.testing.assert_allclose(full, jnp.swapaxes(full, 1, 2), atol=1e-9 * float(jnp.abs(full).max()))
+    bonds = np.asarray(model.bonds)
+    z = jnp.concatenate([v[bonds[:, 0]], v[bonds[:, 1]]], axis=1)
+    y = jnp.einsum("bij,bj->bi", full, z)
+    c = jax.ops.segment_sum(jnp.concatenate([y[:, :dofs], y[:, dofs:]]), jnp.concatenate([bonds[:, 0], bonds[:, 1]]),
+                            model.n)
+    np.testing.assert_allclose(c, b, atol=1e-12 * float(jnp.abs(b).max()))
+    # and each particle's self block is the sum of its bonds' diagonal blocks
+    blocks = dsm.block_diagonal(model, p, jac)
+    ref = (jax.ops.segment_sum(full[:, :dofs, :dofs], bonds[:, 0], model.n)
+           + jax.ops.segment_sum(full[:, dofs:, dofs:], bonds[:, 1], model.n))
+    np.testing.assert_allclose(blocks, ref, atol=1e-12 * float(jnp.abs(ref).max()))
 
 
 def test_coarse_matrix_needs_only_the_coupling_bonds(packing):
@@ -130,7 +144,7 @@ def test_coarse_matrix_needs_only_the_coupling_bonds(packing):
     free = dsm._free_mask(model, UniaxialCompression(), packing)[0]
     coarse = dsm.coarse_space(model, free, aggregate_size=25)
     assert 4 <= coarse.count <= 16 and 0 < coarse.bonds.shape[0] < model.bonds.shape[0]
-    jac = dsm.bond_jacobians(model, default_params(packing))
+    jac = dsm.reduced_jacobians(model, default_params(packing))
     every = dataclasses.replace(coarse, bonds=jnp.arange(model.bonds.shape[0]))
     a, b = dsm._coarse_factor(model, jac, coarse), dsm._coarse_factor(model, jac, every)
     np.testing.assert_allclose(a @ a.T, b @ b.T, rtol=1e-8, atol=1e-10 * float(jnp.abs(b @ b.T).max()))
