@@ -36,7 +36,9 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     options for ``"dsm"``: ``dofs`` (3 or 6 per particle; default: the Model's choice, 6 with bonds), ``nonlinear``
     (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
-    Newton when the reaction changes less than this, relative), ``contact_skin`` [m], ``load_steps`` (nonlinear:
+    Newton when the reaction changes less than this, relative), ``slip`` (contacts slide at the Coulomb limit, True;
+    False: no slip, seed 000's assumption, which overestimates K where contacts slide), ``contact_skin`` [m],
+    ``load_steps`` (nonlinear:
     equal load increments, 4; K is their least-squares slope over the scene's fit range, as for the DEM), ``throw``
     (raise :class:`ConvergenceError` instead of warning when a solve misses its tolerance).
     options for ``"ste"`` (stiffness tensor estimation, no displacement computed): ``dofs`` (3, the paper's

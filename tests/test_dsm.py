@@ -53,6 +53,28 @@ def test_nonlinear_dsm_matches_dem(packing, scene):
     assert abs(a.stiffness / b.stiffness - 1) < 6e-2, (a.stiffness, b.stiffness)
 
 
+def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
+    # stiff particles, soft bonds: contacts carry the load and most of them slide in the DEM (friction 0.5)
+    s = jaxbpm.generate.box(200, seed=3, mean_radius=R, packing_fraction=0.5, materials={"E": 1e8, "nu": 0.25},
+                            particle_material={"E": 1e10, "nu": 0.25, "density": 2500.0, "friction": 0.5,
+                                               "restitution": 0.5}).largest_cluster()
+    scene = UniaxialCompression(strain=0.005, contacts=True)
+    dem = jaxbpm.solve(s, scene, method="dem")
+    slip = jaxbpm.solve(s, scene, method="dsm")
+    with pytest.warns(UserWarning, match="did not converge"):  # Newton stalls without slip here (a known limit)
+        stick = jaxbpm.solve(s, scene, method="dsm", slip=False)
+    assert slip.stats["slip"] and not stick.stats["slip"]
+    err_slip, err_stick = slip.stiffness / dem.stiffness - 1, stick.stiffness / dem.stiffness - 1
+    assert abs(err_slip) < 0.03 and err_stick > 0.1, (err_slip, err_stick)
+    # with a friction no contact reaches, the two are the same law (on a sample where both converge tightly)
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    rough = packing.replace(particle_material=dataclasses.replace(packing.particle_material, friction=1e3))
+    a = jaxbpm.solve(rough, scene, method="dsm", tol=1e-6)
+    b = jaxbpm.solve(packing, scene, method="dsm", slip=False, tol=1e-6)
+    assert a.stats["converged"] and b.stats["converged"]
+    np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-5)
+
+
 def test_gradient_matches_central_differences():
     s = jaxbpm.generate.lattice("fcc", (2, 2, 3), R, bond_radius_ratio=0.5, materials={"E": [1e9, 2e9], "nu": 0.3})
     s = jaxbpm.generate.mix_materials(s, [0.4, 0.6], seed=1)
