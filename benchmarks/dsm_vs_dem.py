@@ -29,8 +29,9 @@ What is compared (the SAME sample for every method of one size)
   (COO -> CSC, restriction), factorisation, solve; ``--repeats`` times (min / median). The assembled matrix is
   checked against the DSM operator (``K v`` vs the jvp on a random ``v``), the stiffness against the DSM-6 one.
 * Nonlinear DSM with Hertz contacts (``contacts=True``: Newton-Krylov over 4 load steps, contact candidates fixed
-  at rest, no slip) vs DEM with contacts (Hertz-Mindlin, neighbour list) at ``--contact-sizes``. The nonlinear DSM
-  compiles inside every call (its jitted steps are closures), so each repeat pays it again; run time excludes it.
+  at rest, sliding at the Coulomb limit: the library's defaults) vs DEM with contacts (Hertz-Mindlin, neighbour
+  list) at ``--contact-sizes``. The nonlinear DSM compiles inside every call (its jitted steps are closures), so
+  each repeat pays it again; run time excludes it.
 
 Speed-ups are run time to run time (compilation excluded on both sides) and wall to wall (each method's whole
 ``solve`` call, compilation and setup included, first call). splu: "total" = Jacobians + assembly + factorisation +

@@ -25,13 +25,14 @@ Points (each one ``jaxbpm.solve`` call; run time = the library's ``run_time``, c
 * DSM linear (bonds only; in the ``hertz`` case it ignores the contacts): CG relative residual ``linear_tol``
   1e-2 ... 1e-8 (6 DOF), ``stiffness_tol`` 1e-2 / 1e-3 / 1e-4 (stop once the strain energy settles; with
   ``linear_tol`` 1e-10), 3 DOF (translations only), block-Jacobi preconditioner instead of the two-level one.
-* DSM nonlinear (Newton-Krylov, 4 load steps, no slip, contact candidates fixed at rest, K fitted over the same
+* DSM nonlinear (Newton-Krylov, 4 load steps, contacts sliding at the Coulomb limit (the library's default),
+  contact candidates fixed at rest, K fitted over the same
   range as the DEM's): Newton tolerance ``tol`` 1e-2, 1e-3, 1e-4, 1e-6, 1e-8 (``--quick``: bonds 1e-2, 1e-4; hertz
   1e-2, 1e-3), ``stiffness_tol`` 1e-3 (full run also 1e-2), 3 DOF (full run). In the ``bonds`` case it solves the
-  geometrically nonlinear static problem of the bonds alone. With contacts Newton stalls near a relative residual of
-  1e-5 (700 particles, strain 0.01: ``tol=1e-5`` ran 30 Newton iterations per load step, 112 s, and stopped
-  unconverged), so the ``hertz`` points below 1e-4 are capped at ``newton_maxiter=10`` and drawn hollow when they
-  miss their tolerance. It compiles inside every call; run time excludes that. The library's ``run_time`` of the
+  geometrically nonlinear static problem of the bonds alone. With contacts Newton can stall near a relative residual
+  of 1e-5 (measured without slip, 700 particles, strain 0.01: ``tol=1e-5`` ran 30 Newton iterations per load
+  step, 112 s, and stopped unconverged), so the ``hertz`` points below 1e-4 are capped at ``newton_maxiter=10``
+  and drawn hollow when they miss their tolerance. It compiles inside every call; run time excludes that. The library's ``run_time`` of the
   nonlinear DSM leaves out its starting point (a linear bond solve, run together with the compilation); the run
   time used here adds it back, measured as a linear DSM call with the same DOFs and CG tolerance
   (``run_s_library`` and ``start_solve_s`` in the JSON).

@@ -15,14 +15,15 @@ section of ``results/stability.json`` (``results/stability_quick.json`` with ``-
    goes from 1e7 to 1e10 Pa with the particles fixed at 1e10 Pa. Reference: the DEM with contacts. Contact share
    = 1 - K_bonds_only / K_with_contacts, both from the DEM. Also the linear (bonds-only) DSM against the same
    reference, and the STE without contacts against the bonds-only DEM (the STE's own error).
-2. ``dsm_strain`` -- the nonlinear DSM (Newton-Krylov, no-slip Hertz contacts) at strains 0.1 % to 5 %: Newton
-   iterations, converged flag, final relative residual and stiffness error against the DEM. Newton is capped
+2. ``dsm_strain`` -- the nonlinear DSM (Newton-Krylov, Hertz contacts) at strains 0.1 % to 5 %, with slip at the
+   Coulomb limit (the default) and without slip (``slip=False``, seed 000's assumption): Newton iterations,
+   converged flag, final relative residual and stiffness error against the DEM. Newton is capped
    (``--newton-maxiter`` per load step, ``--krylov-restarts`` GMRES restarts of 40 vectors) so no solve runs for
    minutes; a solve that misses the tolerance at the cap counts as not converged.
-3. ``dsm_sliding`` -- the DSM assumes no slip; the DEM's Coulomb limit lets contacts slide. The friction
-   coefficient goes from 0.05 to 1 (and 10, near no-slip); the sliding contacts are counted in the DEM's final
-   state (|F_t| >= 0.99 mu F_n, recomputed from the stored tangential springs: the DEM state does not expose the
-   count). The DSM lifts the Coulomb limit, so one DSM solve serves every friction coefficient.
+3. ``dsm_sliding`` -- the DEM's Coulomb limit lets contacts slide. The friction coefficient goes from 0.05 to 1
+   (and 10, near no-slip); the sliding contacts are counted in the DEM's final state (|F_t| >= 0.99 mu F_n,
+   recomputed from the stored tangential springs: the DEM state does not expose the count). The no-slip DSM lifts
+   the Coulomb limit (one solve serves every friction coefficient); the DSM with slip is solved per coefficient.
 4. ``dem_time_step`` -- the DEM time step as a multiple of the critical step estimate (power iteration on the bonds
    plus a contact term), bonds only and with contacts: stable (K within 1 % of the run at the default step),
    inaccurate (finishes, K off), the library's InstabilityError, or a neighbour-list re-allocation loop (see
@@ -292,26 +293,37 @@ def study_dsm_strain(sample, args, cache):
         log(f"  strain {100 * strain:g} %")
         dem, _ = run_dem(sample, scene, p, args.budget, chunk=args.chunk)
         dsm = run_dsm(sample, scene, p, **opts)
+        dsm_ns = run_dsm(sample, scene, p, slip=False, **opts)
         cache[("dsm", strain)] = dsm
+        cache[("dsm_noslip", strain)] = dsm_ns
         cache[("dem", strain)] = dem
         dem_b, _ = run_dem(sample, UniaxialCompression(strain=strain), p, args.budget, chunk=args.chunk)
         row = {"strain": strain, "K_dem": dem.get("K"), "K_dsm": dsm.get("K"), "converged": dsm.get("converged"),
                "iterations": dsm.get("iterations"), "residual": dsm.get("residual"), "error": rel(dsm, dem),
                "contact_share": None if rel(dem_b, dem) is None else -rel(dem_b, dem),
-               "dsm_run_s": dsm.get("run_s"), "runs": {"dem": dem, "dsm": dsm, "dem_bonds": dem_b}}
+               "dsm_run_s": dsm.get("run_s"), "K_dsm_noslip": dsm_ns.get("K"),
+               "error_noslip": rel(dsm_ns, dem), "converged_noslip": dsm_ns.get("converged"),
+               "residual_noslip": dsm_ns.get("residual"), "dsm_noslip_run_s": dsm_ns.get("run_s"),
+               "runs": {"dem": dem, "dsm": dsm, "dsm_noslip": dsm_ns, "dem_bonds": dem_b}}
+        log(f"    no-slip DSM {pct(row['error_noslip'])} vs DEM, converged {row['converged_noslip']}")
         log(f"    DSM {pct(row['error'])} vs DEM, converged {row['converged']}, {row['iterations']} iterations, "
             f"residual {row['residual']}, {dsm.get('wall_s', 0):.1f} s"
             + "".join(f"; {k} FAILED {v['error']}" for k, v in row["runs"].items() if "error" in v))
         rows.append(row)
-    print(f"\n[2] Nonlinear DSM (no-slip Hertz contacts) vs strain (E_b = {args.mid_E:.3g} Pa, at most "
+    print(f"\n[2] Nonlinear DSM (Hertz contacts sliding at the Coulomb limit, the default; and without slip) vs "
+          f"strain (E_b = {args.mid_E:.3g} Pa, at most "
           f"{args.newton_maxiter} Newton iterations per load step x {args.load_steps} steps, "
           f"{args.krylov_restarts} GMRES restarts; converged: every load step reached the 1e-3 tolerance; residual: "
           "at the last load step)")
     table([{"strain %": 100 * r["strain"], "contact share %": _p(r["contact_share"]),
             "converged": r["converged"] if r["K_dsm"] is not None else "FAILED", "Newton its": r["iterations"],
             "residual": r["residual"] if r["residual"] is not None else float("nan"), "DSM err %": _p(r["error"]),
-            "DSM run s": r["dsm_run_s"] if r["dsm_run_s"] is not None else float("nan")} for r in rows],
-          ["strain %", "contact share %", "converged", "Newton its", "residual", "DSM err %", "DSM run s"])
+            "DSM run s": r["dsm_run_s"] if r["dsm_run_s"] is not None else float("nan"),
+            "no-slip err %": _p(r["error_noslip"]), "no-slip conv.": r["converged_noslip"],
+            "no-slip run s": r["dsm_noslip_run_s"] if r["dsm_noslip_run_s"] is not None else float("nan")}
+           for r in rows],
+          ["strain %", "contact share %", "converged", "Newton its", "residual", "DSM err %", "DSM run s",
+           "no-slip err %", "no-slip conv.", "no-slip run s"])
     conv = [r for r in rows if r["converged"]]
     fail = [r for r in rows if not r["converged"]]
     conclusions = []
@@ -333,6 +345,11 @@ def study_dsm_strain(sample, args, cache):
                            if abs(errs[-1][1]) > abs(errs[0][1]) else
                            f"the DSM's stiffness error does not grow with strain ({pct(errs[0][1])} at "
                            f"{100 * errs[0][0]:g} %, {pct(errs[-1][1])} at {100 * errs[-1][0]:g} %)")
+    ns = [(r["strain"], r["error_noslip"]) for r in rows if r["error_noslip"] is not None]
+    if ns:
+        conclusions.append("without slip (seed 000's assumption) the error is "
+                           + ", ".join(f"{pct(e)} at {100 * x:g} %" for x, e in ns)
+                           + f"; {sum(bool(r['converged_noslip']) for r in rows)} of {len(rows)} such solves converge")
     return {"reference": "DEM with contacts", "bond_E": args.mid_E,
             "dsm_options": {**opts, "tol": 1e-3}, "rows": rows, "conclusions": conclusions}
 
@@ -343,28 +360,34 @@ def study_dsm_sliding(sample, args, cache):
     p = params_for(args.mid_E)
     scene = UniaxialCompression(strain=args.strain, contacts=True)
     opts = dict(newton_maxiter=args.newton_maxiter, maxiter=args.krylov_restarts, load_steps=args.load_steps)
-    dsm = cache.get(("dsm", args.strain))
+    dsm = cache.get(("dsm_noslip", args.strain))
     if dsm is None:
-        log("  DSM (friction plays no part: the static solve lifts the Coulomb limit)")
-        dsm = run_dsm(sample, scene, p, **opts)
+        log("  no-slip DSM (friction plays no part: it lifts the Coulomb limit)")
+        dsm = run_dsm(sample, scene, p, slip=False, **opts)
     rows = []
     for mu in args.frictions:
         s_mu = sample.replace(particle_material={**PARTICLE, "friction": mu})
         dem, res = run_dem(s_mu, scene, p, args.budget, chunk=args.chunk)
         slide = sliding_contacts(s_mu, res) if res is not None else {}
+        slip = cache.get(("dsm", args.strain)) if mu == PARTICLE["friction"] else None
+        slip = run_dsm(s_mu, scene, p, **opts) if slip is None else slip
         row = {"friction": mu, "K_dem": dem.get("K"), "K_dsm": dsm.get("K"), "dsm_converged": dsm.get("converged"),
-               "error": rel(dsm, dem), **slide, "runs": {"dem": dem}}
-        log(f"  mu = {mu:g}: {slide.get('sliding')} of {slide.get('active')} contacts sliding, DSM "
-            f"{pct(row['error'])} vs DEM" + (f"; DEM FAILED {dem['error']}" if "error" in dem else ""))
+               "error": rel(dsm, dem), "K_dsm_slip": slip.get("K"), "error_slip": rel(slip, dem),
+               "slip_converged": slip.get("converged"), **slide, "runs": {"dem": dem, "dsm_slip": slip}}
+        log(f"  mu = {mu:g}: {slide.get('sliding')} of {slide.get('active')} contacts sliding, no-slip DSM "
+            f"{pct(row['error'])}, DSM with slip {pct(row['error_slip'])} vs DEM"
+            + (f"; DEM FAILED {dem['error']}" if "error" in dem else ""))
         rows.append(row)
     print(f"\n[3] Nonlinear DSM (no slip) vs sliding contacts in the DEM (strain {100 * args.strain:g} %, E_b = "
           f"{args.mid_E:.3g} Pa; DSM converged: {dsm.get('converged')}, K_DSM = {dsm.get('K', float('nan')):.4g} N/m)")
     table([{"friction": r["friction"], "active contacts": r.get("active", ""), "sliding": r.get("sliding", ""),
             "sliding %": _p(r.get("sliding_fraction")),
             "F_n on sliding %": _p(r.get("sliding_normal_force_fraction")),
-            "K DEM [N/m]": r["K_dem"] if r["K_dem"] is not None else "FAILED", "DSM err %": _p(r["error"])}
+            "K DEM [N/m]": r["K_dem"] if r["K_dem"] is not None else "FAILED", "no-slip DSM err %": _p(r["error"]),
+            "DSM (slip) err %": _p(r["error_slip"]), "slip conv.": r["slip_converged"]}
            for r in rows],
-          ["friction", "active contacts", "sliding", "sliding %", "F_n on sliding %", "K DEM [N/m]", "DSM err %"])
+          ["friction", "active contacts", "sliding", "sliding %", "F_n on sliding %", "K DEM [N/m]",
+           "no-slip DSM err %", "DSM (slip) err %", "slip conv."])
     ok = [r for r in rows if r["error"] is not None and "sliding_fraction" in r]
     conclusions = []
     if ok:
@@ -389,6 +412,12 @@ def study_dsm_sliding(sample, args, cache):
                                f"{dsm.get('residual', float('nan')):.2g}, above the 1e-3 tolerance; its agreement "
                                f"with the DEM at mu = {least['friction']:g} ({pct(least['error'])}) shows the "
                                "stiffness is nevertheless close)")
+        es = [r["error_slip"] for r in ok if r["error_slip"] is not None]
+        if es:
+            conclusions.append(f"the DSM with slip (the default) is within {pct(min(es, key=abs))} to "
+                               f"{pct(max(es, key=abs))} of the DEM over mu = {ok[0]['friction']:g} to "
+                               f"{ok[-1]['friction']:g} ({sum(bool(r['slip_converged']) for r in ok)} of {len(ok)} "
+                               "solves converged to the 1e-3 residual)")
         if abs(least["error"]) > 0.05:
             conclusions.append(f"even with few sliding contacts (mu = {least['friction']:g}) the DSM is "
                                f"{pct(least['error'])} off: slip explains only part of its error at this strain")
@@ -536,11 +565,14 @@ def plot_study(name, data, path, note):
         rows = data["rows"]
         fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.5))
         x = arr(rows, "strain", 100)
-        err = arr(rows, "error", 100)
-        conv = np.array([bool(r["converged"]) for r in rows])
-        ax.plot(x, err, "-", color="C0")
-        ax.plot(x[conv], err[conv], "o", color="C0", label="converged")
-        ax.plot(x[~conv], err[~conv], "o", mfc="none", color="C3", label="not converged")
+        for key, ckey, color, label in (("error", "converged", "C0", "with slip (default)"),
+                                        ("error_noslip", "converged_noslip", "C1", "no slip")):
+            err = arr(rows, key, 100)
+            conv = np.array([bool(r[ckey]) for r in rows])
+            ax.plot(x, err, "-", color=color)
+            ax.plot(x[conv], err[conv], "o", color=color, label=f"{label}, converged")
+            ax.plot(x[~conv], err[~conv], "o", mfc="none", color=color, label=f"{label}, not converged")
+        ax.axhline(0.0, color="0.5", lw=0.6)
         ax.set_xscale("log")
         ax.set_xlabel("strain [%]")
         ax.set_ylabel("DSM stiffness error vs DEM [%]")
@@ -567,12 +599,16 @@ def plot_study(name, data, path, note):
         ax.set_ylabel("share in the DEM's final state [%]")
         ax.legend(fontsize=8)
         ax.set_title("sliding contacts (|F_t| >= 0.99 mu F_n)")
-        bx.plot(arr(rows, "sliding_fraction", 100), arr(rows, "error", 100), "o-")
+        bx.plot(arr(rows, "sliding_fraction", 100), arr(rows, "error", 100), "o-", color="C1", label="no slip")
+        bx.plot(arr(rows, "sliding_fraction", 100), arr(rows, "error_slip", 100), "s-", color="C0",
+                label="with slip (default)")
+        bx.axhline(0.0, color="0.5", lw=0.6)
+        bx.legend(fontsize=8)
         for r in rows:
             if r.get("sliding_fraction") is not None and r["error"] is not None:
                 bx.annotate(f"mu={r['friction']:g}", (100 * r["sliding_fraction"], 100 * r["error"]), fontsize=7)
         bx.set_xlabel("contacts sliding in the DEM [%]")
-        bx.set_ylabel("no-slip DSM stiffness error vs DEM [%]")
+        bx.set_ylabel("DSM stiffness error vs DEM [%]")
         bx.set_title("DSM error vs sliding")
     else:
         fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.5))

@@ -41,7 +41,8 @@ from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model
 
-__all__ = ["bond_jacobians", "reduced_jacobians", "block_diagonal", "stiffness_product", "tangent_operator", "linear_solve", "solve_scene",
+__all__ = ["bond_jacobians", "reduced_jacobians", "block_diagonal", "stiffness_product", "tangent_operator",
+           "linear_solve", "solve_scene",
            "stiffness_function", "load_cases"]
 
 
