@@ -378,8 +378,9 @@ def study_dsm_sliding(sample, args, cache):
             f"{pct(row['error'])}, DSM with slip {pct(row['error_slip'])} vs DEM"
             + (f"; DEM FAILED {dem['error']}" if "error" in dem else ""))
         rows.append(row)
-    print(f"\n[3] Nonlinear DSM (no slip) vs sliding contacts in the DEM (strain {100 * args.strain:g} %, E_b = "
-          f"{args.mid_E:.3g} Pa; DSM converged: {dsm.get('converged')}, K_DSM = {dsm.get('K', float('nan')):.4g} N/m)")
+    print(f"\n[3] Nonlinear DSM, no slip and with slip, vs sliding contacts in the DEM (strain "
+          f"{100 * args.strain:g} %, E_b = {args.mid_E:.3g} Pa; no-slip DSM converged: {dsm.get('converged')}, "
+          f"K = {dsm.get('K', float('nan')):.4g} N/m)")
     table([{"friction": r["friction"], "active contacts": r.get("active", ""), "sliding": r.get("sliding", ""),
             "sliding %": _p(r.get("sliding_fraction")),
             "F_n on sliding %": _p(r.get("sliding_normal_force_fraction")),
@@ -408,7 +409,7 @@ def study_dsm_sliding(sample, args, cache):
                                    f"{np.corrcoef(x, y)[0, 1]:.2f} ({100 * slope / 10:+.1f} % error per 10 % more "
                                    "contacts sliding)")
         if not dsm.get("converged"):
-            conclusions.append(f"(the DSM solve at this strain stopped at residual "
+            conclusions.append(f"(the no-slip DSM solve at this strain stopped at residual "
                                f"{dsm.get('residual', float('nan')):.2g}, above the 1e-3 tolerance; its agreement "
                                f"with the DEM at mu = {least['friction']:g} ({pct(least['error'])}) shows the "
                                "stiffness is nevertheless close)")
