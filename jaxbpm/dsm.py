@@ -4,11 +4,12 @@ Unknowns are the displacements (and, with 6 DOF per particle, the rotation vecto
 clamped ones are prescribed by the scene. The residual is the Model's force function itself, so DSM and DEM differ
 only by the approximations the method names: no inertia, small motion (linear DSM) and fixed contact candidates.
 
-* **Linear** (bonds only): ``K_ff u_f = -K_fp u_p`` with ``K v`` a Jacobian-vector product of the forces at rest
-  (``jax.jvp``; never an assembled matrix), solved by ``jax.scipy.sparse.linalg.cg`` with a block-Jacobi
-  preconditioner (each particle's 6x6 (or 3x3) self-stiffness, from per-bond Jacobians of the same bond law).
-  ``cg`` is a ``lax.custom_linear_solve``: derivatives with respect to the bond parameters come from implicit
-  differentiation, not from unrolling the iterations; ``vmap`` over parameter sets works.
+* **Linear** (bonds only): ``K_ff u_f = -K_fp u_p`` with ``K v`` applied bond by bond from per-bond Jacobians of the
+  same bond law at rest (forward-mode derivatives, :func:`reduced_jacobians`; or a ``jax.jvp`` of the whole force
+  function, ``operator="jvp"``; never an assembled matrix), solved by preconditioned CG (block-Jacobi from each
+  particle's 6x6 (or 3x3) self-stiffness, plus by default a coarse space of the rigid modes of particle
+  aggregates). The CG runs inside ``lax.custom_linear_solve``: derivatives with respect to the bond parameters come
+  from implicit differentiation, not from unrolling the iterations; ``vmap`` over parameter sets works.
 * **Nonlinear** (Hertz contacts, walls): Newton-Krylov, started from the linear bond solution; each Newton step
   solves the tangent system (jvp at the current state) with GMRES, then a backtracking line search on the residual
   norm. Contact candidates are the pairs within reach at rest (fixed in advance); a contact's tangential spring is the
