@@ -39,6 +39,7 @@ import numpy as np
 
 from jaxbpm.errors import ConvergenceError, SceneError
 from jaxbpm.physics import bond as bond_mod
+from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model
 
@@ -55,8 +56,9 @@ def _configuration(model: Model, u):
     return x, q
 
 
-def _internal_forces(model: Model, params, u, contacts=None, walls=None):
-    """Generalised forces ``[n, 3 or 6]`` (forces, then moments) at the DOF state ``u``."""
+def _internal_forces(model: Model, params, u, contacts=None, walls=None, bonds=True):
+    """Generalised forces ``[n, 3 or 6]`` (forces, then moments) at the DOF state ``u``; ``bonds=False`` leaves the
+    bonds out (contacts and walls only)."""
     x, q = _configuration(model, u)
     con = None
     if contacts is not None:
@@ -71,12 +73,13 @@ def _internal_forces(model: Model, params, u, contacts=None, walls=None):
         zeros = jnp.zeros_like(dxi)
         con = (pairs, valid, zeros, dxi, zeros)
     wp, wn = (None, None) if walls is None else walls
-    f, m, parts = model.forces(x, q, params, contacts=con, wall_points=wp, wall_normals=wn)
+    intact = None if bonds else jnp.zeros(model.bonds.shape[0], bool)
+    f, m, parts = model.forces(x, q, params, intact=intact, contacts=con, wall_points=wp, wall_normals=wn)
     gen = jnp.concatenate([f, m], axis=1) if model.rotations else f
     return gen, parts
 
 
-def reduced_jacobians(model: Model, params) -> jnp.ndarray:
+def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
     """Per-bond force Jacobians at rest in the reduced form the solver stores, ``[ni, no, nb]`` (components first,
     bonds last): ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` with 6 DOF per particle (9 x 9 per bond), ``d f_i /
     d d`` with 3 (3 x 3), where ``d = r0 + u_j - u_i`` is the bond vector. The bond law sees the displacements only
@@ -85,7 +88,8 @@ def reduced_jacobians(model: Model, params) -> jnp.ndarray:
 
     Forward-mode derivatives (one ``jax.jvp`` per input component, batched with ``vmap``) of the same bond law the
     DEM runs, on ``[nb]`` component arrays. A rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the
-    exact map to first order, which is all a Jacobian at rest sees.
+    exact map to first order, which is all a Jacobian at rest sees. With a DOF state ``u`` ``[n, nd]`` the Jacobians
+    are taken there instead (the tangent of a deformed configuration; rotations through the exact map).
     """
     k = model.stiffness(params)
     r0 = tuple(model.r0.T)
@@ -96,16 +100,23 @@ def reduced_jacobians(model: Model, params) -> jnp.ndarray:
 
     def law(z):
         d = tuple(r0[c] + z[c] for c in range(3))
-        if model.rotations:
+        if not model.rotations:
+            qi = qj = (one, zero, zero, zero)
+        elif u is None:
             qi = (one,) + tuple(0.5 * z[3 + c] for c in range(3))
             qj = (one,) + tuple(0.5 * z[6 + c] for c in range(3))
         else:
-            qi = qj = (one, zero, zero, zero)
+            qi = tuple(rotation.from_rotation_vector(z[3:6].T).T)
+            qj = tuple(rotation.from_rotation_vector(z[6:9].T).T)
         out = bond_mod._law(d, r0, qi, qj, k.kn, k.kt, k.ktw, k.kb)
         parts = (out.f_i + out.m_i + out.m_j) if model.rotations else out.f_i
         return jnp.stack(parts)
 
     z0 = jnp.zeros((ni, nb), dtype)
+    if u is not None:
+        i, j = model.bonds[:, 0], model.bonds[:, 1]
+        ut = u.T
+        z0 = jnp.concatenate([ut[:3, j] - ut[:3, i]] + ([ut[3:, i], ut[3:, j]] if model.rotations else []))
     basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
     return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
 
@@ -141,9 +152,21 @@ def stiffness_product(model: Model, jr, v):
     z = [vt[c, j] - vt[c, i] for c in range(3)]
     if model.rotations:
         z += [vt[3 + c, i] for c in range(3)] + [vt[3 + c, j] for c in range(3)]
+    return _scatter_pairs(model, i, j, _apply(jr, z))
+
+
+def _apply(jr, z):
+    """``sum_c jr[c] z[c]``: the force rates ``[no, P]`` of pairs from their reduced Jacobians ``[ni, no, P]`` and
+    the ``ni`` input components ``z`` (``[P]`` each)."""
     y = jr[0] * z[0][None]
     for c in range(1, len(z)):
-        y = y + jr[c] * z[c][None]  # force (f_i [, m_i, m_j]) rates, [no, nb]
+        y = y + jr[c] * z[c][None]
+    return y
+
+
+def _scatter_pairs(model: Model, i, j, y):
+    """Stiffness product from pair force rates ``y`` = (f_i [, m_i, m_j]) ``[no, P]``: particle i gets minus
+    (f_i [, m_i]), j gets (f_i [, -m_j]) (``f_j = -f_i``); one scatter of rows of 4 or 8 numbers."""
     zero = jnp.zeros_like(y[0])
     if model.rotations:
         rows_i = jnp.stack([-y[0], -y[1], -y[2], zero, -y[3], -y[4], -y[5], zero], axis=1)
@@ -153,6 +176,45 @@ def stiffness_product(model: Model, jr, v):
         rows_j = jnp.stack([y[0], y[1], y[2], zero], axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), model.n)
     return jnp.concatenate([total[:, :3], total[:, 4:7]], axis=1) if model.rotations else total[:, :3]
+
+
+def _contact_jacobians(model: Model, pairs, u) -> jnp.ndarray:
+    """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u``: ``[2nd, no, C]``,
+    ``d (f_i [, m_i, m_j]) / d (u_i [, theta_i], u_j [, theta_j])``, by batched jvps of the same contact law the
+    DEM runs (the tangential spring is the contact points' relative tangential displacement since rest, as in
+    :func:`_internal_forces`)."""
+    rot = model.rotations
+    nd = 6 if rot else 3
+    i, j = pairs[:, 0], pairs[:, 1]
+    p0 = model.positions0.T
+    r_i, r_j, m_i, m_j = model.radii[i], model.radii[j], model.mass[i], model.mass[j]
+    zero = jnp.zeros(pairs.shape[0], u.dtype)
+    ut = u.T
+    z0 = jnp.concatenate([ut[:, i], ut[:, j]])
+
+    def law(z):
+        ui, uj = z[0:3], z[nd:nd + 3]
+        d = tuple(p0[c, j] + uj[c] - p0[c, i] - ui[c] for c in range(3))
+        inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        n = tuple(c * inv for c in d)
+        dxi = tuple(uj[c] - ui[c] for c in range(3))
+        if rot:  # + theta_j x (-r_j n) - theta_i x (r_i n)
+            a = bond_mod._cross(tuple(z[9 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
+            b = bond_mod._cross(tuple(z[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
+            dxi = tuple(dxi[c] + a[c] - b[c] for c in range(3))
+        out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
+        return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
+
+    basis = jnp.broadcast_to(jnp.eye(2 * nd, dtype=u.dtype)[:, :, None], (2 * nd, 2 * nd, pairs.shape[0]))
+    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+
+
+def _contact_product(model: Model, pairs, jc, v):
+    """``K v`` of the contacts from :func:`_contact_jacobians`."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    vt = v.T
+    return _scatter_pairs(model, i, j, _apply(jc, [vt[c, i] for c in range(vt.shape[0])]
+                                          + [vt[c, j] for c in range(vt.shape[0])]))
 
 
 def block_diagonal(model: Model, params, jac=None) -> jnp.ndarray:
@@ -621,10 +683,10 @@ jax.tree_util.register_dataclass(_NewtonSystem, data_fields=["model", "params", 
                                  meta_fields=["axis", "maxiter"])
 
 
-def _newton_residual(sys: _NewtonSystem, u, wall_points):
-    con = None if sys.pairs is None else (sys.pairs, jnp.ones(sys.pairs.shape[0], bool))
+def _newton_residual(sys: _NewtonSystem, u, wall_points, bonds=True, contacts=True):
+    con = None if sys.pairs is None or not contacts else (sys.pairs, jnp.ones(sys.pairs.shape[0], bool))
     walls = None if sys.normals is None else (wall_points, sys.normals)
-    gen, parts = _internal_forces(sys.model, sys.params, u, con, walls)
+    gen, parts = _internal_forces(sys.model, sys.params, u, con, walls, bonds)
     return jnp.where(sys.free, gen, 0.0), gen, parts
 
 
@@ -648,10 +710,21 @@ def _newton_step(sys: _NewtonSystem, u, wall_points, krylov_tol):
     """The Newton correction: GMRES on the tangent (a jvp of the residual at ``u``), right-preconditioned."""
     r = _newton_residual(sys, u, wall_points)[0]
     free = sys.free
+    # the tangent at u, element by element: bonds and contacts from their Jacobians at u (batched jvps of the same
+    # laws, once per step; XLA on CPU runs a jvp of a pair law inside the Krylov loop several times slower), walls
+    # by a jvp
+    jac = reduced_jacobians(sys.model, sys.params, u)
+    jc = None if sys.pairs is None else _contact_jacobians(sys.model, sys.pairs, u)
 
     def matvec(v):
-        return jnp.where(free, -jax.jvp(lambda w: _newton_residual(sys, w, wall_points)[0], (u,),
-                                        (jnp.where(free, v, 0.0),))[1], v)
+        vf = jnp.where(free, v, 0.0)
+        kv = stiffness_product(sys.model, jac, vf)
+        if jc is not None:
+            kv = kv + _contact_product(sys.model, sys.pairs, jc, vf)
+        if sys.normals is not None:
+            kv = kv - jax.jvp(lambda w: _newton_residual(sys, w, wall_points, bonds=False, contacts=False)[0],
+                              (u,), (vf,))[1]
+        return jnp.where(free, kv, v)
 
     # right preconditioning (A M y = r, du = M y): jax's gmres measures a left-preconditioned residual against the
     # unpreconditioned right-hand side, which stops it at once when M carries units (1 / stiffness)
