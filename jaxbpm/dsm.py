@@ -11,8 +11,8 @@ only by the approximations the method names: no inertia, small motion (linear DS
   aggregates). The CG runs inside ``lax.custom_linear_solve``: derivatives with respect to the bond parameters come
   from implicit differentiation, not from unrolling the iterations; ``vmap`` over parameter sets works.
 * **Nonlinear** (Hertz contacts, walls): Newton-Krylov, started from the linear bond solution; each Newton step
-  solves the tangent system (jvp at the current state) with GMRES, then a backtracking line search on the residual
-  norm. Contact candidates are the pairs within reach at rest (fixed in advance); a contact's tangential spring is the
+  solves the tangent system at the current state with GMRES (bonds and contacts element by element from their
+  Jacobians there, walls by a jvp), then a backtracking line search on the residual norm. Contact candidates are the pairs within reach at rest (fixed in advance); a contact's tangential spring is the
   whole relative tangential displacement of its contact points since rest, capped by Coulomb (``|F_t| <= mu F_n``,
   ``slip=True``, the default) or not capped (``slip=False``: no slip, as seed 000, 3.1.2, assumes); walls are ideal
   frictionless moving walls. Why slip by default: on contact-dominated samples most contacts slide in the DEM, and
@@ -707,7 +707,8 @@ def _newton_evaluate(sys: _NewtonSystem, u, wall_points):
 
 @jax.jit
 def _newton_step(sys: _NewtonSystem, u, wall_points, krylov_tol):
-    """The Newton correction: GMRES on the tangent (a jvp of the residual at ``u``), right-preconditioned."""
+    """The Newton correction: GMRES on the tangent at ``u`` (element by element for bonds and contacts, a jvp for
+    walls), right-preconditioned."""
     r = _newton_residual(sys, u, wall_points)[0]
     free = sys.free
     # the tangent at u, element by element: bonds and contacts from their Jacobians at u (batched jvps of the same
