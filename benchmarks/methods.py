@@ -4,7 +4,7 @@
 Usage::
 
     python benchmarks/methods.py --quick        # 600 particles, 1 sample per case (Case 2: 1:4 at 40 %): 1 min 45 s
-    python benchmarks/methods.py --n 1000 --seeds 3 --mixes 0.4 --threads 1   # 15 samples: 22 min 45 s on one core
+    python benchmarks/methods.py --n 1000 --seeds 3 --mixes 0.4 --threads 1   # 15 samples: 10 min on one core
     python benchmarks/methods.py                # 3000 particles, 3 samples per case (and per Case-2 variant)
 
 Cases (built with jaxbpm's generators; uniaxial compression to 2 % strain between clamped layers, as a DEM user

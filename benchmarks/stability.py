@@ -4,7 +4,7 @@
 Usage::
 
     python benchmarks/stability.py --quick      # 400 particles, fewer points: about 1.5 min on 2 cores
-    python benchmarks/stability.py              # 1200 particles: about 4.5 min on 2 cores
+    python benchmarks/stability.py              # 1200 particles: about 3 min on one core
 
 One dense random box (bonds at contacts, Hertz-Mindlin contacts superimposed on the bonds, particle E = 1e10 Pa,
 nu = 0.25, friction 0.5 unless varied), compressed between clamped layers. Each study prints a table, fills one
@@ -37,7 +37,7 @@ An unstable DEM run raises ``InstabilityError`` (the DEM checks for runaway moti
 neighbour list, and stops after 4 re-allocations of one chunk); a wall-clock alarm per DEM run guards the budget.
 
 Measured run times (``time python benchmarks/stability.py [--quick]``, 2-core CPU shared with other work, float64,
-jax 0.10.2): ``--quick`` (400 particles, 1114 bonds) 1 min 27 s; full (1199 particles, 3560 bonds) 4 min 16 s.
+jax 0.10.2): ``--quick`` (400 particles, 1114 bonds) 1 min 27 s; full (1199 particles, 3560 bonds) 2 min 53 s on one core (`--threads 1`).
 Most of it is compilation (DEM chunk with contacts, Newton-Krylov), once per sample size.
 """
 
