@@ -41,6 +41,7 @@ from jaxbpm.errors import ConvergenceError, SceneError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
+from jaxbpm.physics import wall as wall_mod
 from jaxbpm.physics.model import Model
 
 __all__ = ["bond_jacobians", "reduced_jacobians", "block_diagonal", "stiffness_product", "tangent_operator",
@@ -56,25 +57,36 @@ def _configuration(model: Model, u):
     return x, q
 
 
-def _internal_forces(model: Model, params, u, contacts=None, walls=None, bonds=True):
-    """Generalised forces ``[n, 3 or 6]`` (forces, then moments) at the DOF state ``u``; ``bonds=False`` leaves the
-    bonds out (contacts and walls only)."""
+def _contact_slip(model: Model, pairs, d, z):
+    """Relative tangential displacement of the contact points of ``pairs [C, 2]`` since rest, as ``(x, y, z)``
+    components: ``u_j - u_i + theta_j x (-r_j n) - theta_i x (r_i n)`` (the contact law keeps its tangential part),
+    with ``d`` the current pair vectors (components) and ``z`` the pairs' DOFs ``[2nd, C]`` (i's, then j's)."""
+    nd = z.shape[0] // 2
+    dxi = tuple(z[nd + c] - z[c] for c in range(3))
+    if not model.rotations:
+        return dxi
+    inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    n = tuple(c * inv for c in d)
+    r_i, r_j = model.radii[pairs[:, 0]], model.radii[pairs[:, 1]]
+    a = bond_mod._cross(tuple(z[9 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
+    b = bond_mod._cross(tuple(z[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
+    return tuple(dxi[c] + a[c] - b[c] for c in range(3))
+
+
+def _internal_forces(model: Model, params, u, contacts=None, walls=None):
+    """Generalised forces ``[n, 3 or 6]`` (forces, then moments) at the DOF state ``u``."""
     x, q = _configuration(model, u)
     con = None
     if contacts is not None:
         pairs, valid = contacts
         i, j = pairs[:, 0], pairs[:, 1]
-        d = x[j] - x[i]
-        nrm = d / jnp.linalg.norm(d, axis=1, keepdims=True)
-        dxi = u[j, :3] - u[i, :3]
-        if model.rotations:
-            dxi = dxi + jnp.cross(u[j, 3:], -model.radii[j, None] * nrm) - jnp.cross(u[i, 3:],
-                                                                                    model.radii[i, None] * nrm)
+        ut = u.T
+        dxi = jnp.stack(_contact_slip(model, pairs, tuple((x[j] - x[i]).T), jnp.concatenate([ut[:, i], ut[:, j]])),
+                        axis=1)
         zeros = jnp.zeros_like(dxi)
         con = (pairs, valid, zeros, dxi, zeros)
     wp, wn = (None, None) if walls is None else walls
-    intact = None if bonds else jnp.zeros(model.bonds.shape[0], bool)
-    f, m, parts = model.forces(x, q, params, intact=intact, contacts=con, wall_points=wp, wall_normals=wn)
+    f, m, parts = model.forces(x, q, params, contacts=con, wall_points=wp, wall_normals=wn)
     gen = jnp.concatenate([f, m], axis=1) if model.rotations else f
     return gen, parts
 
@@ -181,8 +193,8 @@ def _scatter_pairs(model: Model, i, j, y):
 def _contact_jacobians(model: Model, pairs, u) -> jnp.ndarray:
     """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u``: ``[2nd, no, C]``,
     ``d (f_i [, m_i, m_j]) / d (u_i [, theta_i], u_j [, theta_j])``, by batched jvps of the same contact law the
-    DEM runs (the tangential spring is the contact points' relative tangential displacement since rest, as in
-    :func:`_internal_forces`)."""
+    DEM runs (the tangential spring is the contact points' relative tangential displacement since rest,
+    :func:`_contact_slip`, as in :func:`_internal_forces`)."""
     rot = model.rotations
     nd = 6 if rot else 3
     i, j = pairs[:, 0], pairs[:, 1]
@@ -193,15 +205,8 @@ def _contact_jacobians(model: Model, pairs, u) -> jnp.ndarray:
     z0 = jnp.concatenate([ut[:, i], ut[:, j]])
 
     def law(z):
-        ui, uj = z[0:3], z[nd:nd + 3]
-        d = tuple(p0[c, j] + uj[c] - p0[c, i] - ui[c] for c in range(3))
-        inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-        n = tuple(c * inv for c in d)
-        dxi = tuple(uj[c] - ui[c] for c in range(3))
-        if rot:  # + theta_j x (-r_j n) - theta_i x (r_i n)
-            a = bond_mod._cross(tuple(z[9 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
-            b = bond_mod._cross(tuple(z[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
-            dxi = tuple(dxi[c] + a[c] - b[c] for c in range(3))
+        d = tuple(p0[c, j] + z[nd + c] - p0[c, i] - z[c] for c in range(3))
+        dxi = _contact_slip(model, pairs, d, z)
         out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
         return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
 
@@ -683,10 +688,10 @@ jax.tree_util.register_dataclass(_NewtonSystem, data_fields=["model", "params", 
                                  meta_fields=["axis", "maxiter"])
 
 
-def _newton_residual(sys: _NewtonSystem, u, wall_points, bonds=True, contacts=True):
-    con = None if sys.pairs is None or not contacts else (sys.pairs, jnp.ones(sys.pairs.shape[0], bool))
+def _newton_residual(sys: _NewtonSystem, u, wall_points):
+    con = None if sys.pairs is None else (sys.pairs, jnp.ones(sys.pairs.shape[0], bool))
     walls = None if sys.normals is None else (wall_points, sys.normals)
-    gen, parts = _internal_forces(sys.model, sys.params, u, con, walls, bonds)
+    gen, parts = _internal_forces(sys.model, sys.params, u, con, walls)
     return jnp.where(sys.free, gen, 0.0), gen, parts
 
 
@@ -722,9 +727,12 @@ def _newton_step(sys: _NewtonSystem, u, wall_points, krylov_tol):
         kv = stiffness_product(sys.model, jac, vf)
         if jc is not None:
             kv = kv + _contact_product(sys.model, sys.pairs, jc, vf)
-        if sys.normals is not None:
-            kv = kv - jax.jvp(lambda w: _newton_residual(sys, w, wall_points, bonds=False, contacts=False)[0],
-                              (u,), (vf,))[1]
+        if sys.normals is not None:  # walls push on translations only
+            m = sys.model
+            fw = jax.jvp(lambda x: wall_mod.wall_forces(x, m.radii, wall_points, sys.normals, m.walls,
+                                                        m.wall_stiffness)[0],
+                         (m.positions0 + u[:, :3],), (vf[:, :3],))[1]
+            kv = kv.at[:, :3].add(-fw)
         return jnp.where(free, kv, v)
 
     # right preconditioning (A M y = r, du = M y): jax's gmres measures a left-preconditioned residual against the

@@ -38,9 +38,9 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
     Newton when the reaction changes less than this, relative), ``slip`` (contacts slide at the Coulomb limit, True;
     False: no slip, seed 000's assumption, which overestimates K where contacts slide), ``contact_skin`` [m],
-    ``load_steps`` (nonlinear:
-    equal load increments, 4; K is their least-squares slope over the scene's fit range, as for the DEM), ``throw``
-    (raise :class:`ConvergenceError` instead of warning when a solve misses its tolerance).
+    ``load_steps`` (nonlinear: equal load increments, 4; K is their least-squares slope over the scene's fit range,
+    as for the DEM), ``throw`` (raise :class:`ConvergenceError` instead of warning when a solve misses its
+    tolerance).
     options for ``"ste"`` (stiffness tensor estimation, no displacement computed): ``dofs`` (3, the paper's
     translations-only form, or 6), ``first_neighbour`` (Eq. 33-35 instead of Eq. 32), ``layered`` (layered
     springs in series along the load, for porous or shaped bodies), ``layer_thickness`` [m], ``contact_fraction``
