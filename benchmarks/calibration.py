@@ -5,7 +5,7 @@ components (moduli 1:4, mixed 50/50; the ratio is kept and the common scale cali
 evaluations (solves, the DEM check excluded), iterations, wall time and the final error of a DEM run at the answer.
 
 Methods: Adam-FD on DEM (few iterations: a DEM run of this size costs seconds to tens of seconds), Adam-FD on DSM,
-Adam-autodiff on DSM (both with seed 003's initial estimates, the closed-form shortcut off), the random-forest
+Adam-autodiff on DSM (both with Qu et al.'s initial estimates, the closed-form shortcut off), the random-forest
 surrogate on DSM (a small run set, solved ``--chunk`` runs per ``vmap`` batch so that the batch's memory stays
 bounded), and the multi-fidelity default (``method="auto"``: STE, then DSM where needed,
 closed form on each level). Goal: within 1 % of the target checked by DEM, <= 6 iterations, <= 8 evaluations.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""DEM vs DSM vs STE on seed 000's three case types: speed-up and stiffness error (its Fig. 4, redone).
+"""DEM vs DSM vs STE on Jarolin & Dosta's three case types: speed-up and stiffness error (its Fig. 4, redone).
 
 Usage::
 
@@ -8,10 +8,11 @@ Usage::
     python benchmarks/methods.py                # 3000 particles, 3 samples per case (and per Case-2 variant)
 
 Cases (built with jaxbpm's generators; uniaxial compression to 2 % strain between clamped layers, as a DEM user
-would set it up; seed 000 used walls):
+would set it up; Jarolin & Dosta 2020 used walls):
 
 1. **Bond-dominated porous cylinder** (like the alginate aerogels): a loose random cylinder (packing fraction
-   0.45), bonds across gaps up to 0.6 mean radii (bond coordination ~8, as seed 000's model), Hertz contacts superimposed on the bonds -- few particles touch at
+   0.45), bonds across gaps up to 0.6 mean radii (bond coordination ~8, as Jarolin & Dosta's model), Hertz contacts
+   superimposed on the bonds -- few particles touch at
    small strain, so the bonds carry the load.
 2. **Contact-dominated bi-component agglomerates**: a dense random box, two bond materials with stiffness ratios
    1:2, 2:1 and 1:4 mixed at 10-100 %, soft bonds (E_b = 1e8 Pa) against stiff particles (E = 1e10 Pa): the Hertz
@@ -22,7 +23,8 @@ would set it up; seed 000 used walls):
 Methods per sample: DEM with contacts (the reference), DSM nonlinear (Newton-Krylov with contacts), DSM linear
 (bonds only), STE (linearised contacts; layered for Case 3). Times are run times (compilation excluded, reported
 separately); the speed-up is DEM run / method run. Errors are stiffness differences to the DEM, mean and standard
-deviation over the samples of a case. JSON to ``results/methods.json`` and a PNG in the style of seed 000's Fig. 4.
+deviation over the samples of a case. JSON to ``results/methods.json`` and a PNG in the style of Jarolin & Dosta's Fig.
+4.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ def case_samples(case, n, seeds, variants):
 
     if case == "1-porous":
         for seed in seeds:
-            # bond_gap 0.6 gives a bond coordination of ~8, as in seed 000's aerogel model (4e5 bonds on 1e5
+            # bond_gap 0.6 gives a bond coordination of ~8, as in Jarolin & Dosta's aerogel model (4e5 bonds on 1e5
             # particles); at 0.3 (coordination ~6) the STE overestimates K by ~25 % (see README)
             s = jaxbpm.generate.cylinder(n, seed=seed, packing_fraction=0.45, bond_gap=0.6,
                                          materials={"E": 1e9, "nu": 0.25},
@@ -171,7 +173,7 @@ def plot(summary, path, note):
     h1, l1 = ax.get_legend_handles_labels()
     h2, l2 = ax2.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper left", ncol=2)
-    ax.set_title("DEM vs DSM vs STE on three case types (seed 000, Fig. 4 style)")
+    ax.set_title("DEM vs DSM vs STE on three case types (Jarolin & Dosta 2020, Fig. 4 style)")
     return save_png(fig, path, note)
 
 
@@ -236,7 +238,7 @@ def main(argv=None) -> int:
         goals["case1_ste_1000x_at_no_worse_error_than_7pct"] = {
             "met": c1["STE"].get("speedup_mean", 0) >= 1000 and c1["STE"].get("abs_error_mean", 1) <= 0.07,
             "speedup": c1["STE"].get("speedup_mean"), "error": c1["STE"].get("abs_error_mean")}
-    print("\nGoals (seed 000 on CPU: DSM 46x at 1 %, STE 878x at 7 % for Case 1):")
+    print("\nGoals (Jarolin & Dosta 2020 on CPU: DSM 46x at 1 %, STE 878x at 7 % for Case 1):")
     for k, v in goals.items():
         print(f"  {k}: {'MET' if v['met'] else 'NOT met'} (speed-up {v['speedup']}, error {v['error']})")
     info = machine_info()

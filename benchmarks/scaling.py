@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Time against particle count: DEM, DSM and STE on the same random boxes (seed 000's Fig. 5, redone).
+"""Time against particle count: DEM, DSM and STE on the same random boxes (Jarolin & Dosta's Fig. 5, redone).
 
 Usage::
 
@@ -217,7 +217,7 @@ def plot(results, fits, path, note, skipped):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     ax.set_title("Computation time against particle count, uniaxial compression, bonds only\n"
-                 "(seed 000, Fig. 5 style; lines: power laws fitted to the run times)", fontsize=10)
+                 "(Jarolin & Dosta 2020, Fig. 5 style; lines: power laws fitted to the run times)", fontsize=10)
     return save_png(fig, path, note)
 
 

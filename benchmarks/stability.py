@@ -16,7 +16,7 @@ section of ``results/stability.json`` (``results/stability_quick.json`` with ``-
    = 1 - K_bonds_only / K_with_contacts, both from the DEM. Also the linear (bonds-only) DSM against the same
    reference, and the STE without contacts against the bonds-only DEM (the STE's own error).
 2. ``dsm_strain`` -- the nonlinear DSM (Newton-Krylov, Hertz contacts) at strains 0.1 % to 5 %, with slip at the
-   Coulomb limit (the default) and without slip (``slip=False``, seed 000's assumption): Newton iterations,
+   Coulomb limit (the default) and without slip (``slip=False``, Jarolin & Dosta's assumption): Newton iterations,
    converged flag, final relative residual and stiffness error against the DEM. Newton is capped
    (``--newton-maxiter`` per load step, ``--krylov-restarts`` GMRES restarts of 40 vectors) so no solve runs for
    minutes; a solve that misses the tolerance at the cap counts as not converged.
@@ -37,7 +37,8 @@ An unstable DEM run raises ``InstabilityError`` (the DEM checks for runaway moti
 neighbour list, and stops after 4 re-allocations of one chunk); a wall-clock alarm per DEM run guards the budget.
 
 Measured run times (``time python benchmarks/stability.py [--quick]``, 2-core CPU shared with other work, float64,
-jax 0.10.2): ``--quick`` (400 particles, 1114 bonds) 1 min 27 s; full (1199 particles, 3560 bonds) 2 min 53 s on one core (`--threads 1`).
+jax 0.10.2): ``--quick`` (400 particles, 1114 bonds) 1 min 27 s; full (1199 particles, 3560 bonds) 2 min 53 s on one
+core (`--threads 1`).
 Most of it is compilation (DEM chunk with contacts, Newton-Krylov), once per sample size.
 """
 
@@ -347,7 +348,7 @@ def study_dsm_strain(sample, args, cache):
                            f"{100 * errs[0][0]:g} %, {pct(errs[-1][1])} at {100 * errs[-1][0]:g} %)")
     ns = [(r["strain"], r["error_noslip"]) for r in rows if r["error_noslip"] is not None]
     if ns:
-        conclusions.append("without slip (seed 000's assumption) the error is "
+        conclusions.append("without slip (Jarolin & Dosta's assumption) the error is "
                            + ", ".join(f"{pct(e)} at {100 * x:g} %" for x, e in ns)
                            + f"; {sum(bool(r['converged_noslip']) for r in rows)} of {len(rows)} such solves converge")
     return {"reference": "DEM with contacts", "bond_E": args.mid_E,

@@ -1,12 +1,13 @@
-"""Calibrate the bond tensile and shear strengths (sigma_c, tau_c) to a target UCS and flexural strength (seed 003).
+"""Calibrate the bond tensile and shear strengths (sigma_c, tau_c) to a target UCS and flexural strength (Qu et al.).
 
 Specimens: a bonded cylinder (``--ucs-n`` particles) compressed to failure for the UCS and a bonded beam (``--tpb-n``
 particles) in three-point bending for the flexural strength, both with breakable bonds (DEM). The targets are the
 strengths the same DEM gives for known strengths (``--sigma``, ``--tau``; sigma_c / tau_c = 0.5 by default, inside
-the range where seed 003 allows its simplified scheme). Both schemes of seed 003 (original: 3 parameter sets per
+the range where Qu et al. 2020 allows its simplified scheme). Both schemes of Qu et al. 2020 (original: 3 parameter
+sets per
 iteration; simplified: 1) start from the first and second estimates (Eq. 14-15) and stop when both strengths are
-within ``--tol``. A parameter set is one UCS run plus one bending run, as seed 003 counts "models".
-Goal: both strengths within 5 % in no more models than seed 003's Table 6 (19 original, 4 simplified).
+within ``--tol``. A parameter set is one UCS run plus one bending run, as Qu et al. 2020 counts "models".
+Goal: both strengths within 5 % in no more models than Qu et al.'s Table 6 (19 original, 4 simplified).
 
     python benchmarks/strength_calibration.py [--ucs-n 250] [--tpb-n 300]
 """
@@ -71,7 +72,7 @@ def main(argv=None):
     rows, out = [], {}
     for scheme in args.schemes.split(","):
         # the original scheme spends 3 parameter sets per Adam iteration: 7 points = 2 estimates + 5 iterations
-        # = 17 sets; the simplified scheme one per point: 4 points = 4 sets (seed 003's budgets: 19 and 4)
+        # = 17 sets; the simplified scheme one per point: 4 points = 4 sets (Qu et al.'s budgets: 19 and 4)
         max_it = 7 if scheme == "original" else 4
         print(f"\n== {scheme} scheme (at most {max_it} points)", flush=True)
         res = cal.calibrate_strength(cyl, beam, ucs=targets["ucs"], flexural=targets["flexural"], scheme=scheme,

@@ -1,6 +1,7 @@
 """Bond parameter conventions of other DEM codes, translated exactly to and from jaxbpm's bond law.
 
-jaxbpm's bond (seed 000, Eq. 1-4) is a cylinder of radius r_b and initial length L (the centre distance of the two
+jaxbpm's bond (Jarolin & Dosta 2020, Eq. 1-4) is a cylinder of radius r_b and initial length L (the centre distance of
+the two
 particles when the bond was made) of an isotropic material (E, nu)::
 
     A = pi r_b^2,  I = pi r_b^4 / 4,  J = pi r_b^4 / 2
@@ -35,7 +36,7 @@ Yade          CohFrictMat / CohFrictPhys: k_n = 2 E1 R1 E2 R2 / (E1 R1 + E2 R2) 
               (2 R1 R2 L) (pi/2 x E for equal touching spheres and r_b = R), poisson = 1 / (2 (1 + nu)),
               alphaKr = 2 (1 + nu) r_b^2 / (4 R1 R2), alphaKtw = r_b^2 / (2 R1 R2). A Yade poisson <= 1/3
               needs nu >= 0.5 and has no jaxbpm counterpart.
-MUSEN         elastic solid bond: the same law (seed 000 is MUSEN's): Young modulus E, shear modulus
+MUSEN         elastic solid bond: the same law (Jarolin & Dosta's model is MUSEN's): Young modulus E, shear modulus
               G = E / (2 (1 + nu)), diameter 2 r_b, initial length L; normal/tangential strength.
 ============  ===========================================================================================
 

@@ -46,7 +46,7 @@ class Result:
 
     def stress_at(self, strains) -> np.ndarray:
         """The stress [Pa] at the given strains, interpolated linearly on the loading curve (a stress-strain vector
-        target, e.g. seed 002's 17 equispaced strains). Strains beyond the curve are an error."""
+        target, e.g. Irazabal et al.'s 17 equispaced strains). Strains beyond the curve are an error."""
         strains = np.asarray(strains, np.float64)
         e = self.strain
         if len(e) == 0 or np.any(strains < min(e[0], 0.0) - 1e-12) or np.any(strains > e[-1] * (1 + 1e-9)):

@@ -1,7 +1,7 @@
 """Scenes: a lab test = boundary conditions + loading + observables, applied to a sample.
 
 :class:`UniaxialCompression` squeezes a sample along one axis, either between two plane walls or by clamping a
-bottom layer of particles and moving a top layer rigidly, to a target strain (default 2 %, as in seed 000).
+bottom layer of particles and moving a top layer rigidly, to a target strain (default 2 %, as in Jarolin & Dosta 2020).
 Observables: the force-displacement curve, the stiffness K (least-squares slope over the linear range) and Young's
 modulus E = K l / A.
 """

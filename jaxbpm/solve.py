@@ -37,7 +37,7 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
     Newton when the reaction changes less than this, relative), ``slip`` (contacts slide at the Coulomb limit, True;
-    False: no slip, seed 000's assumption, which overestimates K where contacts slide), ``contact_skin`` [m],
+    False: no slip, Jarolin & Dosta's assumption, which overestimates K where contacts slide), ``contact_skin`` [m],
     ``load_steps`` (nonlinear: equal load increments, 4; K is their least-squares slope over the scene's fit range,
     as for the DEM), ``throw`` (raise :class:`ConvergenceError` instead of warning when a solve misses its
     tolerance).

@@ -1,6 +1,7 @@
 """Stiffness tensor estimation (STE): the elastic tensor of a bonded sample without computing any displacement.
 
-After Misra & Chang, as in seed 000 (section 3.2, Eq. 11-36). Every interaction (bond, and linearised Hertz contact
+After Misra & Chang, as in Jarolin & Dosta 2020 (section 3.2, Eq. 11-36). Every interaction (bond, and linearised Hertz
+contact
 when the scene has contacts) gets its stiffness as the Jacobian of the SAME force law the DEM and the DSM use,
 evaluated at rest (``jax.jacfwd``); nothing is written twice. With ``dofs=3`` (the paper's form) a pair's stiffness
 is the 3x3 block ``K^nm = d f^n / d u^m`` (force on n per displacement of m); with ``dofs=6`` the fluctuations also
@@ -46,10 +47,11 @@ Conventions and choices:
   zero overlap: the overlap each candidate pair reaches under the affine target strain of the scene at the middle
   of its fit range, ``delta = s (d . e)^2 / |d| eps - gap`` (``s`` = mid fit range, default 0.625; ``e`` the load
   axis). Pairs that do not touch by then are left out; no slip (the Coulomb limit is lifted, as in the static DSM).
-* **Walls** (seed 000, 3.2.3): the body and each wall act as springs in series; a wall's stiffness is the sum of the
+* **Walls** (Jarolin & Dosta 2020, 3.2.3): the body and each wall act as springs in series; a wall's stiffness is the
+sum of the
   tangent stiffnesses of the particles touching it (gap below half the target displacement), each at its share of
   the force the sample carries at mid fit range (solved for self-consistently).
-* **Layered springs in series** (``layered=True``, seed 000 Case 3): the sample is cut into layers two mean
+* **Layered springs in series** (``layered=True``, Jarolin & Dosta 2020 Case 3): the sample is cut into layers two mean
   particle diameters thick along the load; each layer's modulus comes from the V-weighted mean tensor of its
   particles, its cross-section from the volume they represent (``sum V^n / h``), and the layers add as springs in
   series over the gauge length.
@@ -665,7 +667,7 @@ def isotropic_fit(c6) -> tuple[jnp.ndarray, jnp.ndarray]:
 
 # ---------------------------------------------------------------------------------------------------- scenes
 def layer_stiffness(est: Estimator, params, gauge_length, area):
-    """Stiffness [N/m] of the layered springs-in-series model along ``est.axis`` (seed 000, Case 3).
+    """Stiffness [N/m] of the layered springs-in-series model along ``est.axis`` (Jarolin & Dosta 2020, Case 3).
 
     Layer k: modulus ``E_k`` from the V-weighted mean tensor of its included particles (the body tensor where a
     layer has none), cross-section ``A_k = V_k / h`` from the volume its particles represent; compliance of the
@@ -690,7 +692,8 @@ def layer_stiffness(est: Estimator, params, gauge_length, area):
 
 
 def wall_series(k_body, est: Estimator, scene, sample: Sample, fraction: float | None = None):
-    """The body and the two walls as springs in series (seed 000, 3.2.3): ``1/K = 1/K_body + 1/k_bottom + 1/k_top``.
+    """The body and the two walls as springs in series (Jarolin & Dosta 2020, 3.2.3):
+    ``1/K = 1/K_body + 1/k_bottom + 1/k_top``.
 
     A wall's stiffness is the sum of the tangent stiffnesses of the particles touching it, each carrying an equal
     share of the force ``F = K * s * delta`` the sample carries at the middle ``s`` of the scene's fit range
@@ -831,7 +834,7 @@ def _check_params(params, sample: Sample):
 
 # ---------------------------------------------------------------------------------------------------- local map
 class LocalMap(NamedTuple):
-    """The local stiffness map (seed 000, 4.4): per particle, moduli averaged over a neighbourhood.
+    """The local stiffness map (Jarolin & Dosta 2020, 4.4): per particle, moduli averaged over a neighbourhood.
 
     positions ``[n, 3]`` [m]; E ``[n, 3]``: Young's moduli along x, y, z of the V-weighted mean tensor of the
     non-singular particles within ``radius`` of each particle [Pa] (NaN where there is none); deviation ``[n, 3]``:
@@ -847,7 +850,7 @@ class LocalMap(NamedTuple):
 
 def local_map(sample: Sample, params=None, *, scene=None, radius: float | None = None, **options) -> LocalMap:
     """Local moduli averaged over spheres of ``radius`` (default 1.5 mean particle diameters, i.e. neighbourhoods
-    three diameters across, as in seed 000) and their deviation from the mean (Eq. 36)."""
+    three diameters across, as in Jarolin & Dosta 2020) and their deviation from the mean (Eq. 36)."""
     from scipy.sparse import coo_matrix, identity
     from scipy.spatial import cKDTree
 

@@ -56,7 +56,7 @@ def test_adam_autodiff_recovers_known_bond_E(which, request):
 
 def test_adam_without_estimates_converges(one):
     """Plain Adam (Eq. 4-8) from 20 % off, autodiff: within 2 % in <= 10 iterations (Adam's fixed step size limits
-    the final precision; the initial estimates of seed 003 remove that limit, see above)."""
+    the final precision; the initial estimates of Qu et al. 2020 remove that limit, see above)."""
     target = _modulus(one, {**default_params(one), "bond_E": jnp.array([1.2e9])})
     res = cal.calibrate(one, SCENE, {"youngs_modulus": target}, method="adam", shortcut=False, gradient="autodiff",
                         tol=0.02, max_iterations=10, first_estimate=False, second_estimate=False,
@@ -105,7 +105,7 @@ def test_fd_and_autodiff_gradients_agree(two):
     assert np.linalg.norm(g_f - g_ad) <= 1e-3 * np.linalg.norm(g_ad), (g_f, g_ad)
 
 
-# ---------------------------------------------------------------------------------------------------- seed 003
+# ---------------------------------------------------------------------------------------------------- Qu et al. 2020
 def _analytic(c=3.0):
     """A cheap homogeneous model: E = c * bond_E, K = 2 c * bond_E[1] + 0.01 bond_E[0]."""
     def fn(params):
@@ -156,7 +156,7 @@ def test_simplified_scheme_runs_fewer_sets():
     pert = cal.adam(_analytic_problem(targets, n=2), simplified="perturbed", **kw)
     simp = cal.adam(_analytic_problem(targets, n=2), simplified=True, **kw)
     # 3 iterations with gradients + the last point: full 3 * 3 + 1 solves, one perturbed point 3 * 2 + 1; the
-    # secant form (seed 003's count) one point per iteration, plus a perturbed point at the first (no step yet)
+    # secant form (Qu et al.'s count) one point per iteration, plus a perturbed point at the first (no step yet)
     assert full.evaluations == 10 and pert.evaluations == 7 and simp.evaluations == 5
     assert simp.info["secant_gradients"] == 2 and pert.info["secant_gradients"] == 0
     # the weak coupling (0.01) leaves the path nearly unchanged

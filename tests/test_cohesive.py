@@ -1,4 +1,4 @@
-"""The stress-dependent cohesive contact law of seed 002 (Eq. 2-17, Fig. 7): history, closed forms, restitution,
+"""The stress-dependent cohesive contact law of Irazabal et al. (Eq. 2-17, Fig. 7): history, closed forms, restitution,
 Coulomb limit, neighbour-list rebuilds, and a cohesive granular sample under uniaxial compression."""
 
 import dataclasses
@@ -133,7 +133,7 @@ def test_damping_gives_the_coefficient_of_restitution():
     s = jaxbpm.Sample.from_arrays(pos, R, np.zeros((0, 2), int), bond_radius=np.zeros(0),
                                   particle_material={**PM, "restitution": cor})
     model = build_model(s, contacts=True, contact_law="cohesive")  # no cohesion: c0 = kc = c_max = 0
-    assert not model.rotations  # seed 002: particles do not rotate
+    assert not model.rotations  # Irazabal et al. 2023: particles do not rotate
     params = default_params(s)
     empty = jnp.zeros((0, 3))
     load = dem.Loading(clamped=jnp.zeros(2, bool), velocity=jnp.zeros((2, 3)), wall_points0=empty,
@@ -189,7 +189,7 @@ def _granular(seed=0):
 
 
 def test_cohesive_sample_stress_strain_curve():
-    """A cohesive granular sample under uniaxial compression gives the stress-strain curve seed 002 calibrates
+    """A cohesive granular sample under uniaxial compression gives the stress-strain curve Irazabal et al. calibrates
     against (17 points up to 11.33 % strain); cohesion raises it, and the DSM refuses the history-dependent law."""
     s = _granular()
     strains = np.linspace(0.0, 0.1133, 17)

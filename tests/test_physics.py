@@ -52,7 +52,7 @@ def test_bond_law_conserves_momentum_and_matches_linear_law():
     # angular momentum balance about particle i: r x f_j + m_i + m_j = 0
     total = jnp.cross(r0 + u, -out.f_i) + out.m_i + out.m_j
     assert float(jnp.max(jnp.abs(total))) < 1e-12
-    # linear law (seed 000, Eq. 1-4) on the bond frame x = axis
+    # linear law (Jarolin & Dosta 2020, Eq. 1-4) on the bond frame x = axis
     kn, kt, ktw, kb = k
     delta_t = jnp.array([0.0, u[1], u[2]]) - jnp.cross(th_i + th_j, 0.5 * r0)
     expected_f = jnp.array([kn * u[0], 0.0, 0.0]) + kt * jnp.array([0.0, delta_t[1], delta_t[2]])

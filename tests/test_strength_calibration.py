@@ -1,4 +1,4 @@
-"""Strength calibration (seed 003): original vs simplified scheme, the initial estimates, the history table."""
+"""Strength calibration (Qu et al. 2020): original vs simplified scheme, the initial estimates, the history table."""
 
 import numpy as np
 import pytest
@@ -80,7 +80,7 @@ def test_original_and_simplified_model_counts():
 
 def test_cross_coupling_costs_the_simplified_scheme_accuracy():
     """The simplified gradient uses each parameter's own test only (Eq. 16-19); with a strong coupling of the flexural
-    strength to tau_c (outside the range seed 003 allows it for) it is off, the original scheme's gradient is not."""
+    strength to tau_c (outside the range Qu et al. allows it for) it is off, the original scheme's gradient is not."""
     strong = {"b": 0.05, "d": 0.5}
     kw = dict(tol=0.01, max_iterations=8, learning_rate=0.05, fd_step=0.05)
     full, flog = _run("original", model_kw=strong, **kw)
@@ -95,7 +95,7 @@ def test_cross_coupling_costs_the_simplified_scheme_accuracy():
     assert all(b < a for a, b in zip(f_full[1:], f_full[2:])) and f_full[-1] < 0.5 * f_full[1]
     # the secant ascribes the flexural change between the estimates (mostly tau_c's) to sigma_c: no progress
     assert f_simp[-1] >= f_simp[1]
-    # a note warns when the answer lies outside the ratio seed 003 allows for the simplified scheme
+    # a note warns when the answer lies outside the ratio Qu et al. 2020 allows for the simplified scheme
     ucs, f = 2e6, 3e6
     res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme="simplified",
                                  model=_stand_in(a=0.3, b=0.0, c=0.3, d=0.0), tol=1e-6, max_iterations=3)

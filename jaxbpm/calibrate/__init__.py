@@ -5,14 +5,14 @@
 * ``method="auto"`` (default): multi-fidelity (:mod:`~jaxbpm.calibrate.multifidelity`): STE, then DSM only when STE's
   answer is not already within ``tol`` there; each level in closed form where it applies (bonds-only elasticity:
   stiffness is linear in a common bond modulus, :mod:`~jaxbpm.calibrate.closed_form`), else Adam.
-* ``method="adam"``: optax Adam with finite-difference or autodiff gradients and seed 003's options
+* ``method="adam"``: optax Adam with finite-difference or autodiff gradients and Qu et al.'s options
   (:mod:`~jaxbpm.calibrate.adam`); the closed form replaces it where it applies unless ``shortcut=False``.
-* ``method="surrogate"``: seed 002's random forests with iterative range narrowing
+* ``method="surrogate"``: Irazabal et al.'s random forests with iterative range narrowing
   (:mod:`~jaxbpm.calibrate.surrogate`).
 * ``method="closed-form"``: the closed form, or an error saying why it does not apply.
 
 Strengths: :func:`calibrate_strength` calibrates the bond tensile and shear strengths against the UCS and the
-flexural strength (seed 003's original and simplified schemes, :mod:`~jaxbpm.calibrate.strength`); it is
+flexural strength (Qu et al.'s original and simplified schemes, :mod:`~jaxbpm.calibrate.strength`); it is
 ``calibrate`` with ``Target("strength", ..., scene="ucs"/"tpb")`` on DEM failure runs.
 
 Lower-level pieces (:class:`Target`, :class:`Parameter`, :class:`ParameterSpace`, :class:`Forward`,
@@ -71,8 +71,8 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
       method: one of :data:`METHODS`.
       model: the solver for ``"adam"``, ``"surrogate"`` and ``"closed-form"`` (``"dsm"``, ``"ste"``, ``"dem"``).
       parameters: free :class:`Parameter` s; default :func:`default_parameters` (one common bond modulus).
-      scaling: ``"log"`` or ``"target"`` (seed 003, Eq. 10-11: each parameter over the target it is tied to).
-      tol: relative tolerance on every target (default 5 %, seed 003).
+      scaling: ``"log"`` or ``"target"`` (Qu et al. 2020, Eq. 10-11: each parameter over the target it is tied to).
+      tol: relative tolerance on every target (default 5 %, Qu et al. 2020).
       shortcut: use the closed form wherever it applies (the result's ``method`` and ``notes`` say so).
       levels: multi-fidelity levels (``method="auto"``; default :func:`default_levels`).
       check: a model (e.g. ``"dem"``) solved once at the answer; its errors go to ``result.info["check"]``.
@@ -142,7 +142,7 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
 
 
 def _target_scales(space: ParameterSpace, targets, tie) -> ParameterSpace:
-    """For ``scaling="target"``: each parameter's scale is its tied target's value (seed 003, Eq. 10)."""
+    """For ``scaling="target"``: each parameter's scale is its tied target's value (Qu et al. 2020, Eq. 10)."""
     if space.scaling != "target":
         return space
     scalar = [t for t in targets if t.size == 1]

@@ -10,14 +10,14 @@ import numpy as np
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
 
-# parameter key -> observables measured in the same units (seed 003, Eq. 14: the macroscopic value is a first
+# parameter key -> observables measured in the same units (Qu et al. 2020, Eq. 14: the macroscopic value is a first
 # estimate of the microscopic one)
 _SAME_UNITS = {"bond_E": ("youngs_modulus",), "bond_nu": ("poisson_ratio",),
                "bond_tensile_strength": ("strength",), "bond_shear_strength": ("strength",)}
 
 
 def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | None:
-    """Index of the target each parameter is tied to (seed 003, 3.5-3.6), or None when there is no tie.
+    """Index of the target each parameter is tied to (Qu et al. 2020, 3.5-3.6), or None when there is no tie.
 
     ``tie`` maps parameter names to target names; ``None`` ties the only parameter to the only target when the
     problem has one of each (a scalar target)."""

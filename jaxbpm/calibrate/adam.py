@@ -1,9 +1,9 @@
-"""Adam calibration driven by optax (seed 003, section 3), with finite-difference or autodiff gradients.
+"""Adam calibration driven by optax (Qu et al. 2020, section 3), with finite-difference or autodiff gradients.
 
-The variable is ``z``, the free parameters in log form or target-scaled form (seed 003, Eq. 10-11; see
+The variable is ``z``, the free parameters in log form or target-scaled form (Qu et al. 2020, Eq. 10-11; see
 :class:`~jaxbpm.calibrate.objective.ParameterSpace`). Each iteration evaluates the model at ``z``; once every target
 lies within ``tol`` the calibration stops, else the gradient of the objective (Eq. 3) is taken and optax's Adam
-(Eq. 4-8) makes the step. Options of seed 003:
+(Eq. 4-8) makes the step. Options of Qu et al. 2020:
 
 * ``loss_scaled``: the Adam step multiplied by the current loss L (Eq. 9): smaller steps near the target, larger far
   from it.
@@ -12,14 +12,15 @@ lies within ``tol`` the calibration stops, else the gradient of the objective (E
   it is tied to (Eq. 15).
 * ``simplified``: each parameter is tied to one target (``tie``) and the derivative of each parameter uses its tied
   target's term of L only (Eq. 16-19: a test does not depend on the parameters tied to the other tests).
-  ``simplified=True`` (``"secant"``) runs one parameter set per iteration, as seed 003 counts it: the step from the
+  ``simplified=True`` (``"secant"``) runs one parameter set per iteration, as Qu et al. 2020 counts it: the step from
+  the
   previous point perturbs every parameter at once, so the difference of each tied term between the two points over
   the parameter's change is its derivative (where a parameter moved by less than ``fd_step / 10`` since the previous
   point, or at the first point, one perturbed point is run instead). ``simplified="perturbed"`` always runs one
   perturbed point (all parameters perturbed at once) next to the point itself.
 
 Gradients: ``"fd-forward"`` (n extra solves), ``"fd-central"`` (2n), run as one batch (``jax.vmap`` when the model
-is a pure function, else one after another; seed 003 Eq. 12-13), or ``"autodiff"`` (``jax.value_and_grad`` through
+is a pure function, else one after another; Qu et al. 2020 Eq. 12-13), or ``"autodiff"`` (``jax.value_and_grad`` through
 the model, one forward and one adjoint solve).
 """
 
@@ -47,7 +48,7 @@ def loss_and_gradient(problem: Problem, z, method: str = "autodiff", *, step: fl
     """Loss, gradient ``dL/dz [n]`` and the relative errors at ``z``.
 
     method: ``"autodiff"``, ``"fd-forward"`` or ``"fd-central"`` (perturbed points evaluated as one batch), or
-    ``"simplified"`` (needs ``tie``: one point with every parameter perturbed, seed 003 Eq. 16-19).
+    ``"simplified"`` (needs ``tie``: one point with every parameter perturbed, Qu et al. 2020 Eq. 16-19).
     base: the errors at ``z`` when already known (finite differences then skip the base solve).
     """
     z = np.asarray(z, dtype=np.float64)
@@ -94,10 +95,11 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
          b2: float = 0.99, eps: float = 1e-8, tol: float = 0.05, max_iterations: int = 20, loss_scaled: bool = False,
          first_estimate: bool | None = None, second_estimate: bool | None = None, tie: Mapping[str, str] | None = None,
          simplified: bool = False, fd_step: float = 1e-3, progress=None) -> CalibrationResult:
-    """Calibrate ``problem`` with Adam (seed 003). Returns a :class:`CalibrationResult` at the best point seen.
+    """Calibrate ``problem`` with Adam (Qu et al. 2020). Returns a :class:`CalibrationResult` at the best point seen.
 
-    gradient: one of :data:`GRADIENTS`. learning_rate, b1, b2, eps: Adam's (seed 003 uses b2 = 0.99); the step is in
-    ``z`` (log form: a relative change). tol: stop when every target's relative error is within it (seed 003
+    gradient: one of :data:`GRADIENTS`. learning_rate, b1, b2, eps: Adam's (Qu et al. 2020 uses b2 = 0.99); the step is
+    in
+    ``z`` (log form: a relative change). tol: stop when every target's relative error is within it (Qu et al. 2020
     5.1.2: 5 %). max_iterations: evaluated points at most (estimates included). loss_scaled: Eq. 9.
     first_estimate / second_estimate: Eq. 14 / 15; ``None`` = on where they make sense (a tie exists; Eq. 14 only
     when each parameter and its target share units, e.g. bond E and Young's modulus). tie: ``{parameter: target}``
@@ -146,7 +148,7 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
     if first_estimate:
         values = space.clip([problem.targets[k].value for k in ties])
         kind = "estimate-1"
-        notes.append("first estimate (seed 003, Eq. 14): each parameter starts at its target's value")
+        notes.append("first estimate (Qu et al. 2020, Eq. 14): each parameter starts at its target's value")
     z = space.to_z(values)
     opt = optax.adam(learning_rate, b1=b1, b2=b2, eps=eps)
     state = opt.init(jnp.asarray(z))
@@ -185,7 +187,7 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
                 z = space.to_z(space.clip(values * ratio))
                 kind = "estimate-2"
                 if not any("Eq. 15" in n for n in notes):
-                    notes.append("second estimate (seed 003, Eq. 15): parameters scaled by target / model value")
+                    notes.append("second estimate (Qu et al. 2020, Eq. 15): parameters scaled by target / model value")
                 continue
             notes.append("second estimate skipped: a model value has the opposite sign of its target")
         if g is None and secant and previous is not None and np.all(np.abs(z - previous[0]) >= 0.1 * fd_step):
@@ -206,9 +208,9 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         kind = "adam"
     _, values, e = best
     if loss_scaled:
-        notes.append("step scaled by the loss (seed 003, Eq. 9)")
+        notes.append("step scaled by the loss (Qu et al. 2020, Eq. 9)")
     if simplified:
-        notes.append("simplified scheme (seed 003, Eq. 16-19): " + (
+        notes.append("simplified scheme (Qu et al. 2020, Eq. 16-19): " + (
             f"one parameter set per iteration ({secants} secant gradients between successive points)" if secant
             else "one perturbed point per iteration"))
     info = {"gradient": grad_method, "learning_rate": learning_rate, "scaling": space.scaling,

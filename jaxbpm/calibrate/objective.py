@@ -4,13 +4,14 @@
   stress-strain curve, or any observable a custom model returns), its weight and how its error is normalised.
 * :class:`Parameter` / :class:`ParameterSpace`: the free entries of the parameter pytree
   (``{"bond_E": [n_materials], "bond_nu": [n_materials]}``) with bounds, mapped to an optimisation variable ``z`` in
-  log form (``z = log(p / p_ref)``) or target-scaled form (``z = p / scale``, seed 003 Eq. 10-11).
+  log form (``z = log(p / p_ref)``) or target-scaled form (``z = p / scale``, Qu et al. 2020 Eq. 10-11).
 * :class:`Forward`: the model behind the objective: any solver of :func:`jaxbpm.solve` (``"ste"``, ``"dsm"``,
   ``"dem"``) on one or several scenes, or a plain function. Where the solver module offers a pure
   ``stiffness_function(sample, scene)`` (``params -> K``), elastic targets use it: batches of parameter sets go
   through ``jax.vmap`` and gradients through ``jax.grad``.
 * :class:`Problem`: targets + parameters + model. Weights are normalised to sum 1 and the objective is
-  ``L = sum_k w_k mean((y_k - t_k)^2 / s_k^2)`` (seed 003, Eq. 3), ``s_k`` the target's scale (``|t|`` for a scalar,
+  ``L = sum_k w_k mean((y_k - t_k)^2 / s_k^2)`` (Qu et al. 2020, Eq. 3), ``s_k`` the target's scale (``|t|`` for a
+  scalar,
   ``max |t|`` for a vector unless given). It counts every solve (one parameter set on one scene).
 """
 
@@ -61,7 +62,7 @@ class Target:
     observable: ``"stiffness"`` [N/m], ``"youngs_modulus"`` [Pa], ``"poisson_ratio"`` (when the model reports one),
       ``"stress"`` (the stress-strain curve sampled at the strains ``at``, [Pa]) or any key a custom model returns.
     value: the measured value (a number, or one number per point of ``at`` / element of a vector observable).
-    weight: relative weight (> 0); a :class:`Problem` normalises the weights to sum 1 (seed 003, Eq. 3).
+    weight: relative weight (> 0); a :class:`Problem` normalises the weights to sum 1 (Qu et al. 2020, Eq. 3).
     scene: key of the scene it is measured on (when a model has several scenes, e.g. ``{"ucs": ..., "tpb": ...}``).
     at: strains at which a ``"stress"`` target samples the curve.
     scale: error normaliser ``s`` (relative error ``(y - t) / s``); default ``|t|`` (scalar) or ``max |t|`` (vector).
@@ -157,7 +158,7 @@ class Parameter:
       (e.g. ``ratio=(1, 4)``: two components whose moduli keep the ratio 1:4; the value is that of ratio 1).
     bounds: ``(lo, hi)``; default ``(initial / 100, initial * 100)`` for positive parameters.
     initial: starting value; default the sample's current value.
-    scale: scale of the target-scaled form (seed 003, Eq. 10); default the value of the target it is tied to,
+    scale: scale of the target-scaled form (Qu et al. 2020, Eq. 10); default the value of the target it is tied to,
       else its initial value.
     """
 
@@ -197,7 +198,7 @@ class ParameterSpace:
     """Free parameters on top of a base pytree; maps values ``v [n]`` to full parameter pytrees.
 
     scaling: ``"log"`` (``z = log(v / v0)``, v0 the initial values; positive parameters only) or ``"target"``
-    (``z = v / scale``, seed 003 Eq. 10-11). ``to_params`` is traceable (``grad``/``vmap``).
+    (``z = v / scale``, Qu et al. 2020 Eq. 10-11). ``to_params`` is traceable (``grad``/``vmap``).
     """
 
     def __init__(self, parameters: Sequence[Parameter], base: Mapping[str, Any], *, scaling: str = "log",
@@ -514,7 +515,7 @@ def _forward_model(sample_map, scene_map, model, solve_mod, solve_options) -> Fo
 
 # ---------------------------------------------------------------------------------------------------- problem
 class Problem:
-    """Targets, parameters and a model: evaluates the relative errors and the weighted objective (seed 003, Eq. 3)
+    """Targets, parameters and a model: evaluates the relative errors and the weighted objective (Qu et al. 2020, Eq. 3)
     and counts the solves (``evaluations``: one parameter set on one scene)."""
 
     def __init__(self, forward: Forward, targets, space: ParameterSpace):

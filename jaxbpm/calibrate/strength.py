@@ -1,4 +1,4 @@
-"""Strength calibration (seed 003): the bond tensile and shear strengths from the UCS and the flexural strength.
+"""Strength calibration (Qu et al. 2020): the bond tensile and shear strengths from the UCS and the flexural strength.
 
 The bond tensile strength ``sigma_c`` and the bond shear strength ``tau_c`` (the cohesion of the shear criterion) are
 calibrated against the uniaxial compressive strength (UCS, a cylinder compressed to failure) and the flexural strength
@@ -13,9 +13,9 @@ calibrated against the uniaxial compressive strength (UCS, a cylinder compressed
   ``tau_c`` to the UCS (Eq. 16-19), one parameter set per iteration.
 
 The runs are DEM runs with bond breakage: those of one iteration run one after another (a failure run cannot be
-batched). A parameter set is one UCS run plus one bending run; seed 003 counts "models" in parameter sets
+batched). A parameter set is one UCS run plus one bending run; Qu et al. 2020 counts "models" in parameter sets
 (Table 6: 19 for the original scheme, 4 for the simplified one). :func:`strength_table` gives the history in the form
-of seed 003's Tables 4 and 5.
+of Qu et al.'s Tables 4 and 5.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
                        learning_rate: float = 0.05, fd_step: float = 0.05, loss_scaled: bool = False,
                        weights=(0.5, 0.5), tol: float = 0.05, max_iterations: int = 8, bounds: float = 100.0,
                        solve_options: Mapping | None = None, progress=None) -> CalibrationResult:
-    """Calibrate ``sigma_c`` and ``tau_c`` so that the UCS and the flexural strength reach their targets (seed 003).
+    """Calibrate ``sigma_c`` and ``tau_c`` so that the UCS and the flexural strength reach their targets (Qu et al.).
 
     Args:
       ucs_sample: the specimen of the compression test (e.g. ``jaxbpm.generate.cylinder``).
@@ -64,7 +64,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
         "bond_shear_strength": ...}`` start values when ``first_estimate=False`` (default: the sample's table).
       learning_rate, fd_step, loss_scaled: Adam's step, the finite-difference step (a fraction of the target in the
         scaled form) and Eq. 9. weights: ``(l1, l2)`` of the UCS and the flexural strength (normalised).
-      tol: relative tolerance on both strengths (default 5 %, seed 003). max_iterations: evaluated points at most
+      tol: relative tolerance on both strengths (default 5 %, Qu et al. 2020). max_iterations: evaluated points at most
         (estimates included). bounds: each strength is kept within ``[target / bounds, target * bounds]``.
       solve_options: options of ``jaxbpm.solve`` (default ``{"transits": 30}``).
       progress: True to print each iteration, or a callable.
@@ -121,15 +121,15 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
     result.info.update(scheme=scheme, targets={UCS: ucs, TPB: flexural}, parameter_sets=result.evaluations // 2)
     ratio = result.values["bond_tensile_strength"] / result.values["bond_shear_strength"]
     if scheme == "simplified" and ratio >= 0.8:
-        result.notes.append(f"sigma_c / tau_c = {ratio:.2f}: seed 003 restricts the simplified scheme to ratios "
+        result.notes.append(f"sigma_c / tau_c = {ratio:.2f}: Qu et al. 2020 restricts the simplified scheme to ratios "
                             "below 0.8 (above, the UCS depends on sigma_c too); check with scheme='original'")
     return result
 
 
 def strength_table(result: CalibrationResult) -> list[dict]:
-    """The history of a strength calibration as in seed 003's Tables 4 and 5: per evaluated point the iteration
+    """The history of a strength calibration as in Qu et al.'s Tables 4 and 5: per evaluated point the iteration
     (from 0), its kind, ``sigma_c``, ``tau_c``, the flexural strength and the UCS, their errors, and the cost so far:
-    ``models`` (parameter sets, seed 003's count: one UCS and one bending run each) and ``runs`` (solves)."""
+    ``models`` (parameter sets, Qu et al.'s count: one UCS and one bending run each) and ``runs`` (solves)."""
     if not isinstance(result, CalibrationResult) or "targets" not in result.info:
         raise CalibrationError("strength_table needs the result of calibrate_strength")
     h = result.history

@@ -1,10 +1,11 @@
-"""Random-forest surrogate calibration (seed 002, section 2).
+"""Random-forest surrogate calibration (Irazabal et al. 2023, section 2).
 
 1. A run set: N parameter sets by optimised Latin hypercube sampling (``scipy.stats.qmc``) within the parameter
    ranges, all solved as one batch (``jax.vmap`` for pure models). It is stored in HDF5 (:meth:`RunSet.save`) and
    re-used for other targets on the same specimen without new runs.
 2. One :class:`sklearn.ensemble.RandomForestRegressor` per element of the output vector, trained on
-   ``err = y_target - y_run`` (seed 002, Eq. 1; divided by the target's scale when ``normalize``), 500 trees and a
+   ``err = y_target - y_run`` (Irazabal et al. 2023, Eq. 1; divided by the target's scale when ``normalize``), 500
+   trees and a
    third of the inputs per split by default; out-of-bag R^2 and the impurity importance of each parameter per element
    and on average. Parameters whose mean importance is below ``importance_threshold`` can be dropped (held at their
    initial value) and the run set re-sampled on the rest.
@@ -162,11 +163,11 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
               normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
               seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, chunk: int | None = None,
               progress=None) -> CalibrationResult:
-    """Calibrate with the random-forest surrogate of seed 002 (see the module docstring).
+    """Calibrate with the random-forest surrogate of Irazabal et al. 2023 (see the module docstring).
 
     runs: a stored :class:`RunSet` to re-use (no new runs); else ``n_runs`` are solved. I_e: initial admissible
     error (relative to each target's scale when ``normalize``, else in the output's units); L_s: combinations per
-    iteration; it_max: iterations at most. n_trees, max_features: the forests (seed 002: 500 and 1/3).
+    iteration; it_max: iterations at most. n_trees, max_features: the forests (Irazabal et al. 2023: 500 and 1/3).
     importance_threshold: drop parameters whose mean importance is below it; resample_runs: then solve that many new
     runs on the remaining parameters. chunk: solve the runs in batches of this many (bounds the memory of a
     ``vmap`` of large solves; ``None``: one batch). verify: solve once at the answer and report the measured errors

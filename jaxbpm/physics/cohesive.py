@@ -1,4 +1,4 @@
-"""Stress-dependent cohesive contacts (the DEM model of seed 002, Irazabal et al. 2023, Eq. 2-17).
+"""Stress-dependent cohesive contacts (the DEM model of Irazabal et al. 2023, Eq. 2-17).
 
 A linear spring-dashpot contact with an attractive cohesive stress that remembers the largest compressive stress the
 contact has carried. For two spheres ``i, j`` with overlap ``delta = r_i + r_j - |x_j - x_i|`` (Eq. 2) in contact
@@ -34,7 +34,8 @@ Tangential force (Eq. 15-17), regularised Coulomb::
 
 limited by ``|F_T| <= mu max(k_N delta + d_N d(delta)/dt, 0)``; when the limit is reached the force is scaled onto
 it and the stored elastic force becomes the limit force. The stored elastic force is kept in the current tangent
-plane (same length) as the contact turns. Particles do not rotate in seed 002 (models with this law default to 3
+plane (same length) as the contact turns. Particles do not rotate in Irazabal et al. 2023 (models with this law default
+to 3
 DOF per particle); when they do, the tangential force gives moments as in :mod:`jaxbpm.physics.contact`.
 
 Per-contact state carried by the DEM: the elastic tangential force ``spring`` ``[C, 3]`` [N] and the cohesion
@@ -60,7 +61,7 @@ __all__ = ["CohesiveLaw", "CohesiveParams", "CohesiveForces", "resolve_contact_l
 
 @dataclasses.dataclass(frozen=True)
 class CohesiveLaw:
-    """Parameters of the stress-dependent cohesive contact law (seed 002, Table 1 names them).
+    """Parameters of the stress-dependent cohesive contact law (Irazabal et al. 2023, Table 1 names them).
 
     c0: initial cohesion c_0 [Pa] of the contacts present at the start. kc: amount of cohesion from stress k_c [-].
     c_max: maximum cohesion [Pa] (``>= c0``). E, nu, friction, restitution: Young's modulus [Pa], Poisson ratio,

@@ -11,7 +11,8 @@ Coulomb ``|F_t| <= mu F_n`` (the spring is shortened to match when the contact s
 Optional damping (Tsuji et al.): ``c = 2 sqrt(5/6) beta sqrt(S m*)`` with ``beta = ln e / sqrt(ln^2 e + pi^2)``,
 ``S_n = 2 E* sqrt(R* delta)``, ``S_t = k_t``.
 
-The DEM passes each step's relative displacement of the contact points; a static solve (no-slip, seed 000 3.1.2)
+The DEM passes each step's relative displacement of the contact points; a static solve (no-slip, Jarolin & Dosta 2020
+3.1.2)
 passes the whole displacement since the reference state with an empty spring.
 """
 

@@ -3,11 +3,12 @@
 A :class:`Model` holds the sample's arrays in JAX form and a few static switches:
 
 * ``rotations``: particles carry orientations (6 DOF each) or not (3 DOF: bonds then act on relative translation
-  only, as in the 3N direct stiffness method of seed 000). Default: on whenever the sample has bonds (they transmit
+  only, as in the 3N direct stiffness method of Jarolin & Dosta 2020). Default: on whenever the sample has bonds (they
+  transmit
   bending and twisting moments) or contacts with friction.
 * ``contacts``: particle contacts (with a neighbour list in the DEM) or none; ``contact_law``: ``"hertz"``
   (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default) or ``"cohesive"`` (the stress-dependent cohesive law of
-  seed 002, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
+  Irazabal et al. 2023, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
 * ``walls``: the wall law (``"hertz"``/``"linear"``) or ``None``.
 
 Parameters that calibrators change live in a small pytree ``params = {"bond_E": [n_materials],
@@ -196,7 +197,8 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
     by default (the static solvers model the elastic range).
     contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw`;
     cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
-    ``contact_law="cohesive"``. Particles with cohesive contacts and no bonds do not rotate by default (seed 002).
+    ``contact_law="cohesive"``. Particles with cohesive contacts and no bonds do not rotate by default (Irazabal et al.
+    2023).
     """
     pm = sample.particle_material
     law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
