@@ -12,9 +12,11 @@ only by the approximations the method names: no inertia, small motion (linear DS
   from implicit differentiation, not from unrolling the iterations; ``vmap`` over parameter sets works.
 * **Nonlinear** (Hertz contacts, walls): Newton-Krylov, started from the linear bond solution; each Newton step
   solves the tangent system at the current state with GMRES (bonds and contacts element by element from their
-  Jacobians there, walls by a jvp), then a backtracking line search on the residual norm. Contact candidates are the pairs within reach at rest (fixed in advance); a contact's tangential spring is the
+  Jacobians there, walls by a jvp), then a backtracking line search on the residual norm. Contact candidates are the
+  pairs within reach at rest (fixed in advance); a contact's tangential spring is the
   whole relative tangential displacement of its contact points since rest, capped by Coulomb (``|F_t| <= mu F_n``,
-  ``slip=True``, the default) or not capped (``slip=False``: no slip, as seed 000, 3.1.2, assumes); walls are ideal
+  ``slip=True``, the default) or not capped (``slip=False``: no slip, as Jarolin & Dosta 2020, 3.1.2, assumes); walls
+  are ideal
   frictionless moving walls. Why slip by default: on contact-dominated samples most contacts slide in the DEM, and
   the no-slip assumption was the main error of the static solve (+16 % to +35 % on a 400-particle box at 0.2-2 %
   strain, +112 % on a bi-component agglomerate at 2 %; with slip -0.1 % to +0.0 % and +1.1 %).
@@ -44,9 +46,8 @@ from jaxbpm.physics import rotation
 from jaxbpm.physics import wall as wall_mod
 from jaxbpm.physics.model import Model
 
-__all__ = ["bond_jacobians", "reduced_jacobians", "block_diagonal", "stiffness_product", "tangent_operator",
-           "linear_solve", "solve_scene",
-           "stiffness_function", "load_cases"]
+__all__ = ["bond_jacobians", "reduced_jacobians", "packed_jacobians", "block_diagonal", "stiffness_product",
+           "tangent_operator", "linear_solve", "solve_scene", "stiffness_function", "load_cases"]
 
 
 # ---------------------------------------------------------------------------------------------------- operators
@@ -98,7 +99,7 @@ def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
     through ``d`` and ``f_j = -f_i``, so these numbers give the whole 12 x 12 (6 x 6) tangent (:func:`bond_jacobians`)
     in 56 % (25 %) of its memory.
 
-    Forward-mode derivatives (one ``jax.jvp`` per input component, batched with ``vmap``) of the same bond law the
+    Forward-mode derivatives (one ``jax.jvp`` per input component) of the same bond law the
     DEM runs, on ``[nb]`` component arrays. A rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the
     exact map to first order, which is all a Jacobian at rest sees. With a DOF state ``u`` ``[n, nd]`` the Jacobians
     are taken there instead (the tangent of a deformed configuration; rotations through the exact map).
@@ -129,8 +130,14 @@ def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
         i, j = model.bonds[:, 0], model.bonds[:, 1]
         ut = u.T
         z0 = jnp.concatenate([ut[:3, j] - ut[:3, i]] + ([ut[3:, i], ut[3:, j]] if model.rotations else []))
-    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
-    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+    # one jvp per input component, each materialised on its own: vmapped over the basis, XLA on CPU fused the nine
+    # tangents into loops that re-derived the shared intermediates per output (3x slower)
+    eye = jnp.eye(ni, dtype=dtype)
+
+    def column(c):
+        return jax.lax.optimization_barrier(jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (ni, nb)),))[1])
+
+    return jnp.stack([column(c) for c in range(ni)])
 
 
 def _full_jacobians(jr) -> jnp.ndarray:
@@ -154,8 +161,9 @@ def bond_jacobians(model: Model, params) -> jnp.ndarray:
 
 
 def stiffness_product(model: Model, jr, v):
-    """``K v`` for the whole sample from the reduced per-bond Jacobians ``jr`` (:func:`reduced_jacobians`), element
-    by element: gather both ends of every bond, ``ni x no`` multiply-adds per bond on ``[nb]`` arrays, one scatter
+    """``K v`` for the whole sample from the reduced per-bond Jacobians ``jr`` (:func:`reduced_jacobians`, or their
+    packed symmetric form at rest, :func:`packed_jacobians`), element by element: gather both ends of every bond, ``ni
+    x no`` multiply-adds per bond on ``[nb]`` arrays, one scatter
     of both ends' rows (padded to 4 or 8 numbers, which XLA on CPU scatters fastest). No global matrix is formed;
     ``K`` is the positive (stiffness) sign of the force Jacobian."""
     b = model.bonds
@@ -164,12 +172,70 @@ def stiffness_product(model: Model, jr, v):
     z = [vt[c, j] - vt[c, i] for c in range(3)]
     if model.rotations:
         z += [vt[3 + c, i] for c in range(3)] + [vt[3 + c, j] for c in range(3)]
-    return _scatter_pairs(model, i, j, _apply(jr, z))
+    return _scatter_pairs(model, i, j, _apply_packed(jr, z) if jr.ndim == 2 else _apply(jr, z))
+
+
+_UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def packed_jacobians(jr) -> jnp.ndarray:
+    """The reduced Jacobians at rest (:func:`reduced_jacobians`) in the packed form the linear solve streams through
+    at every CG iteration, ``[45, nb]`` (``[6, nb]`` with 3 DOF per particle): the bond stiffness is symmetric at rest
+    (the bond law has a potential there), so of the 9 x 9 numbers ``J = d (f_i, m_i, m_j) / d (d, theta_i,
+    theta_j)`` only the upper triangles of ``d f_i / d d``, ``d m_i / d theta_i``, ``d m_j / d theta_j`` and the full
+    ``d f_i / d theta_i``, ``d f_i / d theta_j``, ``d m_i / d theta_j`` are kept (``d m_i / d d = -(d f_i /
+    d theta_i)^T``, ``d m_j / d d = -(d f_i / d theta_j)^T``, ``d m_j / d theta_i = (d m_i / d theta_j)^T``). The
+    product reads 56 % of the memory of the 9 x 9 form (the product is memory-bound on CPU). Not for a deformed
+    state, whose tangent need not be symmetric."""
+    def blk(ro, co, upper):
+        idx = _UPPER3 if upper else tuple((a, b) for a in range(3) for b in range(3))
+        return [jr[co + c, ro + o] for o, c in idx]
+
+    parts = blk(0, 0, True)
+    if jr.shape[0] == 9:
+        parts += blk(0, 3, False) + blk(0, 6, False) + blk(3, 3, True) + blk(3, 6, False) + blk(6, 6, True)
+    return jnp.stack(parts)
+
+
+def _apply_packed(jp, z):
+    """:func:`_apply` for :func:`packed_jacobians`: the force rates ``[no, P]``."""
+    z = jax.lax.optimization_barrier(jnp.stack(z))
+    sym = {(a, b): k for k, (a, b) in enumerate(_UPPER3)}
+
+    def s(base, o, c):  # symmetric block entry (o, c)
+        return jp[base + sym[(min(o, c), max(o, c))]]
+
+    def g(base, o, c):  # general block entry (o, c)
+        return jp[base + 3 * o + c]
+
+    def row(terms):
+        out = None
+        for coef, x in terms:
+            out = coef * x if out is None else out + coef * x
+        return out
+
+    zd = [z[c] for c in range(3)]
+    if jp.shape[0] == 6:
+        return jnp.stack([row([(s(0, o, c), zd[c]) for c in range(3)]) for o in range(3)])
+    zi, zj = [z[3 + c] for c in range(3)], [z[6 + c] for c in range(3)]
+    a, b, c_, e, f, ii = 0, 6, 15, 24, 30, 39
+    y_f = [row([(s(a, o, c), zd[c]) for c in range(3)] + [(g(b, o, c), zi[c]) for c in range(3)]
+               + [(g(c_, o, c), zj[c]) for c in range(3)]) for o in range(3)]
+    y_mi = [row([(-g(b, c, o), zd[c]) for c in range(3)] + [(s(e, o, c), zi[c]) for c in range(3)]
+                + [(g(f, o, c), zj[c]) for c in range(3)]) for o in range(3)]
+    y_mj = [row([(-g(c_, c, o), zd[c]) for c in range(3)] + [(g(f, c, o), zi[c]) for c in range(3)]
+                + [(s(ii, o, c), zj[c]) for c in range(3)]) for o in range(3)]
+    return jnp.stack(y_f + y_mi + y_mj)
 
 
 def _apply(jr, z):
     """``sum_c jr[c] z[c]``: the force rates ``[no, P]`` of pairs from their reduced Jacobians ``[ni, no, P]`` and
-    the ``ni`` input components ``z`` (``[P]`` each)."""
+    the ``ni`` input components ``z`` (``[P]`` each).
+
+    The inputs are gathered into one ``[ni, P]`` array first, behind an optimisation barrier: fused into the
+    multiply-adds, XLA on CPU would gather every input once per output row (``ni x no`` gathers per pair instead of
+    ``ni``), which made the product 1.5x slower."""
+    z = jax.lax.optimization_barrier(jnp.stack(z))
     y = jr[0] * z[0][None]
     for c in range(1, len(z)):
         y = y + jr[c] * z[c][None]
@@ -210,8 +276,13 @@ def _contact_jacobians(model: Model, pairs, u) -> jnp.ndarray:
         out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
         return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
 
-    basis = jnp.broadcast_to(jnp.eye(2 * nd, dtype=u.dtype)[:, :, None], (2 * nd, 2 * nd, pairs.shape[0]))
-    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+    eye = jnp.eye(2 * nd, dtype=u.dtype)
+
+    def column(c):  # one materialised jvp per input component (see reduced_jacobians)
+        return jax.lax.optimization_barrier(
+            jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (2 * nd, pairs.shape[0])),))[1])
+
+    return jnp.stack([column(c) for c in range(2 * nd)])
 
 
 def _contact_product(model: Model, pairs, jc, v):
@@ -346,9 +417,79 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
     scale = jnp.mean(jnp.abs(jnp.diagonal(blocks, axis1=1, axis2=2)), axis=0)
     empty = jnp.all(jnp.abs(jnp.where(mask, blocks, 0.0)) == 0, axis=(1, 2))
     blocks = jnp.where(empty[:, None, None], jnp.diag(scale)[None], blocks)
-    inv = jnp.linalg.inv(blocks)
-    factor = None if coarse is None else _coarse_factor(model, jac, coarse)
+    inv = _spd_inverse(blocks)
+    factor = None if coarse is None else _CholeskyBlocks.of(_coarse_factor(model, jac, coarse))
     return Preconditioner(inv=inv, free=free, factor=factor, coarse=coarse)
+
+
+def _spd_inverse(blocks):
+    """Inverses of symmetric positive definite ``[n, k, k]`` matrices by Gauss-Jordan elimination without pivoting
+    (stable for SPD matrices), written on ``[n]`` arrays of the entries: elementwise loops, 3x faster on CPU than
+    ``jnp.linalg.inv``, which factors the small matrices one at a time. Each pivot step is materialised, so that
+    XLA does not re-derive earlier steps inside later ones."""
+    k = blocks.shape[-1]
+    a = [[blocks[:, r, c] for c in range(k)] for r in range(k)]
+    for p in range(k):
+        inv_p = 1.0 / a[p][p]
+        row_p = [a[p][c] * inv_p for c in range(k)]
+        row_p[p] = inv_p
+        rows = []
+        for r in range(k):
+            if r == p:
+                rows.append(row_p)
+                continue
+            f = a[r][p]
+            row = [a[r][c] - f * row_p[c] for c in range(k)]
+            row[p] = -f * inv_p
+            rows.append(row)
+        a = jax.lax.optimization_barrier(rows)
+    return jnp.stack([jnp.stack(row, axis=-1) for row in a], axis=-2)
+
+
+@dataclasses.dataclass(frozen=True)
+class _CholeskyBlocks:
+    """A lower Cholesky factor ``L`` cut into diagonal blocks of ``size`` rows, for ``A^-1 r`` by blocked forward
+    and back substitution: the inverses of the diagonal blocks and the off-diagonal panels are taken once, and every
+    application is a few matrix-vector products (4x faster on CPU than a triangular solve with one right-hand side,
+    which XLA runs as a scalar loop)."""
+
+    inv_diag: Any   # list of [b, b]: inverses of the diagonal blocks of L
+    rows: Any       # list of [b, start]: L[block, :start] (row panel left of each diagonal block)
+    cols_t: Any     # list of [b, m - end]: L[end:, block]^T (column panel below each diagonal block, transposed)
+
+    size = 96
+
+    @classmethod
+    def of(cls, factor):
+        m = factor.shape[0]
+        e = list(range(0, m, cls.size)) + [m]
+        eye = jnp.eye(cls.size, dtype=factor.dtype)
+        inv_diag = [jax.scipy.linalg.solve_triangular(factor[a:b, a:b], eye[:b - a, :b - a], lower=True)
+                    for a, b in zip(e[:-1], e[1:])]
+        rows = [factor[a:b, :a] for a, b in zip(e[:-1], e[1:])]
+        cols_t = [factor[b:, a:b].T for a, b in zip(e[:-1], e[1:])]
+        return cls(inv_diag=inv_diag, rows=rows, cols_t=cols_t)
+
+    def solve(self, r):
+        """``(L L^T)^-1 r``."""
+        nb = len(self.inv_diag)
+        ys = []
+        for k in range(nb):
+            a = sum(y.shape[0] for y in ys)
+            rb = r[a:a + self.inv_diag[k].shape[0]]
+            if k:
+                rb = rb - self.rows[k] @ jnp.concatenate(ys)
+            ys.append(self.inv_diag[k] @ rb)
+        xs = [None] * nb
+        for k in reversed(range(nb)):
+            yb = ys[k]
+            if k < nb - 1:
+                yb = yb - self.cols_t[k] @ jnp.concatenate(xs[k + 1:])
+            xs[k] = self.inv_diag[k].T @ yb
+        return jnp.concatenate(xs)
+
+
+jax.tree_util.register_dataclass(_CholeskyBlocks, data_fields=["inv_diag", "rows", "cols_t"], meta_fields=[])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -362,13 +503,17 @@ class Preconditioner:
     coarse: CoarseSpace | None = None
 
     def __call__(self, v):
-        out = jnp.where(self.free, jnp.einsum("nij,nj->ni", self.inv, v), v)
+        # block-Jacobi as nd broadcast products (elementwise; a batched einsum of 6x6 blocks is slower on CPU)
+        out = self.inv[:, :, 0] * v[:, None, 0]
+        for c in range(1, v.shape[1]):
+            out = out + self.inv[:, :, c] * v[:, None, c]
+        out = jnp.where(self.free, out, v)
         if self.coarse is None:
             return out
         c = self.coarse
         vf = jnp.where(self.free, v, 0.0)
         rc = jax.ops.segment_sum(jnp.einsum("nkc,nk->nc", c.basis, vf), c.labels, c.count).reshape(-1)
-        y = jax.scipy.linalg.cho_solve((self.factor, True), rc).reshape(c.count, 6)
+        y = self.factor.solve(rc).reshape(c.count, 6)
         return out + jnp.einsum("nkc,nc->nk", c.basis, y[c.labels])
 
 
@@ -393,7 +538,8 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None):
         if walls is not None or model.walls is not None or model.contacts:
             raise SceneError("the 'jacobians' operator covers bonds only; use operator='jvp' with walls or contacts")
         jac = reduced_jacobians(model, params)
-        return (lambda v: stiffness_product(model, jac, v)), jac
+        packed = packed_jacobians(jac)
+        return (lambda v: stiffness_product(model, packed, v)), jac
     if operator != "jvp":
         raise ValueError(f"operator must be 'auto', 'jacobians' or 'jvp', got {operator!r}")
     nd = 6 if model.rotations else 3
@@ -750,7 +896,7 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
     """
     model_c = dataclasses.replace(model, contacts=pairs is not None and len(pairs) > 0)
     if model_c.contacts and not slip:
-        # no slip (seed 000): the Coulomb limit is lifted for the static solve
+        # no slip (Jarolin & Dosta 2020): the Coulomb limit is lifted for the static solve
         model_c = dataclasses.replace(model_c, contact=model_c.contact._replace(
             friction=jnp.asarray(jnp.inf, model.positions0.dtype)))
     # with slip, the tangential spring of a contact is its whole relative tangential displacement since rest, capped by
@@ -782,7 +928,8 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
     frac0 = fractions[0]
     if uses_walls:
         # start from the bond system with the wall-touching particles moved axially so that each wall overlaps them
-        # a little (seed 000 starts Newton from the pure bond solution; without overlap the walls add no stiffness
+        # a little (Jarolin & Dosta 2020 starts Newton from the pure bond solution; without overlap the walls add no
+        # stiffness
         # and the first Newton system would be singular)
         z, rad = np.asarray(model.positions0[:, ax]), np.asarray(model.radii)
         lo, hi = (z - rad).min(), (z + rad).max()
