@@ -58,20 +58,28 @@ def _configuration(model: Model, u):
     return x, q
 
 
-def _contact_slip(model: Model, pairs, d, z):
+def _contact_slip(model: Model, pairs, d, w):
     """Relative tangential displacement of the contact points of ``pairs [C, 2]`` since rest, as ``(x, y, z)``
     components: ``u_j - u_i + theta_j x (-r_j n) - theta_i x (r_i n)`` (the contact law keeps its tangential part),
-    with ``d`` the current pair vectors (components) and ``z`` the pairs' DOFs ``[2nd, C]`` (i's, then j's)."""
-    nd = z.shape[0] // 2
-    dxi = tuple(z[nd + c] - z[c] for c in range(3))
+    with ``d`` the current pair vectors (components) and ``w`` the pairs' reduced DOFs ``[3 or 9, C]``: ``u_j -
+    u_i``, then (with rotations) ``theta_i`` and ``theta_j``."""
+    dxi = tuple(w[c] for c in range(3))
     if not model.rotations:
         return dxi
     inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     n = tuple(c * inv for c in d)
     r_i, r_j = model.radii[pairs[:, 0]], model.radii[pairs[:, 1]]
-    a = bond_mod._cross(tuple(z[9 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
-    b = bond_mod._cross(tuple(z[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
+    a = bond_mod._cross(tuple(w[6 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
+    b = bond_mod._cross(tuple(w[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
     return tuple(dxi[c] + a[c] - b[c] for c in range(3))
+
+
+def _pair_dofs(model: Model, pairs, u):
+    """The reduced DOFs of pairs ``[3 or 9, C]`` from a DOF array ``u [n, nd]``: ``u_j - u_i`` (and ``theta_i``,
+    ``theta_j``), the only way the bond and contact laws see the displacements."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    ut = u.T
+    return jnp.concatenate([ut[:3, j] - ut[:3, i]] + ([ut[3:, i], ut[3:, j]] if model.rotations else []))
 
 
 def _internal_forces(model: Model, params, u, contacts=None, walls=None):
@@ -81,9 +89,7 @@ def _internal_forces(model: Model, params, u, contacts=None, walls=None):
     if contacts is not None:
         pairs, valid = contacts
         i, j = pairs[:, 0], pairs[:, 1]
-        ut = u.T
-        dxi = jnp.stack(_contact_slip(model, pairs, tuple((x[j] - x[i]).T), jnp.concatenate([ut[:, i], ut[:, j]])),
-                        axis=1)
+        dxi = jnp.stack(_contact_slip(model, pairs, tuple((x[j] - x[i]).T), _pair_dofs(model, pairs, u)), axis=1)
         zeros = jnp.zeros_like(dxi)
         con = (pairs, valid, zeros, dxi, zeros)
     wp, wn = (None, None) if walls is None else walls
@@ -125,11 +131,7 @@ def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
         parts = (out.f_i + out.m_i + out.m_j) if model.rotations else out.f_i
         return jnp.stack(parts)
 
-    z0 = jnp.zeros((ni, nb), dtype)
-    if u is not None:
-        i, j = model.bonds[:, 0], model.bonds[:, 1]
-        ut = u.T
-        z0 = jnp.concatenate([ut[:3, j] - ut[:3, i]] + ([ut[3:, i], ut[3:, j]] if model.rotations else []))
+    z0 = jnp.zeros((ni, nb), dtype) if u is None else _pair_dofs(model, model.bonds, u)
     # one jvp per input component, each materialised on its own: vmapped over the basis, XLA on CPU fused the nine
     # tangents into loops that re-derived the shared intermediates per output (3x slower)
     eye = jnp.eye(ni, dtype=dtype)
@@ -167,12 +169,8 @@ def stiffness_product(model: Model, jr, v):
     of both ends' rows (padded to 4 or 8 numbers, which XLA on CPU scatters fastest). No global matrix is formed;
     ``K`` is the positive (stiffness) sign of the force Jacobian."""
     b = model.bonds
-    i, j = b[:, 0], b[:, 1]
-    vt = v.T
-    z = [vt[c, j] - vt[c, i] for c in range(3)]
-    if model.rotations:
-        z += [vt[3 + c, i] for c in range(3)] + [vt[3 + c, j] for c in range(3)]
-    return _scatter_pairs(model, i, j, _apply_packed(jr, z) if jr.ndim == 2 else _apply(jr, z))
+    z = _pair_dofs(model, b, v)
+    return _scatter_pairs(model, b[:, 0], b[:, 1], _apply_packed(jr, z) if jr.ndim == 2 else _apply(jr, z))
 
 
 _UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
@@ -199,7 +197,7 @@ def packed_jacobians(jr) -> jnp.ndarray:
 
 def _apply_packed(jp, z):
     """:func:`_apply` for :func:`packed_jacobians`: the force rates ``[no, P]``."""
-    z = jax.lax.optimization_barrier(jnp.stack(z))
+    z = jax.lax.optimization_barrier(z)
     sym = {(a, b): k for k, (a, b) in enumerate(_UPPER3)}
 
     def s(base, o, c):  # symmetric block entry (o, c)
@@ -230,12 +228,12 @@ def _apply_packed(jp, z):
 
 def _apply(jr, z):
     """``sum_c jr[c] z[c]``: the force rates ``[no, P]`` of pairs from their reduced Jacobians ``[ni, no, P]`` and
-    the ``ni`` input components ``z`` (``[P]`` each).
+    their reduced DOFs ``z``.
 
-    The inputs are gathered into one ``[ni, P]`` array first, behind an optimisation barrier: fused into the
+    The inputs ``z [ni, P]`` (:func:`_pair_dofs`) are materialised behind an optimisation barrier: fused into the
     multiply-adds, XLA on CPU would gather every input once per output row (``ni x no`` gathers per pair instead of
     ``ni``), which made the product 1.5x slower."""
-    z = jax.lax.optimization_barrier(jnp.stack(z))
+    z = jax.lax.optimization_barrier(z)
     y = jr[0] * z[0][None]
     for c in range(1, len(z)):
         y = y + jr[c] * z[c][None]
@@ -257,40 +255,37 @@ def _scatter_pairs(model: Model, i, j, y):
 
 
 def _contact_jacobians(model: Model, pairs, u) -> jnp.ndarray:
-    """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u``: ``[2nd, no, C]``,
-    ``d (f_i [, m_i, m_j]) / d (u_i [, theta_i], u_j [, theta_j])``, by batched jvps of the same contact law the
-    DEM runs (the tangential spring is the contact points' relative tangential displacement since rest,
-    :func:`_contact_slip`, as in :func:`_internal_forces`)."""
+    """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u`` in the reduced form of
+    :func:`reduced_jacobians`, ``[ni, no, C]``: ``d (f_i [, m_i, m_j]) / d (u_j - u_i [, theta_i, theta_j])``, by
+    jvps of the same contact law the DEM runs (the tangential spring is the contact points' relative tangential
+    displacement since rest, :func:`_contact_slip`, as in :func:`_internal_forces`)."""
     rot = model.rotations
-    nd = 6 if rot else 3
+    ni = 9 if rot else 3
     i, j = pairs[:, 0], pairs[:, 1]
     p0 = model.positions0.T
     r_i, r_j, m_i, m_j = model.radii[i], model.radii[j], model.mass[i], model.mass[j]
     zero = jnp.zeros(pairs.shape[0], u.dtype)
-    ut = u.T
-    z0 = jnp.concatenate([ut[:, i], ut[:, j]])
+    z0 = _pair_dofs(model, pairs, u)
 
     def law(z):
-        d = tuple(p0[c, j] + z[nd + c] - p0[c, i] - z[c] for c in range(3))
+        d = tuple(p0[c, j] - p0[c, i] + z[c] for c in range(3))
         dxi = _contact_slip(model, pairs, d, z)
         out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
         return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
 
-    eye = jnp.eye(2 * nd, dtype=u.dtype)
+    eye = jnp.eye(ni, dtype=u.dtype)
 
     def column(c):  # one materialised jvp per input component (see reduced_jacobians)
         return jax.lax.optimization_barrier(
-            jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (2 * nd, pairs.shape[0])),))[1])
+            jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (ni, pairs.shape[0])),))[1])
 
-    return jnp.stack([column(c) for c in range(2 * nd)])
+    return jnp.stack([column(c) for c in range(ni)])
 
 
 def _contact_product(model: Model, pairs, jc, v):
-    """``K v`` of the contacts from :func:`_contact_jacobians`."""
-    i, j = pairs[:, 0], pairs[:, 1]
-    vt = v.T
-    return _scatter_pairs(model, i, j, _apply(jc, [vt[c, i] for c in range(vt.shape[0])]
-                                          + [vt[c, j] for c in range(vt.shape[0])]))
+    """``K v`` of the contacts from :func:`_contact_jacobians` (a contact's tangent need not be symmetric: sliding
+    contacts, so the 9 x 9 form)."""
+    return _scatter_pairs(model, pairs[:, 0], pairs[:, 1], _apply(jc, _pair_dofs(model, pairs, v)))
 
 
 def block_diagonal(model: Model, params, jac=None) -> jnp.ndarray:
@@ -883,9 +878,12 @@ def _newton_step(sys: _NewtonSystem, u, wall_points, krylov_tol):
 
     # right preconditioning (A M y = r, du = M y): jax's gmres measures a left-preconditioned residual against the
     # unpreconditioned right-hand side, which stops it at once when M carries units (1 / stiffness)
-    y, _ = jax.scipy.sparse.linalg.gmres(lambda y: matvec(sys.precond(y)), r, tol=krylov_tol, restart=40,
-                                         maxiter=sys.maxiter, solve_method="batched")
-    return jnp.where(free, sys.precond(y), 0.0)
+    # on a flat vector: with [n, nd] vectors jax's gmres keeps its Krylov basis as [n, nd, restart + 1] and XLA on
+    # CPU transposed the whole basis for the Gram-Schmidt products at every iteration
+    shape = r.shape
+    y, _ = jax.scipy.sparse.linalg.gmres(lambda y: matvec(sys.precond(y.reshape(shape))).reshape(-1), r.reshape(-1),
+                                         tol=krylov_tol, restart=40, maxiter=sys.maxiter, solve_method="batched")
+    return jnp.where(free, sys.precond(y.reshape(shape)), 0.0)
 
 
 def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxiter, newton_maxiter, stiffness_tol,
