@@ -79,7 +79,10 @@ def _pair_dofs(model: Model, pairs, u):
     ``theta_j``), the only way the bond and contact laws see the displacements."""
     i, j = pairs[:, 0], pairs[:, 1]
     ut = u.T
-    return jnp.concatenate([ut[:3, j] - ut[:3, i]] + ([ut[3:, i], ut[3:, j]] if model.rotations else []))
+    z = [ut[c, j] - ut[c, i] for c in range(3)]
+    if model.rotations:
+        z += [ut[3 + c, i] for c in range(3)] + [ut[3 + c, j] for c in range(3)]
+    return jnp.stack(z)  # one gather per row: a concatenation of [3, P] gathers runs 4x slower on CPU
 
 
 def _internal_forces(model: Model, params, u, contacts=None, walls=None):
@@ -524,8 +527,9 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None):
     :func:`stiffness_product`; bonds only), ``"jvp"`` (a Jacobian-vector product of the whole force function at
     every application; any interaction) or ``"auto"`` (``"jacobians"`` unless the model has walls or contacts). Both
     give the same operator to round-off: the Jacobians are forward-mode derivatives of the same bond law. The
-    element-by-element product is several times cheaper per application and keeps ``ni x no`` numbers per bond in
-    memory (648 bytes with 6 DOF per particle, 72 with 3).
+    element-by-element product is several times cheaper per application; it streams the packed symmetric form
+    (:func:`packed_jacobians`: 45 numbers per bond with 6 DOF per particle, 6 with 3) at every application, and the
+    reduced Jacobians (81 or 9 numbers per bond) are returned for the preconditioner.
     """
     if operator == "auto":
         operator = "jvp" if (walls is not None or model.walls is not None or model.contacts) else "jacobians"
