@@ -22,7 +22,7 @@ import time
 sys.path.insert(0, os.path.dirname(__file__))
 from _common import enable_x64, machine_info, table, write_json  # noqa: E402
 
-SEED003_MODELS = {"original": 19, "simplified": 4}
+QU2020_MODELS = {"original": 19, "simplified": 4}
 
 
 def main(argv=None):
@@ -92,15 +92,15 @@ def main(argv=None):
                "sigma_c": res.values["bond_tensile_strength"], "tau_c": res.values["bond_shear_strength"],
                "sigma_c_vs_true": res.values["bond_tensile_strength"] / args.sigma - 1,
                "tau_c_vs_true": res.values["bond_shear_strength"] / args.tau - 1,
-               "seed003_models": SEED003_MODELS[scheme],
-               "goal_met": bool(first_ok is not None and first_ok["models"] <= SEED003_MODELS[scheme]),
+               "qu2020_models": QU2020_MODELS[scheme],
+               "goal_met": bool(first_ok is not None and first_ok["models"] <= QU2020_MODELS[scheme]),
                "notes": res.notes, "history": hist}
         rows.append(row)
         out[scheme] = row
     print()
     table([{**r, "ucs_error_%": 100 * r["ucs_error"], "flexural_error_%": 100 * r["flexural_error"]} for r in rows],
           ["scheme", "iterations", "models", "dem_runs", "wall_s", "ucs_error_%", "flexural_error_%",
-           "seed003_models", "goal_met"])
+           "qu2020_models", "goal_met"])
     write_json(args.out, {"benchmark": "strength_calibration", "machine": machine_info(), "settings": vars(args),
                           "specimens": {"ucs": {"particles": cyl.n_particles, "bonds": cyl.n_bonds},
                                         "tpb": {"particles": beam.n_particles, "bonds": beam.n_bonds}},
