@@ -20,7 +20,8 @@ would set it up; Jarolin & Dosta 2020 used walls):
 3. **Porous shaped body** (like the inverse opals): a dense box with a cubic array of spherical pores cut out,
    contacts of bonded pairs replaced by the bonds; the STE uses layered springs in series (``layered=True``).
 
-Methods per sample: DEM with contacts (the reference), DSM nonlinear (Newton-Krylov with contacts), DSM linear
+Methods per sample: DEM with contacts (the reference), DSM nonlinear (Newton-Krylov with contacts), DSM linear +
+contacts (one linear solve with the contacts linearised, ``nonlinear=False`` on the contact scene), DSM linear
 (bonds only), STE (linearised contacts; layered for Case 3). Times are run times (compilation excluded, reported
 separately); the speed-up is DEM run / method run. Errors are stiffness differences to the DEM, mean and standard
 deviation over the samples of a case. JSON to ``results/methods.json`` and a PNG in the style of Jarolin & Dosta's Fig.
@@ -37,6 +38,7 @@ import time
 from _common import enable_x64, machine_info, pin_threads, save_png, table, write_json
 
 CASES = ("1-porous", "2-agglomerate", "3-shaped")
+METHODS = ("DSM nonlinear", "DSM linear + contacts", "DSM linear", "STE")
 
 
 def log(msg):
@@ -95,6 +97,7 @@ def run_sample(sample, case, strain, newton_maxiter=6):
     # Newton is capped (newton_maxiter per load step): where it cannot converge (Case 2) it says so and stops, rather
     # than running for minutes; the row keeps its residual and the "converged" flag
     runs = [("DEM", scene_c, "dem", {}), ("DSM nonlinear", scene_c, "dsm", {"newton_maxiter": newton_maxiter}),
+            ("DSM linear + contacts", scene_c, "dsm", {"nonlinear": False}),
             ("DSM linear", scene_b, "dsm", {}), ("STE", scene_c, "ste", {"layered": case == "3-shaped"})]
     for name, scene, method, opts in runs:
         t = time.perf_counter()
@@ -125,7 +128,7 @@ def run_sample(sample, case, strain, newton_maxiter=6):
 def summarise(rows):
     import numpy as np
 
-    methods = ["DSM nonlinear", "DSM linear", "STE"]
+    methods = list(METHODS)
     out = {}
     for m in methods:
         ok = [r[m] for r in rows if "error" in r[m] and not isinstance(r[m]["error"], str)]
@@ -153,12 +156,12 @@ def plot(summary, path, note):
     import matplotlib.pyplot as plt
     import numpy as np
 
-    methods = ["DSM nonlinear", "DSM linear", "STE"]
+    methods = list(METHODS)
     fig, ax = plt.subplots(figsize=(10, 5))
     ax2 = ax.twinx()
-    width = 0.25
+    width = 0.2
     for k, m in enumerate(methods):
-        xs = np.arange(len(summary)) + (k - 1) * width
+        xs = np.arange(len(summary)) + (k - 1.5) * width
         sp = [summary[c][m].get("speedup_mean", np.nan) for c in summary]
         er = [100 * summary[c][m].get("abs_error_mean", np.nan) for c in summary]
         es = [100 * summary[c][m].get("abs_error_std", np.nan) for c in summary]
@@ -231,10 +234,13 @@ def main(argv=None) -> int:
     goals = {}
     if "1-porous" in summary:
         c1 = summary["1-porous"]
+        # the fastest DSM variant within 1 % (the nonlinear DSM, or the linear one with linearised contacts)
+        within = [m for m in ("DSM nonlinear", "DSM linear + contacts")
+                  if c1[m].get("abs_error_mean", 1) <= 0.01]
+        best = max(within, key=lambda m: c1[m].get("speedup_mean", 0)) if within else "DSM nonlinear"
         goals["case1_dsm_100x_at_no_worse_error_than_1pct"] = {
-            "met": c1["DSM nonlinear"].get("speedup_mean", 0) >= 100 and
-            c1["DSM nonlinear"].get("abs_error_mean", 1) <= 0.01,
-            "speedup": c1["DSM nonlinear"].get("speedup_mean"), "error": c1["DSM nonlinear"].get("abs_error_mean")}
+            "met": bool(within) and c1[best].get("speedup_mean", 0) >= 100, "variant": best,
+            "speedup": c1[best].get("speedup_mean"), "error": c1[best].get("abs_error_mean")}
         goals["case1_ste_1000x_at_no_worse_error_than_7pct"] = {
             "met": c1["STE"].get("speedup_mean", 0) >= 1000 and c1["STE"].get("abs_error_mean", 1) <= 0.07,
             "speedup": c1["STE"].get("speedup_mean"), "error": c1["STE"].get("abs_error_mean")}

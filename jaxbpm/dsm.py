@@ -198,6 +198,29 @@ def packed_jacobians(jr) -> jnp.ndarray:
     return jnp.stack(parts)
 
 
+def _symmetrised(jr) -> jnp.ndarray:
+    """The reduced Jacobians ``[ni, no, P]`` of the symmetric part of each pair's stiffness (for a preloaded contact
+    linearised at an overlap, whose tangent is symmetric only up to its small geometric terms)."""
+    J = [[jr[c, o] for c in range(jr.shape[0])] for o in range(jr.shape[1])]  # J[o][c]
+    out = [[None] * len(J) for _ in J]
+    blocks = [(0, 0)] if len(J) == 3 else [(0, 0), (3, 3), (6, 6)]
+    for ro, co in blocks:  # diagonal blocks d f_i / d d, d m_i / d theta_i, d m_j / d theta_j: symmetric
+        for a in range(3):
+            for b in range(3):
+                out[ro + a][co + b] = 0.5 * (J[ro + a][co + b] + J[ro + b][co + a])
+    if len(J) == 9:
+        for a in range(3):
+            for b in range(3):
+                # d m_i / d d = -(d f_i / d theta_i)^T, d m_j / d d = -(d f_i / d theta_j)^T,
+                # d m_j / d theta_i = (d m_i / d theta_j)^T
+                for (fr, fc), (tr, tc), sign in (((0, 3), (3, 0), -1.0), ((0, 6), (6, 0), -1.0),
+                                                 ((3, 6), (6, 3), 1.0)):
+                    v = 0.5 * (J[fr + a][fc + b] + sign * J[tr + b][tc + a])
+                    out[fr + a][fc + b] = v
+                    out[tr + b][tc + a] = sign * v
+    return jnp.stack([jnp.stack([out[o][c] for o in range(len(J))]) for c in range(len(J))])
+
+
 def _apply_packed(jp, z):
     """:func:`_apply` for :func:`packed_jacobians`: the force rates ``[no, P]``."""
     z = jax.lax.optimization_barrier(z)
@@ -257,32 +280,59 @@ def _scatter_pairs(model: Model, i, j, y):
     return jnp.concatenate([total[:, :3], total[:, 4:7]], axis=1) if model.rotations else total[:, :3]
 
 
-def _contact_jacobians(model: Model, pairs, u) -> jnp.ndarray:
+def _contact_jacobians(model: Model, pairs, u, d0=None) -> jnp.ndarray:
     """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u`` in the reduced form of
     :func:`reduced_jacobians`, ``[ni, no, C]``: ``d (f_i [, m_i, m_j]) / d (u_j - u_i [, theta_i, theta_j])``, by
     jvps of the same contact law the DEM runs (the tangential spring is the contact points' relative tangential
-    displacement since rest, :func:`_contact_slip`, as in :func:`_internal_forces`)."""
+    displacement since rest, :func:`_contact_slip`, as in :func:`_internal_forces`). ``d0 [C, 3]``: the pair
+    vectors to linearise at instead of the rest positions (``u`` is then zero: the linearised contacts of the
+    linear solve)."""
     rot = model.rotations
     ni = 9 if rot else 3
     i, j = pairs[:, 0], pairs[:, 1]
     p0 = model.positions0.T
+    base = [p0[c, j] - p0[c, i] for c in range(3)] if d0 is None else list(d0.T)
     r_i, r_j, m_i, m_j = model.radii[i], model.radii[j], model.mass[i], model.mass[j]
-    zero = jnp.zeros(pairs.shape[0], u.dtype)
-    z0 = _pair_dofs(model, pairs, u)
+    zero = jnp.zeros(pairs.shape[0], model.positions0.dtype)
+    z0 = jnp.zeros((ni, pairs.shape[0]), zero.dtype) if u is None else _pair_dofs(model, pairs, u)
 
     def law(z):
-        d = tuple(p0[c, j] - p0[c, i] + z[c] for c in range(3))
+        d = tuple(base[c] + z[c] for c in range(3))
         dxi = _contact_slip(model, pairs, d, z)
         out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
         return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
 
-    eye = jnp.eye(ni, dtype=u.dtype)
+    eye = jnp.eye(ni, dtype=zero.dtype)
 
     def column(c):  # one materialised jvp per input component (see reduced_jacobians)
         return jax.lax.optimization_barrier(
             jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (ni, pairs.shape[0])),))[1])
 
     return jnp.stack([column(c) for c in range(ni)])
+
+
+def _linearised_contact_jacobians(model: Model, pairs, state) -> jnp.ndarray:
+    """Symmetric positive semi-definite Jacobians (reduced form) of the contact candidates for the linear solve,
+    at the DOF state ``state``: the Hertz normal stiffness at the overlap there, plus the Mindlin tangential
+    stiffness scaled by the contact's secant factor ``|F_t| / |F_t without the Coulomb cap|`` at that state (1 while
+    it sticks, less once it slides). A sliding contact's own tangent couples its tangential force to the normal
+    displacement (not symmetric, and its symmetric part need not be positive), so CG could not use it."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    w = _pair_dofs(model, pairs, state)
+    p0 = model.positions0.T
+    d = tuple(p0[c, j] - p0[c, i] + w[c] for c in range(3))
+    slip = _contact_slip(model, pairs, d, w)
+    zero = (jnp.zeros(pairs.shape[0], w.dtype),) * 3
+    args = (d, model.radii[i], model.radii[j], model.mass[i], model.mass[j], zero, slip, zero)
+    capped = contact_mod._law(*args, model.contact).spring
+    free = contact_mod._law(*args, model.contact._replace(friction=jnp.asarray(1e30, w.dtype))).spring
+    num, den = jnp.sqrt(bond_mod._dot(capped, capped)), jnp.sqrt(bond_mod._dot(free, free))
+    secant = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 1.0)
+    d_state = jnp.stack(d, axis=1)
+    stick = _contact_jacobians(model, pairs, None, d_state)
+    normal = _contact_jacobians(dataclasses.replace(model, contact=model.contact._replace(
+        G_star=0.0 * model.contact.G_star)), pairs, None, d_state)
+    return _symmetrised(normal + secant[None, None] * (stick - normal))
 
 
 def _contact_product(model: Model, pairs, jc, v):
@@ -686,7 +736,8 @@ def _contact_candidates(sample, model, skin):
 
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol=None, contact_skin=None, load_steps=4, throw=False,
-                operator="auto", preconditioner="auto", aggregate_size=None, slip=True):
+                operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
+                contact_passes=2):
     """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`."""
     from jaxbpm.physics.model import default_params
     from jaxbpm.result import Result
@@ -723,6 +774,24 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         reach = float(np.mean(rad)) * 0.5 + delta
         touching = ((pos[:, ax] - rad) <= (pos[:, ax] - rad).min() + reach) | (
             (pos[:, ax] + rad) >= (pos[:, ax] + rad).max() - reach)
+    lin = None
+    if scene.contacts and not nonlinear:
+        # the linear solve takes the contact candidates as springs linearised at `contact_fraction` of the target
+        # strain (the middle of the fit range by default): first at the affine displacement field, then
+        # (`contact_passes` - 1 times) at the previous solution, which puts the overlaps where the sample's
+        # non-affine motion puts them
+        if operator not in ("auto", "jacobians"):
+            raise SceneError("linearised contacts need operator='jacobians' (or 'auto')")
+        frac = float(np.mean(scene.fit_range)) if contact_fraction is None else float(contact_fraction)
+        if not (0 < frac <= 1):
+            raise SceneError(f"contact_fraction must lie in (0, 1], got {contact_fraction!r}")
+        if int(contact_passes) < 1:
+            raise SceneError(f"contact_passes must be at least 1, got {contact_passes!r}")
+        x = np.asarray(sample.positions)[:, ax]
+        u_aff = np.zeros((model.n, nd))
+        u_aff[:, ax] = -delta * (x - x.min()) / max(x.max() - x.min(), 1e-300)
+        lin = (jnp.asarray(pairs, jnp.int32), jnp.asarray(u_aff, model.positions0.dtype),
+               jnp.asarray(frac, model.positions0.dtype))
     _check_held(sample, model, free_np, clamped, pairs, touching)
     free = jnp.asarray(free_np)
     u_p = jnp.asarray(u_p, model.positions0.dtype)
@@ -733,8 +802,13 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         # the jit cache serves repeated solves of one sample size (calibration loops); on a cache miss the first
         # call includes compilation, and a second call gives the run time
         cached = _linear_jit._cache_size()
-        coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
-        args = (model, params, free, u_p, linear_tol, maxiter, operator, stiffness_tol, coarse)
+        springs = model if lin is None else dataclasses.replace(model, bonds=jnp.concatenate([model.bonds, lin[0]]))
+        if lin is not None:
+            stats.update(contact_candidates=int(lin[0].shape[0]), contact_fraction=frac,
+                         contact_passes=int(contact_passes))
+        coarse = _coarse_for(springs, free_np, preconditioner, aggregate_size)
+        args = (model, params, free, u_p, linear_tol, maxiter, operator, stiffness_tol, coarse, lin,
+                int(contact_passes))
         u, force_total, force_boundary, res, iterations = jax.block_until_ready(_linear_jit(*args))
         first = time.perf_counter() - tc
         if _linear_jit._cache_size() > cached:
@@ -787,8 +861,9 @@ def _bond_forces_at(model, params, u):
     return _internal_forces(model, params, u)[1]["bonds"]
 
 
-@functools.partial(jax.jit, static_argnames=("maxiter", "operator"))
-def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffness_tol=None, coarse=None):
+@functools.partial(jax.jit, static_argnames=("maxiter", "operator", "contact_passes"))
+def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffness_tol=None, coarse=None,
+                contacts=None, contact_passes=2):
     """Linear solve of one load case; returns ``(u, reaction, boundary reaction, residual, iterations)``.
 
     reaction = ``u . K u / delta`` (twice the strain energy over the prescribed displacement ``delta``): at
@@ -796,9 +871,30 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
     energy, so its error is quadratic in the error of ``u`` and a loose tolerance still gives an accurate stiffness.
     boundary reaction = mean of the axial forces on the driven and (minus) the resting clamped layer, the measure
     the DEM uses; the two agree to the solver's tolerance.
+    contacts: ``(pairs [C, 2], u_lin [n, nd], fraction)``: contact candidates linearised at the state ``fraction *
+    u_lin`` (:func:`_linearised_contact_jacobians`; a pair that does not touch there adds nothing), added to the bonds as further springs (operator and preconditioner alike; the
+    coarse space must have been built with them). ``contact_passes`` solves: each later one re-linearises the
+    contacts at ``fraction`` times the previous solution. Iterations are summed over the passes.
     """
-    full, jac = tangent_operator(model, params, operator=operator)
-    u, res, iterations, _ = _cg(full, _preconditioner(model, params, free, jac, coarse), free, u_p, tol, maxiter,
+    if contacts is None:
+        full, jac = tangent_operator(model, params, operator=operator)
+        return _linear_once(model, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac)
+    pairs, u_lin, fraction = contacts
+    springs = dataclasses.replace(model, bonds=jnp.concatenate([model.bonds, pairs.astype(model.bonds.dtype)]))
+    jb = reduced_jacobians(model, params)
+    total = 0
+    for _ in range(contact_passes):
+        jac = jnp.concatenate([jb, _linearised_contact_jacobians(model, pairs, fraction * u_lin)], axis=2)
+        packed = packed_jacobians(jac)
+        out = _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse,
+                           lambda v, packed=packed: stiffness_product(springs, packed, v), jac)
+        u_lin = out[0]
+        total = total + out[4]
+    return out[:4] + (total,)
+
+
+def _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac):
+    u, res, iterations, _ = _cg(full, _preconditioner(springs, params, free, jac, coarse), free, u_p, tol, maxiter,
                                 stiffness_tol)
     gen = -full(u)  # linearised internal forces
     delta = jnp.max(jnp.abs(u_p))

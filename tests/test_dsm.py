@@ -75,6 +75,39 @@ def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
     np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-5)
 
 
+def test_linear_dsm_linearises_the_contacts(packing):
+    # stiffer particles: the contacts carry ~20 % of the stiffness (the nonlinear DSM is the reference here: it
+    # matches the DEM with contacts, test_nonlinear_dsm_matches_dem)
+    s = packing.replace(particle_material=dataclasses.replace(packing.particle_material, E=5e9))
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    ref = jaxbpm.solve(s, scene, method="dsm")
+    bonds = jaxbpm.solve(s, UniaxialCompression(strain=0.002), method="dsm")
+    lin = jaxbpm.solve(s, scene, method="dsm", nonlinear=False)
+    assert not lin.stats["nonlinear"] and lin.stats["contact_candidates"] > 0 and lin.stats["converged"]
+    assert ref.stats["converged"]
+    share = 1 - bonds.stiffness / ref.stiffness  # the contacts' share of the stiffness
+    err = lin.stiffness / ref.stiffness - 1
+    assert share > 0.1 and abs(err) < share / 3, (share, err)
+    # Hertz: a later linearisation point (a larger overlap) is stiffer
+    late = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_fraction=1.0)
+    assert late.stiffness > lin.stiffness
+    with pytest.raises(SceneError, match="contact_passes"):
+        jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_passes=0)
+
+
+@pytest.mark.parametrize("dofs", [3, 6])
+def test_symmetrised_jacobians_are_the_symmetric_part(packing, dofs):
+    model = UniaxialCompression().model(packing, rotations=dofs == 6)
+    jr = dsm.reduced_jacobians(model, default_params(packing))
+    np.testing.assert_allclose(dsm._symmetrised(jr), jr, atol=1e-12 * float(jnp.abs(jr).max()))  # bonds at rest
+    pairs = jnp.asarray(np.asarray(model.bonds)[:50])
+    d = (model.positions0[pairs[:, 1]] - model.positions0[pairs[:, 0]]) * 0.999  # a small overlap
+    jc = dsm._contact_jacobians(model, pairs, None, d)
+    full, sym = dsm._full_jacobians(jc), dsm._full_jacobians(dsm._symmetrised(jc))
+    np.testing.assert_allclose(sym, 0.5 * (full + jnp.swapaxes(full, 1, 2)), atol=1e-12 * float(jnp.abs(full).max()))
+    assert float(jnp.abs(full - jnp.swapaxes(full, 1, 2)).max()) > 0  # the preloaded contact is not symmetric
+
+
 def test_gradient_matches_central_differences():
     s = jaxbpm.generate.lattice("fcc", (2, 2, 3), R, bond_radius_ratio=0.5, materials={"E": [1e9, 2e9], "nu": 0.3})
     s = jaxbpm.generate.mix_materials(s, [0.4, 0.6], seed=1)
