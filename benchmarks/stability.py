@@ -216,6 +216,7 @@ def study_ste_contact_share(sample, args):
         dem_c, _ = run_dem(sample, scene_c, p, args.budget, chunk=args.chunk)
         dem_b, _ = run_dem(sample, scene_b, p, args.budget, chunk=args.chunk)
         dsm_b = run_dsm(sample, scene_b, p)
+        dsm_lc = run_dsm(sample, scene_c, p, nonlinear=False)  # linear, contacts linearised (2 passes)
         if ste_c is None:
             try:
                 ste_c = jax.jit(ste.stiffness_function(sample, scene_c))
@@ -231,8 +232,10 @@ def study_ste_contact_share(sample, args):
         row = {"bond_E": E_b, "contact_share": share, "K_dem_contacts": dem_c.get("K"),
                "K_dem_bonds": dem_b.get("K"), "ste_error": rel(rec_ste_c, dem_c),
                "dsm_linear_error": rel(dsm_b, dem_c), "ste_bonds_error": rel(rec_ste_b, dem_b),
+               "dsm_linear_contacts_error": rel(dsm_lc, dem_c),
                "dsm_linear_vs_dem_bonds": rel(dsm_b, dem_b),
-               "runs": {"dem_contacts": dem_c, "dem_bonds": dem_b, "dsm_linear": dsm_b, "ste_contacts": rec_ste_c,
+               "runs": {"dem_contacts": dem_c, "dem_bonds": dem_b, "dsm_linear": dsm_b,
+                        "dsm_linear_contacts": dsm_lc, "ste_contacts": rec_ste_c,
                         "ste_bonds": rec_ste_b}}
         log(f"    share {pct(share)}, STE {pct(row['ste_error'])}, DSM linear {pct(row['dsm_linear_error'])}, "
             f"STE bonds-only vs DEM bonds-only {pct(row['ste_bonds_error'])}; DEM {dem_c.get('wall_s', 0):.1f} s"
@@ -243,12 +246,14 @@ def study_ste_contact_share(sample, args):
     table([{"E_b [Pa]": r["bond_E"], "contact share %": _p(r["contact_share"]),
             "K DEM [N/m]": r["K_dem_contacts"] if r["K_dem_contacts"] is not None else "FAILED",
             "STE err %": _p(r["ste_error"]), "DSM linear err %": _p(r["dsm_linear_error"]),
+            "DSM lin+contacts err %": _p(r["dsm_linear_contacts_error"]),
             "STE bonds-only vs DEM bonds %": _p(r["ste_bonds_error"])} for r in rows],
-          ["E_b [Pa]", "contact share %", "K DEM [N/m]", "STE err %", "DSM linear err %",
+          ["E_b [Pa]", "contact share %", "K DEM [N/m]", "STE err %", "DSM linear err %", "DSM lin+contacts err %",
            "STE bonds-only vs DEM bonds %"])
     shares = [r["contact_share"] for r in rows]
     conclusions = []
-    for name, key in (("STE", "ste_error"), ("linear DSM", "dsm_linear_error")):
+    for name, key in (("STE", "ste_error"), ("linear DSM", "dsm_linear_error"),
+                      ("linear DSM with linearised contacts", "dsm_linear_contacts_error")):
         errs = [r[key] for r in rows]
         for level in (0.05, 0.10):
             x = crossing(shares, errs, level)
@@ -551,6 +556,7 @@ def plot_study(name, data, path, note):
         x = arr(rows, "contact_share", 100)
         for key, label, style in (("ste_error", "STE (linearised contacts)", "o-"),
                                   ("dsm_linear_error", "DSM linear (bonds only)", "s-"),
+                                  ("dsm_linear_contacts_error", "DSM linear, contacts linearised", "D-"),
                                   ("ste_bonds_error", "STE bonds only vs DEM bonds only", "^--")):
             ax.plot(x, arr(rows, key, 100), style, label=label)
         for xi, yi, r in zip(x, arr(rows, "ste_error", 100), rows):

@@ -40,7 +40,9 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     False: no slip, Jarolin & Dosta's assumption, which overestimates K where contacts slide), ``contact_skin`` [m],
     ``load_steps`` (nonlinear: equal load increments, 4; K is their least-squares slope over the scene's fit range,
     as for the DEM), ``throw`` (raise :class:`ConvergenceError` instead of warning when a solve misses its
-    tolerance).
+    tolerance); with ``nonlinear=False`` on a scene with contacts, the contacts are linearised (Hertz normal and
+    secant Mindlin tangential stiffness, symmetric) at ``contact_fraction`` (default: the middle of the fit range)
+    of the strain, first of the affine field, then of the previous solution (``contact_passes``, 2).
     options for ``"ste"`` (stiffness tensor estimation, no displacement computed): ``dofs`` (3, the paper's
     translations-only form, or 6), ``first_neighbour`` (Eq. 33-35 instead of Eq. 32), ``layered`` (layered
     springs in series along the load, for porous or shaped bodies), ``layer_thickness`` [m], ``contact_fraction``
