@@ -135,14 +135,8 @@ def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
         return jnp.stack(parts)
 
     z0 = jnp.zeros((ni, nb), dtype) if u is None else _pair_dofs(model, model.bonds, u)
-    # one jvp per input component, each materialised on its own: vmapped over the basis, XLA on CPU fused the nine
-    # tangents into loops that re-derived the shared intermediates per output (3x slower)
-    eye = jnp.eye(ni, dtype=dtype)
-
-    def column(c):
-        return jax.lax.optimization_barrier(jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (ni, nb)),))[1])
-
-    return jnp.stack([column(c) for c in range(ni)])
+    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
+    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
 
 
 def _full_jacobians(jr) -> jnp.ndarray:
@@ -302,13 +296,8 @@ def _contact_jacobians(model: Model, pairs, u, d0=None) -> jnp.ndarray:
         out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
         return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
 
-    eye = jnp.eye(ni, dtype=zero.dtype)
-
-    def column(c):  # one materialised jvp per input component (see reduced_jacobians)
-        return jax.lax.optimization_barrier(
-            jax.jvp(law, (z0,), (jnp.broadcast_to(eye[c][:, None], (ni, pairs.shape[0])),))[1])
-
-    return jnp.stack([column(c) for c in range(ni)])
+    basis = jnp.broadcast_to(jnp.eye(ni, dtype=zero.dtype)[:, :, None], (ni, ni, pairs.shape[0]))
+    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
 
 
 def _linearised_contact_jacobians(model: Model, pairs, state) -> jnp.ndarray:
@@ -465,7 +454,7 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
     scale = jnp.mean(jnp.abs(jnp.diagonal(blocks, axis1=1, axis2=2)), axis=0)
     empty = jnp.all(jnp.abs(jnp.where(mask, blocks, 0.0)) == 0, axis=(1, 2))
     blocks = jnp.where(empty[:, None, None], jnp.diag(scale)[None], blocks)
-    inv = _spd_inverse(blocks)
+    inv = jnp.linalg.inv(blocks)
     factor = None if coarse is None else _CholeskyBlocks.of(_coarse_factor(model, jac, coarse))
     return Preconditioner(inv=inv, free=free, factor=factor, coarse=coarse)
 
