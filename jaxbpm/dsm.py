@@ -108,7 +108,7 @@ def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
     through ``d`` and ``f_j = -f_i``, so these numbers give the whole 12 x 12 (6 x 6) tangent (:func:`bond_jacobians`)
     in 56 % (25 %) of its memory.
 
-    Forward-mode derivatives (one ``jax.jvp`` per input component) of the same bond law the
+    Forward-mode derivatives (one ``jax.jvp`` per input component, batched with ``vmap``) of the same bond law the
     DEM runs, on ``[nb]`` component arrays. A rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the
     exact map to first order, which is all a Jacobian at rest sees. With a DOF state ``u`` ``[n, nd]`` the Jacobians
     are taken there instead (the tangent of a deformed configuration; rotations through the exact map).
@@ -457,30 +457,6 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
     inv = jnp.linalg.inv(blocks)
     factor = None if coarse is None else _CholeskyBlocks.of(_coarse_factor(model, jac, coarse))
     return Preconditioner(inv=inv, free=free, factor=factor, coarse=coarse)
-
-
-def _spd_inverse(blocks):
-    """Inverses of symmetric positive definite ``[n, k, k]`` matrices by Gauss-Jordan elimination without pivoting
-    (stable for SPD matrices), written on ``[n]`` arrays of the entries: elementwise loops, 3x faster on CPU than
-    ``jnp.linalg.inv``, which factors the small matrices one at a time. Each pivot step is materialised, so that
-    XLA does not re-derive earlier steps inside later ones."""
-    k = blocks.shape[-1]
-    a = [[blocks[:, r, c] for c in range(k)] for r in range(k)]
-    for p in range(k):
-        inv_p = 1.0 / a[p][p]
-        row_p = [a[p][c] * inv_p for c in range(k)]
-        row_p[p] = inv_p
-        rows = []
-        for r in range(k):
-            if r == p:
-                rows.append(row_p)
-                continue
-            f = a[r][p]
-            row = [a[r][c] - f * row_p[c] for c in range(k)]
-            row[p] = -f * inv_p
-            rows.append(row)
-        a = jax.lax.optimization_barrier(rows)
-    return jnp.stack([jnp.stack(row, axis=-1) for row in a], axis=-2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -861,8 +837,9 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
     boundary reaction = mean of the axial forces on the driven and (minus) the resting clamped layer, the measure
     the DEM uses; the two agree to the solver's tolerance.
     contacts: ``(pairs [C, 2], u_lin [n, nd], fraction)``: contact candidates linearised at the state ``fraction *
-    u_lin`` (:func:`_linearised_contact_jacobians`; a pair that does not touch there adds nothing), added to the bonds as further springs (operator and preconditioner alike; the
-    coarse space must have been built with them). ``contact_passes`` solves: each later one re-linearises the
+    u_lin`` (:func:`_linearised_contact_jacobians`; a pair that does not touch there adds nothing), added to the
+    bonds as further springs (operator and preconditioner alike; the coarse space must have been built with them).
+    ``contact_passes`` solves: each later one re-linearises the
     contacts at ``fraction`` times the previous solution. Iterations are summed over the passes.
     """
     if contacts is None:
