@@ -260,6 +260,29 @@ def _apply(jr, z):
     return y
 
 
+def _packed_operator(model: Model, jac):
+    """``v -> K v`` through the packed form of the reduced Jacobians ``jac`` (:func:`packed_jacobians`, computed once),
+    differentiated through the reduced form: the tangent with respect to ``jac`` is the plain 81-term product of the
+    tangent Jacobians. Differentiating the packing itself (45 strided slices, then 81 products reading them)
+    gave reverse mode hundreds of small pads to transpose and compile (a gradient through the solve compiled 6x
+    slower)."""
+    packed = packed_jacobians(jac)
+    return lambda v: _packed_product(model, jac, packed, v)
+
+
+@jax.custom_jvp
+def _packed_product(model: Model, jr, jp, v):
+    return stiffness_product(model, jp, v)
+
+
+@_packed_product.defjvp
+def _packed_product_jvp(primals, tangents):
+    model, jr, jp, v = primals
+    _, jr_dot, _, v_dot = tangents  # jp is packed_jacobians(jr): its tangent follows from jr_dot
+    return _packed_product(model, jr, jp, v), stiffness_product(model, jr_dot, v) + _packed_product(model, jr, jp,
+                                                                                                    v_dot)
+
+
 def _scatter_pairs(model: Model, i, j, y):
     """Stiffness product from pair force rates ``y`` = (f_i [, m_i, m_j]) ``[no, P]``: particle i gets minus
     (f_i [, m_i]), j gets (f_i [, -m_j]) (``f_j = -f_i``); one scatter of rows of 4 or 8 numbers."""
@@ -552,8 +575,7 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None):
         if walls is not None or model.walls is not None or model.contacts:
             raise SceneError("the 'jacobians' operator covers bonds only; use operator='jvp' with walls or contacts")
         jac = reduced_jacobians(model, params)
-        packed = packed_jacobians(jac)
-        return (lambda v: stiffness_product(model, packed, v)), jac
+        return _packed_operator(model, jac), jac
     if operator != "jvp":
         raise ValueError(f"operator must be 'auto', 'jacobians' or 'jvp', got {operator!r}")
     nd = 6 if model.rotations else 3
@@ -851,9 +873,8 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
     total = 0
     for _ in range(contact_passes):
         jac = jnp.concatenate([jb, _linearised_contact_jacobians(model, pairs, fraction * u_lin)], axis=2)
-        packed = packed_jacobians(jac)
         out = _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse,
-                           lambda v, packed=packed: stiffness_product(springs, packed, v), jac)
+                           _packed_operator(springs, jac), jac)
         u_lin = out[0]
         total = total + out[4]
     return out[:4] + (total,)
