@@ -12,6 +12,9 @@ from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics.model import build_model, default_params
 from jaxbpm.scenes import ThreePointBending, UniaxialCompression
 
+# one worker for the whole module under pytest-xdist (loadgroup): its specimens (module fixtures) are built once
+pytestmark = pytest.mark.xdist_group("strength-module")
+
 R = 1e-3
 A = np.pi * (0.5 * R) ** 2
 KN = 1e9 * A / (2 * R)

@@ -132,6 +132,9 @@ def _identity_problem():
     return Problem(fwd, [Target("youngs_modulus", 2.0)], space)
 
 
+# same specimens and run length as notebook 04 at its small size: on one worker (pytest-xdist's loadgroup), the
+# notebook's compiled failure runs serve this test too (0.6 s instead of 36 s)
+@pytest.mark.xdist_group("strength-150")
 def test_one_dem_iteration_reads_strengths_from_the_failure_runs():
     """Real DEM: tiny specimens; the first estimate's runs report both strengths, one set = a UCS and a bending run."""
     mats = {"E": 1e9, "nu": 0.25, "tensile_strength": 4e6, "shear_strength": 8e6}
