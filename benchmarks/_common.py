@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import sys
+import time
 
 
 def pin_threads(threads: int | None) -> None:
@@ -71,3 +72,45 @@ def save_png(fig, path, note: str | None = None, dpi: int = 130):
     _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
     plt.close(fig)
     return path
+
+
+# ---------------------------------------------------------------------------------------------------- machine load
+def cpu_busy(interval: float = 1.0) -> list[float]:
+    """Busy fraction of every core over ``interval`` seconds (from /proc/stat); [] where unavailable."""
+    def read():
+        rows = {}
+        try:
+            with open("/proc/stat") as f:
+                for line in f:
+                    if line.startswith("cpu") and line[3].isdigit():
+                        name, *vals = line.split()
+                        vals = [int(v) for v in vals]
+                        idle = vals[3] + (vals[4] if len(vals) > 4 else 0)
+                        rows[int(name[3:])] = (sum(vals), idle)
+        except OSError:
+            pass
+        return rows
+
+    a = read()
+    time.sleep(interval)
+    b = read()
+    return [round(1.0 - (b[k][1] - a[k][1]) / max(b[k][0] - a[k][0], 1), 3) for k in sorted(b) if k in a]
+
+
+def machine_load(interval: float = 1.0) -> dict:
+    load = {"cpu_busy": cpu_busy(interval)}
+    if hasattr(os, "getloadavg"):
+        load["loadavg"] = [round(x, 2) for x in os.getloadavg()]
+    return load
+
+
+def pin(cpu, threads):
+    """Pin to ``threads`` cores; with one thread to core ``cpu`` (default: the least busy core)."""
+    if threads == 1 and hasattr(os, "sched_setaffinity"):
+        allowed = sorted(os.sched_getaffinity(0))
+        if cpu is None:
+            busy = cpu_busy(1.0)
+            cpu = min(allowed, key=lambda c: busy[c] if c < len(busy) else 1.0)
+        os.sched_setaffinity(0, {cpu})
+    pin_threads(threads)
+    return cpu

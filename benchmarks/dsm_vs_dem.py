@@ -48,52 +48,10 @@ import os
 import sys
 import time
 
-from _common import enable_x64, machine_info, pin_threads, table, write_json
+from _common import enable_x64, machine_info, machine_load, pin, table, write_json
 
 DEFAULT_SIZES = [2000, 3000, 10000, 50000]
 QUICK_SIZES = [500, 1000]
-
-
-# ---------------------------------------------------------------------------------------------------- machine load
-def cpu_busy(interval: float = 1.0) -> list[float]:
-    """Busy fraction of every core over ``interval`` seconds (from /proc/stat); [] where unavailable."""
-    def read():
-        rows = {}
-        try:
-            with open("/proc/stat") as f:
-                for line in f:
-                    if line.startswith("cpu") and line[3].isdigit():
-                        name, *vals = line.split()
-                        vals = [int(v) for v in vals]
-                        idle = vals[3] + (vals[4] if len(vals) > 4 else 0)
-                        rows[int(name[3:])] = (sum(vals), idle)
-        except OSError:
-            pass
-        return rows
-
-    a = read()
-    time.sleep(interval)
-    b = read()
-    return [round(1.0 - (b[k][1] - a[k][1]) / max(b[k][0] - a[k][0], 1), 3) for k in sorted(b) if k in a]
-
-
-def machine_load(interval: float = 1.0) -> dict:
-    load = {"cpu_busy": cpu_busy(interval)}
-    if hasattr(os, "getloadavg"):
-        load["loadavg"] = [round(x, 2) for x in os.getloadavg()]
-    return load
-
-
-def pin(cpu, threads):
-    """Pin to ``threads`` cores; with one thread to core ``cpu`` (default: the least busy core)."""
-    if threads == 1 and hasattr(os, "sched_setaffinity"):
-        allowed = sorted(os.sched_getaffinity(0))
-        if cpu is None:
-            busy = cpu_busy(1.0)
-            cpu = min(allowed, key=lambda c: busy[c] if c < len(busy) else 1.0)
-        os.sched_setaffinity(0, {cpu})
-    pin_threads(threads)
-    return cpu
 
 
 def spread(times) -> dict:

@@ -3,14 +3,15 @@
 
 Usage::
 
-    python benchmarks/ste.py                              # 2k, 10k random packings; 100k, 500k perturbed FCC
+    python benchmarks/ste.py                              # 2k, 10k, 50k random packings; FCC 2k to 500k
     python benchmarks/ste.py --quick                      # smoke run
-    python benchmarks/ste.py --dem-max 10000 --dsm-max 100000
+    python benchmarks/ste.py --dem-max 10000 --dsm-max 100000 --cache-dir results/samples
 
 Samples
 -------
 * ``random``: ``jaxbpm.generate.box(n, seed).largest_cluster()`` (FIRE-packed polydisperse spheres, bonds at contacts)
-  at ``--random-sizes`` (default 2k and 10k): the accuracy points.
+  at ``--random-sizes`` (default 2k, 10k, 50k): the accuracy points (``--cache-dir``: samples saved there and
+  reused, the files ``benchmarks/dsm_vs_dem.py`` writes).
 * ``fcc``: an FCC lattice (``jaxbpm.generate.lattice``) with every centre moved at random by up to 5 % of the radius
   (bonds kept), at ``--fcc-sizes`` (default ~2k to ~500k): the scaling points. The FIRE packer is too slow for
   500k particles on this machine, so the large sizes use this cheap generator; the output says which sample is which.
@@ -19,10 +20,11 @@ Methods (scene: ``UniaxialCompression(strain=0.002)``, clamped layers, bonds onl
 ---------------------------------------------------------------------------------
 * STE (3 DOF, Eq. 32): ``jaxbpm.ste.scene_stiffness`` jitted; compile time (``lower().compile()``) and run time
   (min of ``--repeats`` calls, ``block_until_ready``) separately; the estimator setup (NumPy: fabric, volumes) is
-  timed as ``setup``.
+  timed as ``setup``. Twice: in float64 (the default) and with ``precision="float32"`` (columns ``ste32_*``).
 * DSM (linear, 3 DOF = the STE's model, and 6 DOF = the DEM's model) up to ``--dsm-max`` particles.
 * DEM (6 DOF, the reference, ``jaxbpm.solve(..., "dem")`` defaults) up to ``--dem-max`` particles.
-Speed-up = DEM run time / STE run time (compilation excluded on both sides). Exponent: least-squares slope of
+Speed-up = DEM run time / STE run time (compilation excluded on both sides). Timing: one core (the least busy, unless
+``--cpu``), XLA single-threaded (``--threads``), as in ``dsm_vs_dem.py``. Exponent: least-squares slope of
 log(run time) against log(particles) over the sizes >= 10k.
 """
 
@@ -32,7 +34,7 @@ import argparse
 import sys
 import time
 
-from _common import enable_x64, machine_info, save_png, table, write_json
+from _common import enable_x64, machine_info, machine_load, pin, save_png, table, write_json
 
 
 def log(msg):
@@ -52,7 +54,22 @@ def fcc_sample(n_target, seed=0, radius=1e-3):
     return jaxbpm.Sample.from_arrays(pos, s.radii, s.bonds, s.bond_radius, materials=s.materials, domain=s.domain)
 
 
-def time_ste(sample, scene, repeats):
+def random_sample(n, cache_dir=None, seed=0):
+    import os
+
+    import jaxbpm
+
+    path = os.path.join(cache_dir, f"box_{n}_seed{seed}.h5") if cache_dir else None
+    if path and os.path.exists(path):
+        return jaxbpm.io.load_sample(path)
+    s = jaxbpm.generate.box(n, seed=seed).largest_cluster()
+    if path:
+        os.makedirs(cache_dir, exist_ok=True)
+        jaxbpm.io.save_sample(path, s)
+    return s
+
+
+def time_ste(sample, scene, repeats, precision="float64"):
     import jax
 
     from jaxbpm import ste
@@ -60,7 +77,7 @@ def time_ste(sample, scene, repeats):
 
     params = default_params(sample)
     t = time.perf_counter()
-    est = ste.estimator(sample, scene)
+    est = ste.estimator(sample, scene, precision=precision)
     setup = time.perf_counter() - t
 
     def k_of(est, params):
@@ -80,16 +97,21 @@ def time_ste(sample, scene, repeats):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--random-sizes", type=int, nargs="*", default=[2000, 10000])
+    ap.add_argument("--random-sizes", type=int, nargs="*", default=[2000, 10000, 50000])
     ap.add_argument("--fcc-sizes", type=int, nargs="*", default=[2000, 10000, 100000, 500000])
-    ap.add_argument("--dem-max", type=int, default=10000)
+    ap.add_argument("--dem-max", type=int, default=50000)
     ap.add_argument("--dsm-max", type=int, default=100000)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--cpu", type=int, default=None, help="core to pin to (default: the least busy)")
+    ap.add_argument("--threads", type=int, default=1, help="cores (XLA threads); 1 pins to one core")
+    ap.add_argument("--cache-dir", default=None, help="reuse/save the random samples here (box_<n>_seed0.h5)")
     ap.add_argument("--out", default="results/ste.json")
     args = ap.parse_args(argv)
     if args.quick:
         args.random_sizes, args.fcc_sizes, args.dem_max, args.dsm_max = [500], [500, 2000], 500, 2000
+    load_before = machine_load(1.0)
+    args.cpu = pin(args.cpu, args.threads)
     enable_x64()
     import numpy as np
 
@@ -102,13 +124,17 @@ def main(argv=None):
     jobs = [("random", n) for n in args.random_sizes] + [("fcc", n) for n in args.fcc_sizes]
     for kind, n in jobs:
         t = time.perf_counter()
-        s = jaxbpm.generate.box(n, seed=0).largest_cluster() if kind == "random" else fcc_sample(n)
+        s = random_sample(n, args.cache_dir) if kind == "random" else fcc_sample(n)
         gen = time.perf_counter() - t
         log(f"{kind} {s.n_particles} particles, {s.n_bonds} bonds (generated in {gen:.1f} s)")
         row = {"sample": kind, "particles": s.n_particles, "bonds": s.n_bonds, "gen_s": gen}
         st = time_ste(s, scene, args.repeats)
         row.update({f"ste_{k}": v for k, v in st.items()})
         log(f"  STE K={st['K']:.5g} compile {st['compile_s']:.2f} s run {st['run_s'] * 1e3:.2f} ms")
+        st32 = time_ste(s, scene, args.repeats, "float32")
+        row.update({f"ste32_{k}": v for k, v in st32.items() if k in ("K", "compile_s", "run_s")})
+        row["ste32_vs_ste64_rel"] = st32["K"] / st["K"] - 1
+        log(f"  STE float32 K={st32['K']:.7g} ({row['ste32_vs_ste64_rel']:+.1e}) run {st32['run_s'] * 1e3:.2f} ms")
         if s.n_particles <= args.dsm_max:
             for dofs in (3, 6):
                 r = jaxbpm.solve(s, scene, method="dsm", dofs=dofs)
@@ -121,22 +147,29 @@ def main(argv=None):
                        dem_steps=r.stats.get("steps"))
             row["err_vs_dem_%"] = 100 * (st["K"] / r.stiffness - 1)
             row["speedup_vs_dem"] = r.run_time / st["run_s"]
-            log(f"  DEM K={r.stiffness:.5g} run {r.run_time:.2f} s -> speed-up {row['speedup_vs_dem']:.0f}x")
+            row["speedup32_vs_dem"] = r.run_time / st32["run_s"]
+            log(f"  DEM K={r.stiffness:.5g} run {r.run_time:.2f} s -> speed-up {row['speedup_vs_dem']:.0f}x "
+                f"(float32 {row['speedup32_vs_dem']:.0f}x)")
         rows.append(row)
 
     fcc = [r for r in rows if r["sample"] == "fcc" and r["particles"] >= 10000]
-    exponent = None
+    exponent = exponent32 = None
     if len(fcc) >= 2:
-        exponent = float(np.polyfit(np.log([r["particles"] for r in fcc]), np.log([r["ste_run_s"] for r in fcc]),
-                                    1)[0])
-    cols = ["sample", "particles", "bonds", "ste_compile_s", "ste_run_s", "dsm3_run_s", "dsm6_run_s", "dem_run_s",
-            "err_vs_dsm3_%", "err_vs_dsm6_%", "err_vs_dem_%", "speedup_vs_dem"]
+        logn = np.log([r["particles"] for r in fcc])
+        exponent = float(np.polyfit(logn, np.log([r["ste_run_s"] for r in fcc]), 1)[0])
+        exponent32 = float(np.polyfit(logn, np.log([r["ste32_run_s"] for r in fcc]), 1)[0])
+    cols = ["sample", "particles", "bonds", "ste_compile_s", "ste_run_s", "ste32_run_s", "dsm3_run_s", "dsm6_run_s",
+            "dem_run_s", "err_vs_dsm3_%", "err_vs_dsm6_%", "err_vs_dem_%", "speedup_vs_dem", "speedup32_vs_dem"]
     table(rows, cols)
-    print(f"STE run-time scaling exponent (fcc, >= 10k particles): {exponent}")
+    print(f"STE run-time scaling exponent (fcc, >= 10k particles): float64 {exponent}, float32 {exponent32}")
     print(f"DEM run above {args.dem_max} particles and DSM above {args.dsm_max} skipped (time budget); "
           "fcc = perturbed FCC lattice (cheap generator for the scaling points), random = FIRE packing")
+    load_after = machine_load(1.0)
+    print(f"machine load (busy fraction per core) before {load_before['cpu_busy']} after {load_after['cpu_busy']}; "
+          f"pinned to core {args.cpu}")
     out = {"benchmark": "ste", "machine": machine_info(), "settings": vars(args), "rows": rows,
-           "scaling_exponent": exponent, "total_time_s": time.perf_counter() - t_all,
+           "scaling_exponent": exponent, "scaling_exponent_float32": exponent32,
+           "load": {"before": load_before, "after": load_after}, "total_time_s": time.perf_counter() - t_all,
            "notes": "STE 3 DOF (Eq. 32), default surface_depth (one diameter); speed-up = DEM run / STE run"}
     write_json(args.out, out)
     _plot(rows, exponent, args.out.replace(".json", ".png"))
@@ -155,6 +188,7 @@ def _plot(rows, exponent, path):
             continue
         n = [r["particles"] for r in rr]
         ax.loglog(n, [r["ste_run_s"] for r in rr], marker + "-", label=f"STE run ({kind})")
+        ax.loglog(n, [r["ste32_run_s"] for r in rr], marker + "-", alpha=0.5, label=f"STE float32 run ({kind})")
         dem = [(r["particles"], r["dem_run_s"]) for r in rr if "dem_run_s" in r]
         if dem:
             ax.loglog(*zip(*dem), marker + "--", label=f"DEM run ({kind})")

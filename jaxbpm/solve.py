@@ -47,7 +47,7 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     translations-only form, or 6), ``first_neighbour`` (Eq. 33-35 instead of Eq. 32), ``layered`` (layered
     springs in series along the load, for porous or shaped bodies), ``layer_thickness`` [m], ``contact_fraction``
     (contacts: fraction of the target strain at which Hertz contacts are linearised), ``volumes`` (``[n]`` particle
-    volumes V^n). The stats hold the Voigt tensor, E_x, E_y, E_z, nu, an isotropic fit and the skipped particles.
+    volumes V^n), ``precision`` (``"float64"``, or ``"float32"``: 2-3x faster, ~1e-7 relative change). The stats hold the Voigt tensor, E_x, E_y, E_z, nu, an isotropic fit and the skipped particles.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")

@@ -161,7 +161,7 @@ jax.tree_util.register_dataclass(
 
 def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: bool = False, contacts=None,
               contact_fraction: float | None = None, layer_thickness: float | None = None,
-              surface_depth: float | None = None, volumes=None) -> Estimator:
+              surface_depth: float | None = None, volumes=None, precision: str = "float64") -> Estimator:
     """Build the parameter-independent part of the STE for ``sample`` (and ``scene``, optional).
 
     Args:
@@ -177,6 +177,11 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
       surface_depth: particles closer than this to the sample's boundary [m] are left out of the averages
         (default one mean particle diameter; 0 keeps every non-singular particle).
       volumes: ``[n]`` particle volumes V^n [m^3] to use instead of particle volume / global solid fraction.
+      precision: ``"float64"`` (default) or ``"float32"``: the float type of the estimate's arithmetic. The
+        geometry is always built in the float type JAX gives (float64 with x64 on) and then cast. float32 runs the
+        estimate 2-3x faster on CPU and moves it by ~1e-7 relative (the estimate itself is 5-20 % from the DEM);
+        reverse-mode gradients lose more (~2e-3 relative on a 1k-particle packing: the backward pass sums terms
+        that cancel), and finite differences drown in rounding: calibrate with float64 (the default).
 
     Raises:
       SceneError / SampleError: bad options, or a sample with no interactions.
@@ -185,6 +190,8 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
     if dofs not in (3, 6):
         raise SceneError(f"dofs must be 3 or 6 per particle, got {dofs!r}")
+    if precision not in ("float64", "float32"):
+        raise SceneError(f"precision must be 'float64' or 'float32', got {precision!r}")
     axis = 2 if scene is None else int(scene.axis)
     use_contacts = bool(getattr(scene, "contacts", False)) if contacts is None else bool(contacts)
     pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
@@ -254,6 +261,11 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         ck = (-_contact_jacobians_jit(est)[:, :3, 3:].reshape(-1, 9) if len(cpairs)
               else jnp.zeros((0, 9), dtype))
         est = dataclasses.replace(est, geometry=geometry, terms=terms, contact_k=ck.astype(dtype))
+    if precision == "float32":
+        f32 = jnp.float32
+        est = dataclasses.replace(est, d=est.d.astype(f32), volume=est.volume.astype(f32),
+                                  geometry=None if est.geometry is None else est.geometry.astype(f32),
+                                  contact_k=None if est.contact_k is None else est.contact_k.astype(f32))
     return est
 
 
@@ -421,6 +433,7 @@ def _edges(est: Estimator, params) -> _Edges:
     jac = pair_stiffness(est, params)
     nd = est.dofs
     i, j = est.pairs[:, 0], est.pairs[:, 1]
+    jac = jac.astype(est.d.dtype)
     return _Edges(src=jnp.concatenate([i, j]), dst=jnp.concatenate([j, i]), d=jnp.concatenate([est.d, -est.d]),
                   h_nn=jnp.concatenate([jac[:, :nd, :nd], jac[:, nd:, nd:]]),
                   k_nm=-jnp.concatenate([jac[:, :nd, nd:], jac[:, nd:, :nd]]))
@@ -466,6 +479,11 @@ def _mul(a, b):
     return out
 
 
+def _gram(a, b):
+    """``a^T b`` for ``a [m, p]``, ``b [m, q]`` (the long axis ``m`` contracted)."""
+    return jax.lax.dot_general(a, b, (((0,), (0,)), ((), ())))
+
+
 def _inverse3(D):
     """Inverse of ``[n, 3, 3]`` matrices by cofactors (elementwise)."""
     a = [[D[:, r, c] for c in range(3)] for r in range(3)]
@@ -478,7 +496,7 @@ def _inverse3(D):
 def _coupling(est: Estimator, params) -> jnp.ndarray:
     """``K^nm [P, 3, 3]`` of every pair (3 DOF): ``sum_s k_s G_s`` for the bonds, then the contacts."""
     k = est.model.stiffness(params)
-    ks = (k.kn, k.kt, k.ktw, k.kb)
+    ks = tuple(jnp.asarray(x).astype(est.d.dtype) for x in (k.kn, k.kt, k.ktw, k.kb))
     nb = est.n_bonds
     K = jnp.zeros((nb, 9), est.d.dtype)
     for t, s in enumerate(est.terms):
@@ -535,12 +553,13 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     w = est.include.astype(d.dtype)
     dd = ((w[i] + w[j])[:, None, None] * d[:, :, None] * d[:, None, :]).reshape(-1, 9)  # (i, k)
     t = jnp.dot(dd.T, fl.K.reshape(-1, 9)).reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
-    # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: per-particle products, then a sum
-    # over the leading (particle) axis (a dot_general contracting n made XLA on CPU transpose its operands first)
-    bw = (w[:, None, None, None] * fl.B).transpose(0, 3, 1, 2)  # [n, i, j, a]
-    t = t - jnp.sum(_mul(bw.reshape(n, 9, 3), fl.phi), axis=0).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
+    # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: one matrix product each that
+    # contracts (particle, a) -- rows [n * 3, 9] on both sides (4x faster on CPU than per-particle products summed)
+    bw = (w[:, None, None, None] * fl.B).transpose(0, 2, 3, 1).reshape(3 * n, 9)  # [(n, a), (i, j)]
+    t = t - _gram(bw, fl.phi.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
     if fl.N is not None:
-        t = t + jnp.sum(_mul(fl.N.reshape(n, 9, 3), fl.gamma), axis=0).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
+        nb_ = fl.N.transpose(0, 3, 1, 2).reshape(3 * n, 9)  # [(n, b), (i, j)]
+        t = t + _gram(nb_, fl.gamma.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
     return t / (2.0 * jnp.sum(jnp.where(est.include, est.volume, 0.0)))
 
 
@@ -710,7 +729,9 @@ def wall_series(k_body, est: Estimator, scene, sample: Sample, fraction: float |
     lo_gap = (pos[:, ax] - rad) - (pos[:, ax] - rad).min()
     hi_gap = (pos[:, ax] + rad).max() - (pos[:, ax] + rad)
     touch = [lo_gap <= 0.5 * delta, hi_gap <= 0.5 * delta]
-    radii = [jnp.asarray(rad[t]) for t in touch]
+    dtype = jnp.result_type(k_body)
+    ws = jnp.asarray(ws).astype(dtype)
+    radii = [jnp.asarray(rad[t]).astype(dtype) for t in touch]
     counts = [int(t.sum()) for t in touch]
 
     def wall_k(force, r):
@@ -807,7 +828,7 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, **
              "nu": nu.tolist(), "E_iso": float(e_iso), "nu_iso": float(nu_iso), "K_body": float(parts["K_body"]),
              "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface, "particles": est.n,
              "bonds": est.n_bonds, "contacts": est.n_contacts, "dofs": est.dofs,
-             "first_neighbour": est.first_neighbour, "layered": bool(layered)}
+             "first_neighbour": est.first_neighbour, "layered": bool(layered), "precision": str(est.d.dtype)}
     for name in ("k_bottom", "k_top", "n_bottom", "n_top"):
         if name in parts:
             stats[name] = float(parts[name]) if name.startswith("k") else int(parts[name])
