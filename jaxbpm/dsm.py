@@ -159,6 +159,148 @@ def bond_jacobians(model: Model, params) -> jnp.ndarray:
     return _full_jacobians(reduced_jacobians(model, params))
 
 
+@dataclasses.dataclass(frozen=True)
+class BondGeometry:
+    """The parameter-independent part of the bond Jacobians at rest, computed once per sample.
+
+    The bond stiffnesses are the bond's Young's modulus times its geometry, the shear ones (k_t, k_tw) also times
+    ``s = 1 / (2 (1 + nu))`` (:func:`jaxbpm.physics.bond.stiffness`), and the force Jacobians at rest are linear in
+    the stiffnesses, so every bond's Jacobian is ``E_b (J_E + s_b J_G)``: ``reduced [2, ni, no, nb]`` holds ``J_E``
+    and ``J_G`` in the form of :func:`reduced_jacobians` (forward-mode derivatives of the bond law, with unit
+    modulus), ``packed [2, np, nb]`` the same in the form of :func:`packed_jacobians`. A solve then builds its
+    Jacobians from the parameters with two multiply-adds per number instead of differentiating the bond law again.
+    The preconditioner is linear in the Jacobians as well: ``blocks [M, 2, n, nd, nd]`` are each particle's
+    self-stiffness blocks (:func:`block_diagonal`) and ``coarse [M, 2, 6 na, 6 na]`` the Galerkin coarse matrix of a
+    :class:`CoarseSpace`, per bond material and part, so a solve only weighs and sums them (``None`` when not built:
+    no coarse space, or more than ``_MAX_PRECOMPUTED_MATERIALS`` materials). Build it with :func:`bond_geometry`.
+    """
+
+    reduced: Any
+    packed: Any
+    blocks: Any = None
+    coarse: Any = None
+
+
+jax.tree_util.register_dataclass(BondGeometry, data_fields=["reduced", "packed", "blocks", "coarse"],
+                                 meta_fields=[])
+
+_MAX_PRECOMPUTED_MATERIALS = 8
+
+
+def _unit_stiffnesses(model: Model, nu):
+    """``(k(E=1, nu), s)``: the bond stiffnesses per unit modulus and the shear factor s(nu) of each bond, from the
+    stiffness law itself."""
+    one = jnp.ones_like(model.bond_length)
+    k = bond_mod.stiffness(one, nu, model.bond_area, model.bond_I, model.bond_J, model.bond_length)
+    return k, _shear_factor(nu)
+
+
+def _shear_factor(nu):
+    """``s(nu)``, the factor of the shear stiffnesses: k_t of a bar of unit modulus, area and length."""
+    return bond_mod.stiffness(1.0, nu, 1.0, 1.0, 1.0, 1.0).kt
+
+
+@jax.jit
+def _geometry_parts(model: Model):
+    dtype = model.positions0.dtype
+    zero = jnp.zeros_like(model.bond_length)
+    # the stiffness at two Poisson ratios separates the modulus part from the shear part: k = k_E + s k_G
+    k0, s0 = _unit_stiffnesses(model, zero)
+    k1, s1 = _unit_stiffnesses(model, zero + 1.0)
+    kg = jax.tree_util.tree_map(lambda a, b: (a - b) / (s0 - s1), k0, k1)
+    ke = jax.tree_util.tree_map(lambda a, g: a - s0 * g, k0, kg)
+    # the decomposition must reproduce the law at another ratio (it does unless the stiffness law changes form)
+    k2, s2 = _unit_stiffnesses(model, zero + 0.3)
+    err = jnp.max(jnp.stack([jnp.max(jnp.abs(a - (e + s2 * g))) / jnp.maximum(jnp.max(jnp.abs(a)),
+                                                                               jnp.finfo(dtype).tiny)
+                             for a, e, g in zip(k2, ke, kg)]))
+    reduced = jnp.stack([reduced_jacobians(model, ke), reduced_jacobians(model, kg)])
+    return reduced, err
+
+
+@functools.partial(jax.jit, static_argnames=("n_materials",))
+def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
+    """Block diagonals and coarse matrices per (material, part) of :class:`BondGeometry`."""
+    def one(mp):
+        m, part = mp // 2, mp % 2
+        jac = jnp.where(model.bond_material == m.astype(model.bond_material.dtype), jnp.take(reduced, part, axis=0),
+                        0.0)
+        a = None if coarse is None else _coarse_matrix(model, jac, coarse)
+        return block_diagonal(model, None, jac), a
+
+    blocks, mats = jax.lax.map(one, jnp.arange(2 * n_materials))
+    blocks = blocks.reshape((n_materials, 2) + blocks.shape[1:])
+    return blocks, None if coarse is None else mats.reshape((n_materials, 2) + mats.shape[1:])
+
+
+def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_materials: int | None = None
+                  ) -> BondGeometry | None:
+    """:class:`BondGeometry` of the model's bonds (``None`` without bonds). With ``n_materials`` (the length of
+    ``params["bond_E"]``; at most ``_MAX_PRECOMPUTED_MATERIALS``), the preconditioner's parts as well, for the
+    :class:`CoarseSpace` ``coarse`` (or block-Jacobi alone with ``None``)."""
+    if model.bonds.shape[0] == 0:
+        return None
+    reduced, err = _geometry_parts(model)
+    if not float(err) < 1e-10:
+        raise RuntimeError(f"bond stiffness is not of the form E (k_E + k_G / (2 (1 + nu))) (mismatch {err:.3g})")
+    geometry = BondGeometry(reduced=reduced, packed=jax.vmap(packed_jacobians)(reduced))
+    if n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS:
+        blocks, mats = _preconditioner_parts(model, reduced, coarse, int(n_materials))
+        geometry = dataclasses.replace(geometry, blocks=blocks, coarse=mats)
+    return geometry
+
+
+def _weights(params, geometry: BondGeometry, model: Model):
+    """``[M, 2]``: each material's weights ``(E, E s)`` of the geometry's two parts (the parts' sums are exact only
+    for the material count they were built with)."""
+    e = jnp.asarray(params["bond_E"])
+    return jnp.stack([e, e * _shear_factor(jnp.asarray(params["bond_nu"]).astype(e.dtype))], axis=1)
+
+
+def _bond_factors(model: Model, params):
+    """Per-bond ``(E_b, E_b s_b)``: the weights of :class:`BondGeometry`'s two parts."""
+    e = jnp.asarray(params["bond_E"])[model.bond_material]
+    return e, e * _shear_factor(jnp.asarray(params["bond_nu"])[model.bond_material])
+
+
+def _uses_geometry(geometry, params) -> bool:
+    return geometry is not None and isinstance(params, dict) and {"bond_E", "bond_nu"} <= set(params) and not (
+        "_stiffness" in params)
+
+
+def _geometric_jacobians(model: Model, params, geometry: BondGeometry):
+    """Reduced and packed Jacobians of the bonds at rest from :class:`BondGeometry` and the parameters."""
+    a, b = _bond_factors(model, params)
+    jr = a[None, None] * geometry.reduced[0] + b[None, None] * geometry.reduced[1]
+    jp = a[None] * geometry.packed[0] + b[None] * geometry.packed[1]
+    return jr, jp, (a, b)
+
+
+def _geometric_operator(model: Model, params, geometry: BondGeometry):
+    """``v -> K v`` of the bonds from :class:`BondGeometry` (and the reduced Jacobians, for the preconditioner).
+    The value streams the packed Jacobians; the derivative with respect to the parameters goes through the two
+    per-bond weights only (the product of each geometric part with ``v``, scaled bond by bond), so neither the
+    packing nor the 81-number form is differentiated."""
+    jr, jp, (a, b) = _geometric_jacobians(model, params, geometry)
+    return (lambda v: _weighted_product(model, geometry.packed, a, b, jp, v)), jr
+
+
+@jax.custom_jvp
+def _weighted_product(model: Model, parts, a, b, jp, v):
+    return stiffness_product(model, jp, v)
+
+
+@_weighted_product.defjvp
+def _weighted_product_jvp(primals, tangents):
+    model, parts, a, b, jp, v = primals
+    _, _, a_dot, b_dot, _, v_dot = tangents  # jp = a parts[0] + b parts[1]: its tangent follows from a_dot, b_dot
+    bonds = model.bonds
+    z = _pair_dofs(model, bonds, v)
+    y_dot = a_dot[None] * _apply_packed(parts[0], z) + b_dot[None] * _apply_packed(parts[1], z)
+    return (_weighted_product(model, parts, a, b, jp, v),
+            _scatter_pairs(model, bonds[:, 0], bonds[:, 1], y_dot) + _weighted_product(model, parts, a, b, jp, v_dot))
+
+
 def stiffness_product(model: Model, jr, v):
     """``K v`` for the whole sample from the reduced per-bond Jacobians ``jr`` (:func:`reduced_jacobians`, or their
     packed symmetric form at rest, :func:`packed_jacobians`), element by element: gather both ends of every bond, ``ni
@@ -429,8 +571,13 @@ def coarse_space(model: Model, free, *, aggregate_size=None) -> CoarseSpace:
 
 
 def _coarse_factor(model: Model, jac, coarse: CoarseSpace):
-    """Cholesky factor of the Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na], assembled bond by bond from the
-    coupling bonds (``jac``: reduced Jacobians of every bond, :func:`reduced_jacobians`)."""
+    """Cholesky factor of the Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na] (:func:`_coarse_matrix`)."""
+    return _factor_coarse(_coarse_matrix(model, jac, coarse))
+
+
+def _coarse_matrix(model: Model, jac, coarse: CoarseSpace):
+    """The Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na], assembled bond by bond from the coupling bonds
+    (``jac``: reduced Jacobians of every bond, :func:`reduced_jacobians`)."""
     na = coarse.count
     sel = coarse.bonds
     jb = _full_jacobians(jac[:, :, sel])
@@ -444,7 +591,10 @@ def _coarse_factor(model: Model, jac, coarse: CoarseSpace):
               (aj, ai, tj @ (jb[:, nd:, :nd] @ pi)), (aj, aj, tj @ (jb[:, nd:, nd:] @ pj))]
     keys = jnp.concatenate([r * na + c for r, c, _ in blocks])
     dense = jax.ops.segment_sum(jnp.concatenate([g for _, _, g in blocks]), keys, na * na)
-    a = dense.reshape(na, na, 6, 6).transpose(0, 2, 1, 3).reshape(6 * na, 6 * na)
+    return dense.reshape(na, na, 6, 6).transpose(0, 2, 1, 3).reshape(6 * na, 6 * na)
+
+
+def _factor_coarse(a):
     a = 0.5 * (a + a.T)
     diag = jnp.diagonal(a)
     # modes without any free DOF (an aggregate inside a clamped layer) get a unit diagonal; a tiny shift keeps the
@@ -462,13 +612,25 @@ def _coarse_for(model: Model, free, preconditioner, aggregate_size):
     return coarse_space(model, free, aggregate_size=aggregate_size)
 
 
-def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | None = None):
+def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | None = None,
+                    geometry: BondGeometry | None = None):
     """Block-Jacobi: inverse of each particle's self-stiffness on its free DOFs (identity on the rest); with a
-    :class:`CoarseSpace`, plus the coarse correction ``P (P^T K_ff P)^-1 P^T`` (additive two-level)."""
-    if jac is None and coarse is not None:
-        jac = reduced_jacobians(model, params)
-    jac = None if jac is None else jax.lax.stop_gradient(jac)
-    blocks = jax.lax.stop_gradient(block_diagonal(model, params, jac))
+    :class:`CoarseSpace`, plus the coarse correction ``P (P^T K_ff P)^-1 P^T`` (additive two-level). With a
+    ``geometry`` that holds the preconditioner's parts (built for this ``coarse``), they are weighed by the
+    parameters instead of being assembled from the Jacobians."""
+    precomputed = (_uses_geometry(geometry, params) and geometry.blocks is not None
+                   and geometry.blocks.shape[0] == jnp.shape(params["bond_E"])[0]
+                   and (coarse is None or geometry.coarse is not None))
+    if precomputed:
+        w = jax.lax.stop_gradient(_weights(params, geometry, model))
+        blocks = jnp.einsum("mp,mpnab->nab", w, geometry.blocks)
+        coarse_matrix = None if coarse is None else jnp.einsum("mp,mpab->ab", w, geometry.coarse)
+    else:
+        if jac is None and coarse is not None:
+            jac = reduced_jacobians(model, params)
+        jac = None if jac is None else jax.lax.stop_gradient(jac)
+        blocks = jax.lax.stop_gradient(block_diagonal(model, params, jac))
+        coarse_matrix = None if coarse is None else _coarse_matrix(model, jac, coarse)
     nd = blocks.shape[1]
     eye = jnp.eye(nd, dtype=blocks.dtype)
     mask = free[:, :, None] & free[:, None, :]
@@ -478,7 +640,7 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
     empty = jnp.all(jnp.abs(jnp.where(mask, blocks, 0.0)) == 0, axis=(1, 2))
     blocks = jnp.where(empty[:, None, None], jnp.diag(scale)[None], blocks)
     inv = jnp.linalg.inv(blocks)
-    factor = None if coarse is None else _CholeskyBlocks.of(_coarse_factor(model, jac, coarse))
+    factor = None if coarse is None else _CholeskyBlocks.of(_factor_coarse(coarse_matrix))
     return Preconditioner(inv=inv, free=free, factor=factor, coarse=coarse)
 
 
@@ -557,7 +719,7 @@ jax.tree_util.register_dataclass(Preconditioner, data_fields=["inv", "free", "fa
 
 
 # ---------------------------------------------------------------------------------------------------- linear solve
-def tangent_operator(model: Model, params, *, operator="auto", walls=None):
+def tangent_operator(model: Model, params, *, operator="auto", walls=None, geometry: BondGeometry | None = None):
     """The stiffness operator at rest, ``v -> K v`` on all DOFs (``[n, nd]`` in and out), and the reduced per-bond
     Jacobians it uses (:func:`reduced_jacobians`; ``None`` for ``"jvp"``).
 
@@ -567,13 +729,17 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None):
     give the same operator to round-off: the Jacobians are forward-mode derivatives of the same bond law. The
     element-by-element product is several times cheaper per application; it streams the packed symmetric form
     (:func:`packed_jacobians`: 45 numbers per bond with 6 DOF per particle, 6 with 3) at every application, and the
-    reduced Jacobians (81 or 9 numbers per bond) are returned for the preconditioner.
+    reduced Jacobians (81 or 9 numbers per bond) are returned for the preconditioner. With ``geometry``
+    (:func:`bond_geometry`, computed once per sample) and ``params`` as ``{"bond_E", "bond_nu"}``, the Jacobians are
+    built from it instead of differentiating the bond law again (same numbers to round-off).
     """
     if operator == "auto":
         operator = "jvp" if (walls is not None or model.walls is not None or model.contacts) else "jacobians"
     if operator == "jacobians":
         if walls is not None or model.walls is not None or model.contacts:
             raise SceneError("the 'jacobians' operator covers bonds only; use operator='jvp' with walls or contacts")
+        if _uses_geometry(geometry, params):
+            return _geometric_operator(model, params, geometry)
         jac = reduced_jacobians(model, params)
         return _packed_operator(model, jac), jac
     if operator != "jvp":
@@ -588,19 +754,21 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None):
 
 
 def linear_solve(model: Model, params, free, u_prescribed, *, tol=1e-6, maxiter=None, walls=None,
-                 operator="auto", stiffness_tol=None, coarse: CoarseSpace | None = None):
+                 operator="auto", stiffness_tol=None, coarse: CoarseSpace | None = None,
+                 geometry: BondGeometry | None = None):
     """Solve the linearised equilibrium for one load case.
 
     free: ``[n, nd]`` bool, u_prescribed: ``[n, nd]`` (zero on free DOFs); operator: see :func:`tangent_operator`;
     stiffness_tol: also stop once the strain energy has settled to this relative change (see :func:`_cg`);
-    coarse: a :class:`CoarseSpace` for the two-level preconditioner (``None``: block-Jacobi alone).
+    coarse: a :class:`CoarseSpace` for the two-level preconditioner (``None``: block-Jacobi alone); geometry: a
+    :class:`BondGeometry` (:func:`bond_geometry`) to build the bond Jacobians from.
     Returns ``(u, info)`` with the full displacement field and ``info = {"residual": relative residual,
     "iterations": CG iterations}``.
     Differentiable with respect to ``params``; ``vmap``-able over ``params`` or ``u_prescribed``.
     """
-    full, jac = tangent_operator(model, params, operator=operator, walls=walls)
-    u, res, iterations, _ = _cg(full, _preconditioner(model, params, free, jac, coarse), free, u_prescribed, tol,
-                                maxiter, stiffness_tol)
+    full, jac = tangent_operator(model, params, operator=operator, walls=walls, geometry=geometry)
+    precond = _preconditioner(model, params, free, jac, coarse, geometry)
+    u, res, iterations, _ = _cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol)
     return u, {"residual": res, "iterations": iterations}
 
 
@@ -786,16 +954,24 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
     stats = {"dofs": nd, "nonlinear": nonlinear, "free_dofs": int(free_np.sum())}
     tc = time.perf_counter()
     if not nonlinear:
-        # the jit cache serves repeated solves of one sample size (calibration loops); on a cache miss the first
-        # call includes compilation, and a second call gives the run time
-        cached = _linear_jit._cache_size()
         springs = model if lin is None else dataclasses.replace(model, bonds=jnp.concatenate([model.bonds, lin[0]]))
         if lin is not None:
             stats.update(contact_candidates=int(lin[0].shape[0]), contact_fraction=frac,
                          contact_passes=int(contact_passes))
         coarse = _coarse_for(springs, free_np, preconditioner, aggregate_size)
+        geometry = None
+        if operator in ("auto", "jacobians"):
+            # parameter-independent, once per sample: the bond Jacobians and (bonds only) the preconditioner's
+            # parts per unit modulus (BondGeometry); its own compilation on a new size is part of this time
+            geometry = jax.block_until_ready(bond_geometry(
+                model, coarse, n_materials=None if lin is not None else int(jnp.shape(params["bond_E"])[0])))
+        stats["setup_time"] = time.perf_counter() - tc
+        # the jit cache serves repeated solves of one sample size (calibration loops); on a cache miss the first
+        # call includes compilation, and a second call gives the run time
+        tc = time.perf_counter()
+        cached = _linear_jit._cache_size()
         args = (model, params, free, u_p, linear_tol, maxiter, operator, stiffness_tol, coarse, lin,
-                int(contact_passes))
+                int(contact_passes), geometry)
         u, force_total, force_boundary, res, iterations = jax.block_until_ready(_linear_jit(*args))
         first = time.perf_counter() - tc
         if _linear_jit._cache_size() > cached:
@@ -850,7 +1026,7 @@ def _bond_forces_at(model, params, u):
 
 @functools.partial(jax.jit, static_argnames=("maxiter", "operator", "contact_passes"))
 def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffness_tol=None, coarse=None,
-                contacts=None, contact_passes=2):
+                contacts=None, contact_passes=2, geometry=None):
     """Linear solve of one load case; returns ``(u, reaction, boundary reaction, residual, iterations)``.
 
     reaction = ``u . K u / delta`` (twice the strain energy over the prescribed displacement ``delta``): at
@@ -863,13 +1039,15 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
     bonds as further springs (operator and preconditioner alike; the coarse space must have been built with them).
     ``contact_passes`` solves: each later one re-linearises the
     contacts at ``fraction`` times the previous solution. Iterations are summed over the passes.
+    geometry: :class:`BondGeometry` of the bonds (or ``None``: the Jacobians by differentiating the bond law).
     """
     if contacts is None:
-        full, jac = tangent_operator(model, params, operator=operator)
-        return _linear_once(model, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac)
+        full, jac = tangent_operator(model, params, operator=operator, geometry=geometry)
+        return _linear_once(model, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac, geometry)
     pairs, u_lin, fraction = contacts
     springs = dataclasses.replace(model, bonds=jnp.concatenate([model.bonds, pairs.astype(model.bonds.dtype)]))
-    jb = reduced_jacobians(model, params)
+    jb = (_geometric_jacobians(model, params, geometry)[0] if _uses_geometry(geometry, params)
+          else reduced_jacobians(model, params))
     total = 0
     for _ in range(contact_passes):
         jac = jnp.concatenate([jb, _linearised_contact_jacobians(model, pairs, fraction * u_lin)], axis=2)
@@ -880,9 +1058,9 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
     return out[:4] + (total,)
 
 
-def _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac):
-    u, res, iterations, _ = _cg(full, _preconditioner(springs, params, free, jac, coarse), free, u_p, tol, maxiter,
-                                stiffness_tol)
+def _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac, geometry=None):
+    precond = _preconditioner(springs, params, free, jac, coarse, geometry)
+    u, res, iterations, _ = _cg(full, precond, free, u_p, tol, maxiter, stiffness_tol)
     gen = -full(u)  # linearised internal forces
     delta = jnp.max(jnp.abs(u_p))
     energy_reaction = -jnp.vdot(u, gen) / delta
@@ -1098,9 +1276,12 @@ def stiffness_function(sample, scene, *, dofs=None, tol=1e-6, maxiter=None, oper
     u_p[driven, scene.axis] = -delta
     free, u_p = jnp.asarray(free_np), jnp.asarray(u_p, model.positions0.dtype)
     coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
+    geometry = (bond_geometry(model, coarse, n_materials=sample.n_materials) if operator in ("auto", "jacobians")
+                else None)
 
     def stiffness(params):
-        return _linear_jit(model, params, free, u_p, tol, maxiter, operator, stiffness_tol, coarse)[1] / delta
+        return _linear_jit(model, params, free, u_p, tol, maxiter, operator, stiffness_tol, coarse,
+                           geometry=geometry)[1] / delta
 
     return stiffness
 
@@ -1124,11 +1305,12 @@ def load_cases(sample, scene, directions, params=None, *, dofs=None, tol=1e-8, p
     u_p[:, driven, :3] = delta * dirs[:, None, :]
     free = jnp.asarray(free_np)
     coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
+    geometry = bond_geometry(model, coarse, n_materials=sample.n_materials)
 
     @jax.jit
     def reactions(u_p):
-        full, jac = tangent_operator(model, params)
-        precond = _preconditioner(model, params, free, jac, coarse)
+        full, jac = tangent_operator(model, params, geometry=geometry)
+        precond = _preconditioner(model, params, free, jac, coarse, geometry)
 
         def one(up):
             u = _cg(full, precond, free, up, tol, None)[0]

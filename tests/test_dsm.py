@@ -216,6 +216,43 @@ def test_coarse_matrix_needs_only_the_coupling_bonds(packing):
     np.testing.assert_allclose(b @ b.T, direct, atol=1e-9 * float(jnp.abs(direct).max()))
 
 
+@pytest.mark.parametrize("dofs", [3, 6])
+def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, dofs):
+    # two materials with different E and nu: E_b (J_E + s(nu_b) J_G) is the forward-mode Jacobian of the bond law,
+    # and the weighed per-material parts are the block diagonal and the coarse matrix assembled from it
+    s = jaxbpm.generate.mix_materials(packing, [0.5, 0.5], seed=2, materials={"E": [1e9, 3e9], "nu": [0.2, 0.35]})
+    scene = UniaxialCompression(strain=0.002)
+    model = scene.model(s, rotations=dofs == 6)
+    free = dsm._free_mask(model, scene, s)[0]
+    coarse = dsm.coarse_space(model, free, aggregate_size=25)
+    geo = dsm.bond_geometry(model, coarse, n_materials=2)
+    p = default_params(s)
+    ref = dsm.reduced_jacobians(model, p)
+    jr, jp, _ = dsm._geometric_jacobians(model, p, geo)
+    scale = float(jnp.abs(ref).max())
+    np.testing.assert_allclose(jr, ref, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(jp, dsm.packed_jacobians(ref), rtol=0, atol=1e-12 * scale)
+    w = dsm._weights(p, geo, model)
+    np.testing.assert_allclose(jnp.einsum("mp,mpnab->nab", w, geo.blocks), dsm.block_diagonal(model, p, ref),
+                               rtol=0, atol=1e-12 * scale)
+    direct = dsm._coarse_matrix(model, ref, coarse)
+    np.testing.assert_allclose(jnp.einsum("mp,mpab->ab", w, geo.coarse), direct, rtol=0,
+                               atol=1e-12 * float(jnp.abs(direct).max()))
+    # the solve through the geometry equals the one that differentiates the bond law, and so do its gradients
+    free_j = jnp.asarray(free)
+    u_p = np.zeros(free.shape)
+    u_p[~free.all(axis=1) & (np.asarray(s.positions)[:, 2] > np.asarray(s.positions)[:, 2].mean()), 2] = -1e-6
+
+    def k(p, geometry):
+        u, _ = dsm.linear_solve(model, p, free_j, jnp.asarray(u_p), tol=1e-10, coarse=coarse, geometry=geometry)
+        return jnp.vdot(u, dsm.tangent_operator(model, p)[0](u))
+
+    np.testing.assert_allclose(k(p, geo), k(p, None), rtol=1e-9)
+    g_geo, g_ref = jax.grad(k)(p, geo), jax.grad(k)(p, None)
+    for name in ("bond_E", "bond_nu"):
+        np.testing.assert_allclose(g_geo[name], g_ref[name], rtol=1e-7)
+
+
 def test_two_level_preconditioner_same_answer_fewer_iterations(packing):
     scene = UniaxialCompression(strain=0.002)
     a = jaxbpm.solve(packing, scene, method="dsm", preconditioner="jacobi", linear_tol=1e-10)
