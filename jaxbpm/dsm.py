@@ -171,8 +171,10 @@ class BondGeometry:
     Jacobians from the parameters with two multiply-adds per number instead of differentiating the bond law again.
     The preconditioner is linear in the Jacobians as well: ``blocks [M, 2, n, nd, nd]`` are each particle's
     self-stiffness blocks (:func:`block_diagonal`) and ``coarse [M, 2, 6 na, 6 na]`` the Galerkin coarse matrix of a
-    :class:`CoarseSpace`, per bond material and part, so a solve only weighs and sums them (``None`` when not built:
-    no coarse space, or more than ``_MAX_PRECOMPUTED_MATERIALS`` materials). Build it with :func:`bond_geometry`.
+    :class:`CoarseSpace`, per bond material and part, so a solve only weighs and sums them (``coarse`` is ``None``
+    without a coarse space; both are ``None`` when not built: no material count given, more than
+    ``_MAX_PRECOMPUTED_MATERIALS`` materials, or more than ``_MAX_PRECOMPUTED_BYTES`` of memory).
+    Build it with :func:`bond_geometry`.
     """
 
     reduced: Any
@@ -185,6 +187,7 @@ jax.tree_util.register_dataclass(BondGeometry, data_fields=["reduced", "packed",
                                  meta_fields=[])
 
 _MAX_PRECOMPUTED_MATERIALS = 8
+_MAX_PRECOMPUTED_BYTES = 2 ** 30  # memory for the preconditioner's parts; above it they are assembled per solve
 
 
 def _unit_stiffnesses(model: Model, nu):
@@ -244,7 +247,10 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
     if not float(err) < 1e-10:
         raise RuntimeError(f"bond stiffness is not of the form E (k_E + k_G / (2 (1 + nu))) (mismatch {err:.3g})")
     geometry = BondGeometry(reduced=reduced, packed=jax.vmap(packed_jacobians)(reduced))
-    if n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS:
+    nd = reduced.shape[1] - 3 if model.rotations else 3
+    per_material = 2 * (model.n * nd * nd + (0 if coarse is None else (6 * coarse.count) ** 2))
+    if (n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS
+            and n_materials * per_material * reduced.dtype.itemsize <= _MAX_PRECOMPUTED_BYTES):
         blocks, mats = _preconditioner_parts(model, reduced, coarse, int(n_materials))
         geometry = dataclasses.replace(geometry, blocks=blocks, coarse=mats)
     return geometry
