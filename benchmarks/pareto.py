@@ -38,8 +38,9 @@ Points (each one ``jaxbpm.solve`` call; run time = the library's ``run_time``, c
   time used here adds it back, measured as a linear DSM call with the same DOFs and CG tolerance
   (``run_s_library`` and ``start_solve_s`` in the JSON).
 * STE: ``dofs`` 3 / 6 x ``first_neighbour`` False / True, ``surface_depth`` 0 and two mean diameters (default: one
-  diameter); ``hertz``: contacts linearised at the default point (middle of the fit range) and, full run only, at
-  ``contact_fraction`` 0.25 and 1.0.
+  diameter); 3 DOF in single precision (``precision="float32"``, default and zero surface depth); ``hertz``:
+  contacts linearised at the default point (middle of the fit range) and, full run only, at ``contact_fraction``
+  0.25 and 1.0.
 
 References:
 
@@ -152,6 +153,8 @@ def settings(case, args, diameter):
                         dict(dofs=dofs, first_neighbour=fn)))
         pts.append(("STE", f"STE {dofs}DOF surf 0", "ste", dict(dofs=dofs, surface_depth=0.0)))
         pts.append(("STE", f"STE {dofs}DOF surf 2d", "ste", dict(dofs=dofs, surface_depth=2.0 * diameter)))
+    pts.append(("STE", "STE 3DOF float32", "ste", dict(dofs=3, precision="float32")))
+    pts.append(("STE", "STE 3DOF surf 0 float32", "ste", dict(dofs=3, surface_depth=0.0, precision="float32")))
     if case == "hertz" and not quick:
         for cf in (0.25, 1.0):
             pts.append(("STE", f"STE 3DOF cf {cf:g}", "ste", dict(dofs=3, contact_fraction=cf)))
