@@ -22,7 +22,9 @@ would set it up; Jarolin & Dosta 2020 used walls):
 
 Methods per sample: DEM with contacts (the reference), DSM nonlinear (Newton-Krylov with contacts), DSM linear +
 contacts (one linear solve with the contacts linearised, ``nonlinear=False`` on the contact scene), DSM linear
-(bonds only), STE (linearised contacts; layered for Case 3). Times are run times (compilation excluded, reported
+(bonds only), STE (linearised contacts; layered for Case 3) with the library's default ``surface_depth`` (particles
+within one diameter of the surface left out of the averages) and in the paper's form, every non-singular particle
+averaged (``surface_depth=0``, "STE all particles"). Times are run times (compilation excluded, reported
 separately); the speed-up is DEM run / method run. Errors are stiffness differences to the DEM, mean and standard
 deviation over the samples of a case. JSON to ``results/methods.json`` and a PNG in the style of Jarolin & Dosta's Fig.
 4.
@@ -38,7 +40,7 @@ import time
 from _common import enable_x64, machine_info, pin_threads, save_png, table, write_json
 
 CASES = ("1-porous", "2-agglomerate", "3-shaped")
-METHODS = ("DSM nonlinear", "DSM linear + contacts", "DSM linear", "STE")
+METHODS = ("DSM nonlinear", "DSM linear + contacts", "DSM linear", "STE", "STE all particles")
 
 
 def log(msg):
@@ -98,7 +100,8 @@ def run_sample(sample, case, strain, newton_maxiter=6):
     # than running for minutes; the row keeps its residual and the "converged" flag
     runs = [("DEM", scene_c, "dem", {}), ("DSM nonlinear", scene_c, "dsm", {"newton_maxiter": newton_maxiter}),
             ("DSM linear + contacts", scene_c, "dsm", {"nonlinear": False}),
-            ("DSM linear", scene_b, "dsm", {}), ("STE", scene_c, "ste", {"layered": case == "3-shaped"})]
+            ("DSM linear", scene_b, "dsm", {}), ("STE", scene_c, "ste", {"layered": case == "3-shaped"}),
+            ("STE all particles", scene_c, "ste", {"layered": case == "3-shaped", "surface_depth": 0.0})]
     for name, scene, method, opts in runs:
         t = time.perf_counter()
         try:
@@ -159,9 +162,9 @@ def plot(summary, path, note):
     methods = list(METHODS)
     fig, ax = plt.subplots(figsize=(10, 5))
     ax2 = ax.twinx()
-    width = 0.2
+    width = 0.8 / len(methods)
     for k, m in enumerate(methods):
-        xs = np.arange(len(summary)) + (k - 1.5) * width
+        xs = np.arange(len(summary)) + (k - 0.5 * (len(methods) - 1)) * width
         sp = [summary[c][m].get("speedup_mean", np.nan) for c in summary]
         er = [100 * summary[c][m].get("abs_error_mean", np.nan) for c in summary]
         es = [100 * summary[c][m].get("abs_error_std", np.nan) for c in summary]
@@ -241,12 +244,16 @@ def main(argv=None) -> int:
         goals["case1_dsm_100x_at_no_worse_error_than_1pct"] = {
             "met": bool(within) and c1[best].get("speedup_mean", 0) >= 100, "variant": best,
             "speedup": c1[best].get("speedup_mean"), "error": c1[best].get("abs_error_mean")}
+        # the library's default STE, or the paper's form (every non-singular particle in the averages)
+        within = [m for m in ("STE", "STE all particles") if c1[m].get("abs_error_mean", 1) <= 0.07]
+        best = max(within, key=lambda m: c1[m].get("speedup_mean", 0)) if within else "STE"
         goals["case1_ste_1000x_at_no_worse_error_than_7pct"] = {
-            "met": c1["STE"].get("speedup_mean", 0) >= 1000 and c1["STE"].get("abs_error_mean", 1) <= 0.07,
-            "speedup": c1["STE"].get("speedup_mean"), "error": c1["STE"].get("abs_error_mean")}
+            "met": bool(within) and c1[best].get("speedup_mean", 0) >= 1000, "variant": best,
+            "speedup": c1[best].get("speedup_mean"), "error": c1[best].get("abs_error_mean")}
     print("\nGoals (Jarolin & Dosta 2020 on CPU: DSM 46x at 1 %, STE 878x at 7 % for Case 1):")
     for k, v in goals.items():
-        print(f"  {k}: {'MET' if v['met'] else 'NOT met'} (speed-up {v['speedup']}, error {v['error']})")
+        print(f"  {k}: {'MET' if v['met'] else 'NOT met'} ({v['variant']}: speed-up {v['speedup']:.4g}, "
+              f"error {100 * v['error']:.3g} %)")
     info = machine_info()
     out = {"benchmark": "methods", "machine": info, "settings": vars(args), "total_time_s": time.perf_counter() - t0,
            "summary": summary, "results": results, "rows": rows_out, "goals": goals}
