@@ -114,3 +114,18 @@ def pin(cpu, threads):
         os.sched_setaffinity(0, {cpu})
     pin_threads(threads)
     return cpu
+
+
+def cached_box(n: int, seed: int = 0, cache_dir: str | None = None):
+    """``(sample, source)``: ``jaxbpm.generate.box(n, seed).largest_cluster()``, read from / saved to
+    ``<cache_dir>/box_<n>_seed<seed>.h5`` when ``cache_dir`` is given (call after enabling x64)."""
+    import jaxbpm
+
+    path = os.path.join(cache_dir, f"box_{n}_seed{seed}.h5") if cache_dir else None
+    if path and os.path.exists(path):
+        return jaxbpm.io.load_sample(path), path
+    sample = jaxbpm.generate.box(n, seed=seed).largest_cluster()
+    if path:
+        os.makedirs(cache_dir, exist_ok=True)
+        jaxbpm.io.save_sample(path, sample)
+    return sample, f"generate.box({n}, seed={seed}).largest_cluster()"

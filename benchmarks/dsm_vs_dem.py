@@ -50,7 +50,7 @@ import os
 import sys
 import time
 
-from _common import enable_x64, machine_info, machine_load, pin, table, write_json
+from _common import cached_box, enable_x64, machine_info, machine_load, pin, table, write_json
 
 DEFAULT_SIZES = [2000, 3000, 10000, 50000]
 QUICK_SIZES = [500, 1000]
@@ -175,16 +175,7 @@ def run_size(n, args, jaxbpm, out_rows):
 
     rec = {"n_requested": n}
     t0 = time.perf_counter()
-    cached = os.path.join(args.cache_dir, f"box_{n}_seed{args.seed}.h5") if args.cache_dir else None
-    if cached and os.path.exists(cached):
-        sample = jaxbpm.io.load_sample(cached)
-        rec["sample_source"] = cached
-    else:
-        sample = jaxbpm.generate.box(n, seed=args.seed).largest_cluster()
-        rec["sample_source"] = f"generate.box({n}, seed={args.seed}).largest_cluster()"
-        if cached:
-            os.makedirs(args.cache_dir, exist_ok=True)
-            jaxbpm.io.save_sample(cached, sample)
+    sample, rec["sample_source"] = cached_box(n, args.seed, args.cache_dir)
     rec["generate_s"] = time.perf_counter() - t0
     rec["particles"], rec["bonds"] = sample.n_particles, sample.n_bonds
     params = default_params(sample)

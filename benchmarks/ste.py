@@ -34,7 +34,7 @@ import argparse
 import sys
 import time
 
-from _common import enable_x64, machine_info, machine_load, pin, save_png, table, write_json
+from _common import cached_box, enable_x64, machine_info, machine_load, pin, save_png, table, write_json
 
 
 def log(msg):
@@ -52,21 +52,6 @@ def fcc_sample(n_target, seed=0, radius=1e-3):
     rng = np.random.default_rng(seed)
     pos = np.asarray(s.positions) + rng.uniform(-0.05, 0.05, (s.n_particles, 3)) * radius
     return jaxbpm.Sample.from_arrays(pos, s.radii, s.bonds, s.bond_radius, materials=s.materials, domain=s.domain)
-
-
-def random_sample(n, cache_dir=None, seed=0):
-    import os
-
-    import jaxbpm
-
-    path = os.path.join(cache_dir, f"box_{n}_seed{seed}.h5") if cache_dir else None
-    if path and os.path.exists(path):
-        return jaxbpm.io.load_sample(path)
-    s = jaxbpm.generate.box(n, seed=seed).largest_cluster()
-    if path:
-        os.makedirs(cache_dir, exist_ok=True)
-        jaxbpm.io.save_sample(path, s)
-    return s
 
 
 def time_ste(sample, scene, repeats, precision="float64"):
@@ -124,7 +109,7 @@ def main(argv=None):
     jobs = [("random", n) for n in args.random_sizes] + [("fcc", n) for n in args.fcc_sizes]
     for kind, n in jobs:
         t = time.perf_counter()
-        s = random_sample(n, args.cache_dir) if kind == "random" else fcc_sample(n)
+        s = cached_box(n, 0, args.cache_dir)[0] if kind == "random" else fcc_sample(n)
         gen = time.perf_counter() - t
         log(f"{kind} {s.n_particles} particles, {s.n_bonds} bonds (generated in {gen:.1f} s)")
         row = {"sample": kind, "particles": s.n_particles, "bonds": s.n_bonds, "gen_s": gen}

@@ -247,7 +247,7 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
     if not float(err) < 1e-10:
         raise RuntimeError(f"bond stiffness is not of the form E (k_E + k_G / (2 (1 + nu))) (mismatch {err:.3g})")
     geometry = BondGeometry(reduced=reduced, packed=jax.vmap(packed_jacobians)(reduced))
-    nd = reduced.shape[1] - 3 if model.rotations else 3
+    nd = 6 if model.rotations else 3
     per_material = 2 * (model.n * nd * nd + (0 if coarse is None else (6 * coarse.count) ** 2))
     if (n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS
             and n_materials * per_material * reduced.dtype.itemsize <= _MAX_PRECOMPUTED_BYTES):
@@ -256,17 +256,17 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
     return geometry
 
 
-def _weights(params, geometry: BondGeometry, model: Model):
-    """``[M, 2]``: each material's weights ``(E, E s)`` of the geometry's two parts (the parts' sums are exact only
-    for the material count they were built with)."""
+def _weights(params):
+    """``[M, 2]``: each material's weights ``(E, E s)`` of :class:`BondGeometry`'s two parts (the preconditioner's
+    per-material sums are exact only for the material count they were built with)."""
     e = jnp.asarray(params["bond_E"])
     return jnp.stack([e, e * _shear_factor(jnp.asarray(params["bond_nu"]).astype(e.dtype))], axis=1)
 
 
 def _bond_factors(model: Model, params):
-    """Per-bond ``(E_b, E_b s_b)``: the weights of :class:`BondGeometry`'s two parts."""
-    e = jnp.asarray(params["bond_E"])[model.bond_material]
-    return e, e * _shear_factor(jnp.asarray(params["bond_nu"])[model.bond_material])
+    """Per-bond ``(E_b, E_b s_b)``: the material weights (:func:`_weights`) of each bond."""
+    w = _weights(params)[model.bond_material]
+    return w[:, 0], w[:, 1]
 
 
 def _uses_geometry(geometry, params) -> bool:
@@ -628,7 +628,7 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
                    and geometry.blocks.shape[0] == jnp.shape(params["bond_E"])[0]
                    and (coarse is None or geometry.coarse is not None))
     if precomputed:
-        w = jax.lax.stop_gradient(_weights(params, geometry, model))
+        w = jax.lax.stop_gradient(_weights(params))
         blocks = jnp.einsum("mp,mpnab->nab", w, geometry.blocks)
         coarse_matrix = None if coarse is None else jnp.einsum("mp,mpab->ab", w, geometry.coarse)
     else:

@@ -232,7 +232,7 @@ def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, 
     scale = float(jnp.abs(ref).max())
     np.testing.assert_allclose(jr, ref, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(jp, dsm.packed_jacobians(ref), rtol=0, atol=1e-12 * scale)
-    w = dsm._weights(p, geo, model)
+    w = dsm._weights(p)
     np.testing.assert_allclose(jnp.einsum("mp,mpnab->nab", w, geo.blocks), dsm.block_diagonal(model, p, ref),
                                rtol=0, atol=1e-12 * scale)
     direct = dsm._coarse_matrix(model, ref, coarse)
