@@ -445,13 +445,14 @@ def _scatter_pairs(model: Model, i, j, y):
     return jnp.concatenate([total[:, :3], total[:, 4:7]], axis=1) if model.rotations else total[:, :3]
 
 
-def _contact_jacobians(model: Model, pairs, u, d0=None) -> jnp.ndarray:
+def _contact_jacobians(model: Model, pairs, u, d0=None, normal=False) -> jnp.ndarray:
     """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u`` in the reduced form of
     :func:`reduced_jacobians`, ``[ni, no, C]``: ``d (f_i [, m_i, m_j]) / d (u_j - u_i [, theta_i, theta_j])``, by
     jvps of the same contact law the DEM runs (the tangential spring is the contact points' relative tangential
     displacement since rest, :func:`_contact_slip`, as in :func:`_internal_forces`). ``d0 [C, 3]``: the pair
     vectors to linearise at instead of the rest positions (``u`` is then zero: the linearised contacts of the
-    linear solve)."""
+    linear solve). ``normal=True``: also the Jacobians of the normal force alone (the law without its tangential
+    spring: its moments vanish), ``(all, normal)``, from the same derivatives."""
     rot = model.rotations
     ni = 9 if rot else 3
     i, j = pairs[:, 0], pairs[:, 1]
@@ -465,10 +466,18 @@ def _contact_jacobians(model: Model, pairs, u, d0=None) -> jnp.ndarray:
         d = tuple(base[c] + z[c] for c in range(3))
         dxi = _contact_slip(model, pairs, d, z)
         out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
-        return jnp.stack((out.f_i + out.m_i + out.m_j) if rot else out.f_i)
+        parts = (out.f_i + out.m_i + out.m_j) if rot else out.f_i
+        if normal:  # -F_n n: the force on i without the tangential spring
+            dist = jnp.sqrt(contact_mod._dot(d, d))
+            parts = parts + tuple(-out.normal * c / dist for c in d)
+        return jnp.stack(parts)
 
     basis = jnp.broadcast_to(jnp.eye(ni, dtype=zero.dtype)[:, :, None], (ni, ni, pairs.shape[0]))
-    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+    jac = jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+    if not normal:
+        return jac
+    no = jac.shape[1] - 3
+    return jac[:, :no], jnp.concatenate([jac[:, no:], jnp.zeros_like(jac[:, 3:no])], axis=1)
 
 
 def _linearised_contact_jacobians(model: Model, pairs, state) -> jnp.ndarray:
@@ -488,10 +497,7 @@ def _linearised_contact_jacobians(model: Model, pairs, state) -> jnp.ndarray:
     free = contact_mod._law(*args, model.contact._replace(friction=jnp.asarray(1e30, w.dtype))).spring
     num, den = jnp.sqrt(bond_mod._dot(capped, capped)), jnp.sqrt(bond_mod._dot(free, free))
     secant = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 1.0)
-    d_state = jnp.stack(d, axis=1)
-    stick = _contact_jacobians(model, pairs, None, d_state)
-    normal = _contact_jacobians(dataclasses.replace(model, contact=model.contact._replace(
-        G_star=0.0 * model.contact.G_star)), pairs, None, d_state)
+    stick, normal = _contact_jacobians(model, pairs, None, jnp.stack(d, axis=1), normal=True)
     return _symmetrised(normal + secant[None, None] * (stick - normal))
 
 
@@ -619,11 +625,13 @@ def _coarse_for(model: Model, free, preconditioner, aggregate_size):
 
 
 def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | None = None,
-                    geometry: BondGeometry | None = None):
+                    geometry: BondGeometry | None = None, extra=None):
     """Block-Jacobi: inverse of each particle's self-stiffness on its free DOFs (identity on the rest); with a
     :class:`CoarseSpace`, plus the coarse correction ``P (P^T K_ff P)^-1 P^T`` (additive two-level). With a
     ``geometry`` that holds the preconditioner's parts (built for this ``coarse``), they are weighed by the
-    parameters instead of being assembled from the Jacobians."""
+    parameters instead of being assembled from the Jacobians. ``extra``: ``(pair_model, pair_jac, pair_coarse)``,
+    further springs (the linearised contacts: a model whose ``bonds`` are the pairs, their reduced Jacobians, and the
+    coarse space with ``bonds`` indexing the pairs that couple its modes) added to the blocks and coarse matrix."""
     precomputed = (_uses_geometry(geometry, params) and geometry.blocks is not None
                    and geometry.blocks.shape[0] == jnp.shape(params["bond_E"])[0]
                    and (coarse is None or geometry.coarse is not None))
@@ -637,6 +645,12 @@ def _preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | 
         jac = None if jac is None else jax.lax.stop_gradient(jac)
         blocks = jax.lax.stop_gradient(block_diagonal(model, params, jac))
         coarse_matrix = None if coarse is None else _coarse_matrix(model, jac, coarse)
+    if extra is not None:
+        pair_model, pair_jac, pair_coarse = extra
+        pair_jac = jax.lax.stop_gradient(pair_jac)
+        blocks = blocks + block_diagonal(pair_model, None, pair_jac)
+        if coarse is not None:
+            coarse_matrix = coarse_matrix + _coarse_matrix(pair_model, pair_jac, pair_coarse)
     nd = blocks.shape[1]
     eye = jnp.eye(nd, dtype=blocks.dtype)
     mask = free[:, :, None] & free[:, None, :]
@@ -778,7 +792,7 @@ def linear_solve(model: Model, params, free, u_prescribed, *, tol=1e-6, maxiter=
     return u, {"residual": res, "iterations": iterations}
 
 
-def _cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, delay=5):
+def _cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, delay=5, x0=None):
     """Preconditioned CG on the free DOFs for the prescribed displacements ``u_prescribed``.
 
     Stops when the relative residual ``|K_ff v - b| / |b|`` reaches ``tol`` or, with ``stiffness_tol``, when the
@@ -786,6 +800,8 @@ def _cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, del
     ``alpha_k gamma_k / 2`` in step ``k``, and the sum of the last ``delay`` decreases estimates the error still left
     (the Hestenes-Stiefel estimate; it over-estimates the true error in practice). The energy converges
     quadratically while the residual converges linearly, so this stops several times sooner for the same stiffness.
+
+    x0: a first guess of the displacements (``[n, nd]``, its free DOFs are used; ``None``: zero there).
 
     Returns ``(u, residual, iterations, energy)``. Wrapped in ``lax.custom_linear_solve``: derivatives come from
     implicit differentiation (an adjoint solve stopped by the residual), not from unrolling the iterations.
@@ -799,9 +815,15 @@ def _cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, del
     energy0 = 0.5 * jnp.vdot(u_prescribed, full(u_prescribed))
     limit = 10 * rhs.size if maxiter is None else maxiter
 
-    def run(mv, b, energy_test):
+    def run(mv, b, energy_test, guess=True):
         atol2 = jnp.square(tol) * jnp.vdot(b, b)
-        z0 = precond(b)
+        x_0, r_0, e_0 = jnp.zeros_like(b), b, energy0
+        if guess and x0 is not None:
+            # the energy of the guess: E(x) = E(0) - x.b + x.K x / 2 = E(0) - x.(b + r) / 2 with r = b - K x
+            x_0 = jnp.where(free, jax.lax.stop_gradient(x0), 0.0)
+            r_0 = b - mv(x_0)
+            e_0 = energy0 - 0.5 * jnp.vdot(x_0, b + r_0)
+        z0 = precond(r_0)
         window = jnp.zeros(delay, b.dtype)
 
         def done(c):
@@ -821,13 +843,13 @@ def _cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, del
             drop = 0.5 * alpha * g
             return x, r, g2, z + (g2 / g) * p, k + 1, energy - drop, win.at[k % delay].set(drop)
 
-        init = (jnp.zeros_like(b), b, jnp.vdot(b, z0), z0, 0, energy0, window)
+        init = (x_0, r_0, jnp.vdot(r_0, z0), z0, 0, e_0, window)
         x, _, _, _, k, energy, _ = jax.lax.while_loop(lambda c: ~done(c), body, init)
         return x, (k, energy)
 
     v, (iterations, energy) = jax.lax.custom_linear_solve(
         matvec, rhs, lambda mv, b: run(mv, b, stiffness_tol is not None),
-        transpose_solve=lambda mv, b: run(mv, b, False), symmetric=True, has_aux=True)
+        transpose_solve=lambda mv, b: run(mv, b, False, False), symmetric=True, has_aux=True)
     res = jnp.linalg.norm(matvec(v) - rhs) / jnp.maximum(jnp.linalg.norm(rhs), jnp.finfo(rhs.dtype).tiny)
     return u_prescribed + v, res, iterations, energy
 
@@ -895,6 +917,31 @@ def _contact_candidates(sample, model, skin):
     return pairs.astype(np.int32)
 
 
+def _check_contact_skin(sample, pairs, disp, skin, stats):
+    """Record how many candidates touch at the linearisation state ``disp`` [n, 3] and the largest gap at rest of
+    one that does; warn when it comes near the candidate skin (pairs beyond it were never candidates)."""
+    pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+    i, j = pairs[:, 0], pairs[:, 1]
+    x = pos + disp
+    touching = np.linalg.norm(x[j] - x[i], axis=1) < rad[i] + rad[j]
+    gap = np.linalg.norm(pos[j] - pos[i], axis=1) - rad[i] - rad[j]
+    widest = float(gap[touching].max()) if touching.any() else 0.0
+    stats.update(contact_skin=float(skin), contacts_touching=int(touching.sum()), contact_gap_max=widest)
+    if widest > 0.75 * skin:
+        warnings.warn(f"linearised contacts: a pair {widest:.3g} m apart at rest touches at the linearisation state, "
+                      f"near the candidate reach (contact_skin {skin:.3g} m): pairs beyond it may touch too; pass a "
+                      f"larger contact_skin", stacklevel=3)
+
+
+def _affine_field(sample, model: Model, ax, delta):
+    """``[n, nd]``: the displacements of a uniform strain that moves the top of the sample by ``-delta`` along ``ax``
+    and holds its bottom (no rotations, no lateral motion)."""
+    x = np.asarray(sample.positions)[:, ax]
+    u = np.zeros((model.n, 6 if model.rotations else 3))
+    u[:, ax] = -delta * (x - x.min()) / max(x.max() - x.min(), 1e-300)
+    return jnp.asarray(u, model.positions0.dtype)
+
+
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol=None, contact_skin=None, load_steps=4, throw=False,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
@@ -927,7 +974,14 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         walls = (load.wall_points0 + load.wall_velocity * delta, load.wall_normals)  # top wall moved by delta
     pairs = None
     if scene.contacts:
-        skin = contact_skin if contact_skin is not None else 0.5 * float(np.mean(sample.radii))
+        skin = contact_skin
+        if skin is None:
+            skin = 0.5 * float(np.mean(sample.radii))
+            if not nonlinear:
+                # the linearised contacts only see the state at `contact_fraction` of the strain: four times the
+                # affine approach of two touching mean-sized particles there (0.1 mean radii at 2 % strain)
+                frac = float(np.mean(scene.fit_range)) if contact_fraction is None else float(contact_fraction)
+                skin = min(skin, 4.0 * frac * scene.strain * 2.0 * float(np.mean(sample.radii)))
         pairs = _contact_candidates(sample, model, skin)
     touching = None
     if scene.uses_walls:
@@ -948,11 +1002,8 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             raise SceneError(f"contact_fraction must lie in (0, 1], got {contact_fraction!r}")
         if int(contact_passes) < 1:
             raise SceneError(f"contact_passes must be at least 1, got {contact_passes!r}")
-        x = np.asarray(sample.positions)[:, ax]
-        u_aff = np.zeros((model.n, nd))
-        u_aff[:, ax] = -delta * (x - x.min()) / max(x.max() - x.min(), 1e-300)
-        lin = (jnp.asarray(pairs, jnp.int32), jnp.asarray(u_aff, model.positions0.dtype),
-               jnp.asarray(frac, model.positions0.dtype))
+        lin = [jnp.asarray(pairs, jnp.int32), _affine_field(sample, model, ax, delta),
+               jnp.asarray(frac, model.positions0.dtype), None]
     _check_held(sample, model, free_np, clamped, pairs, touching)
     free = jnp.asarray(free_np)
     u_p = jnp.asarray(u_p, model.positions0.dtype)
@@ -965,19 +1016,28 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             stats.update(contact_candidates=int(lin[0].shape[0]), contact_fraction=frac,
                          contact_passes=int(contact_passes))
         coarse = _coarse_for(springs, free_np, preconditioner, aggregate_size)
+        if lin is not None and coarse is not None:
+            # one coarse space (its aggregates do not depend on the springs): the bonds' part of the coarse matrix
+            # comes from the bond geometry, the contacts' part is assembled from the pairs that couple its modes
+            nb, cb = model.bonds.shape[0], np.asarray(coarse.bonds)
+            lin[3] = dataclasses.replace(coarse, bonds=jnp.asarray(cb[cb >= nb] - nb, jnp.int32))
+            coarse = dataclasses.replace(coarse, bonds=jnp.asarray(cb[cb < nb], jnp.int32))
+        lin = None if lin is None else tuple(lin)
         geometry = None
         if operator in ("auto", "jacobians"):
-            # parameter-independent, once per sample: the bond Jacobians and (bonds only) the preconditioner's
-            # parts per unit modulus (BondGeometry); its own compilation on a new size is part of this time
+            # parameter-independent, once per sample: the bond Jacobians and the preconditioner's parts per unit
+            # modulus (BondGeometry); its own compilation on a new size is part of this time
             geometry = jax.block_until_ready(bond_geometry(
-                model, coarse, n_materials=None if lin is not None else int(jnp.shape(params["bond_E"])[0])))
+                model, coarse, n_materials=int(jnp.shape(params["bond_E"])[0])))
         stats["setup_time"] = time.perf_counter() - tc
         # the jit cache serves repeated solves of one sample size (calibration loops); on a cache miss the first
         # call includes compilation, and a second call gives the run time
         tc = time.perf_counter()
         cached = _linear_jit._cache_size()
+        # CG starts from the affine field of the prescribed strain (the linearised contacts' first pass too)
+        guess = None if lin is not None else _affine_field(sample, model, ax, delta)
         args = (model, params, free, u_p, linear_tol, maxiter, operator, stiffness_tol, coarse, lin,
-                int(contact_passes), geometry)
+                int(contact_passes), geometry, guess)
         u, force_total, force_boundary, res, iterations = jax.block_until_ready(_linear_jit(*args))
         first = time.perf_counter() - tc
         if _linear_jit._cache_size() > cached:
@@ -997,6 +1057,8 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
                      aggregates=0 if coarse is None else coarse.count,
                      stiffness_boundary=float(force_boundary) / delta)
         reaction = float(force_total)
+        if lin is not None:
+            _check_contact_skin(sample, pairs, frac * np.asarray(u)[:, :3], skin, stats)
     else:
         tol = 1e-3 if tol is None else tol
         u, disps, forces, info, compile_time, run_time = _newton(
@@ -1032,7 +1094,7 @@ def _bond_forces_at(model, params, u):
 
 @functools.partial(jax.jit, static_argnames=("maxiter", "operator", "contact_passes"))
 def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffness_tol=None, coarse=None,
-                contacts=None, contact_passes=2, geometry=None):
+                contacts=None, contact_passes=2, geometry=None, guess=None):
     """Linear solve of one load case; returns ``(u, reaction, boundary reaction, residual, iterations)``.
 
     reaction = ``u . K u / delta`` (twice the strain energy over the prescribed displacement ``delta``): at
@@ -1040,33 +1102,43 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
     energy, so its error is quadratic in the error of ``u`` and a loose tolerance still gives an accurate stiffness.
     boundary reaction = mean of the axial forces on the driven and (minus) the resting clamped layer, the measure
     the DEM uses; the two agree to the solver's tolerance.
-    contacts: ``(pairs [C, 2], u_lin [n, nd], fraction)``: contact candidates linearised at the state ``fraction *
-    u_lin`` (:func:`_linearised_contact_jacobians`; a pair that does not touch there adds nothing), added to the
-    bonds as further springs (operator and preconditioner alike; the coarse space must have been built with them).
-    ``contact_passes`` solves: each later one re-linearises the
-    contacts at ``fraction`` times the previous solution. Iterations are summed over the passes.
+    contacts: ``(pairs [C, 2], u_lin [n, nd], fraction, pair_coarse)``: contact candidates linearised at the state
+    ``fraction * u_lin`` (:func:`_linearised_contact_jacobians`; a pair that does not touch there adds nothing),
+    added to the bonds as further springs (operator and preconditioner alike; ``pair_coarse``: ``coarse`` with
+    ``bonds`` indexing the pairs that couple its modes). ``contact_passes`` solves: each later one re-linearises the
+    contacts at ``fraction`` times the previous solution and starts from it; every pass but the last only places
+    the contacts, and stops once the strain energy has settled to ``_PLACING_TOL`` (or at the final tolerances, if
+    looser). Iterations are summed over the passes.
     geometry: :class:`BondGeometry` of the bonds (or ``None``: the Jacobians by differentiating the bond law).
     """
     if contacts is None:
         full, jac = tangent_operator(model, params, operator=operator, geometry=geometry)
-        return _linear_once(model, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac, geometry)
-    pairs, u_lin, fraction = contacts
-    springs = dataclasses.replace(model, bonds=jnp.concatenate([model.bonds, pairs.astype(model.bonds.dtype)]))
-    jb = (_geometric_jacobians(model, params, geometry)[0] if _uses_geometry(geometry, params)
-          else reduced_jacobians(model, params))
-    total = 0
-    for _ in range(contact_passes):
-        jac = jnp.concatenate([jb, _linearised_contact_jacobians(model, pairs, fraction * u_lin)], axis=2)
-        out = _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse,
-                           _packed_operator(springs, jac), jac)
-        u_lin = out[0]
+        precond = _preconditioner(model, params, free, jac, coarse, geometry)
+        return _linear_once(free, u_p, tol, maxiter, stiffness_tol, full, precond, guess)
+    pairs, u_lin, fraction, pair_coarse = contacts
+    pair_model = dataclasses.replace(model, bonds=pairs.astype(model.bonds.dtype))
+    bond_op, jb = tangent_operator(model, params, operator="jacobians", geometry=geometry)
+    total, x0 = 0, u_lin
+    placing_tol = _PLACING_TOL if stiffness_tol is None else jnp.maximum(_PLACING_TOL, stiffness_tol)
+    for k in range(contact_passes):
+        last = k == contact_passes - 1
+        jc = _linearised_contact_jacobians(model, pairs, fraction * u_lin)
+        contact_op = _packed_operator(pair_model, jc)
+        if k == 0:  # the first pass's preconditioner serves the later ones (the contacts move little)
+            precond = _preconditioner(model, params, free, jb, coarse, geometry, (pair_model, jc, pair_coarse))
+        out = _linear_once(free, u_p, tol, maxiter, stiffness_tol if last else placing_tol,
+                           lambda v, c=contact_op: bond_op(v) + c(v), precond, x0)
+        u_lin = x0 = jax.lax.stop_gradient(out[0])
         total = total + out[4]
     return out[:4] + (total,)
 
 
-def _linear_once(springs, params, free, u_p, tol, maxiter, stiffness_tol, coarse, full, jac, geometry=None):
-    precond = _preconditioner(springs, params, free, jac, coarse, geometry)
-    u, res, iterations, _ = _cg(full, precond, free, u_p, tol, maxiter, stiffness_tol)
+# how far the passes that only place the linearised contacts converge (relative change of the strain energy)
+_PLACING_TOL = 1e-2
+
+
+def _linear_once(free, u_p, tol, maxiter, stiffness_tol, full, precond, x0=None):
+    u, res, iterations, _ = _cg(full, precond, free, u_p, tol, maxiter, stiffness_tol, x0=x0)
     gen = -full(u)  # linearised internal forces
     delta = jnp.max(jnp.abs(u_p))
     energy_reaction = -jnp.vdot(u, gen) / delta
@@ -1284,10 +1356,11 @@ def stiffness_function(sample, scene, *, dofs=None, tol=1e-6, maxiter=None, oper
     coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
     geometry = (bond_geometry(model, coarse, n_materials=sample.n_materials) if operator in ("auto", "jacobians")
                 else None)
+    guess = _affine_field(sample, model, scene.axis, delta)
 
     def stiffness(params):
         return _linear_jit(model, params, free, u_p, tol, maxiter, operator, stiffness_tol, coarse,
-                           geometry=geometry)[1] / delta
+                           geometry=geometry, guess=guess)[1] / delta
 
     return stiffness
 

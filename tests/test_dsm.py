@@ -93,6 +93,38 @@ def test_linear_dsm_linearises_the_contacts(packing):
     assert late.stiffness > lin.stiffness
     with pytest.raises(SceneError, match="contact_passes"):
         jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_passes=0)
+    # the candidates of the linear solve reach only as far as the strain can close a gap (0.01 mean radii here):
+    # the pairs left out never touch, so the answer is that of the nonlinear solve's candidates (half a radius)
+    r = float(np.mean(s.radii))
+    wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.5 * r)
+    assert lin.stats["contact_candidates"] < wide.stats["contact_candidates"]
+    assert lin.stats["contacts_touching"] == wide.stats["contacts_touching"] > 0
+    assert lin.stats["contact_gap_max"] < 0.75 * lin.stats["contact_skin"] < 0.01 * r
+    np.testing.assert_allclose(lin.stiffness, wide.stiffness, rtol=1e-9)
+    # a reach that misses touching pairs is reported
+    with pytest.warns(UserWarning, match="contact_skin"):
+        jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.9 * lin.stats["contact_gap_max"])
+
+
+def test_cg_starts_from_a_guess(packing):
+    scene = UniaxialCompression(strain=0.002)
+    model = scene.model(packing, contacts=False)
+    free_np, fixed, driven = dsm._free_mask(model, scene, packing)
+    delta = scene.strain * scene.geometry(packing)[0]
+    u_p = np.zeros(free_np.shape)
+    u_p[driven, scene.axis] = -delta
+    free, u_p = jnp.asarray(free_np), jnp.asarray(u_p)
+    full, jac = dsm.tangent_operator(model, default_params(packing))
+    precond = dsm._preconditioner(model, default_params(packing), free, jac)
+    cold = dsm._cg(full, precond, free, u_p, 1e-10, None)
+    affine = dsm._cg(full, precond, free, u_p, 1e-10, None, x0=dsm._affine_field(packing, model, scene.axis, delta))
+    # the same solution from a start closer to it (the guess's prescribed DOFs are not used)
+    assert affine[1] <= 1e-10 and int(affine[2]) < int(cold[2]), (int(affine[2]), int(cold[2]))
+    scale = np.abs(np.asarray(cold[0])).max(axis=0)  # displacements and rotations apart
+    assert np.abs(np.asarray(affine[0] - cold[0]) / scale).max() < 1e-6
+    np.testing.assert_allclose(affine[3], cold[3], rtol=1e-12)  # the energy, tracked from the guess's own
+    # started at the solution, nothing is left to do
+    assert int(dsm._cg(full, precond, free, u_p, 1e-8, None, x0=cold[0])[2]) == 0
 
 
 @pytest.mark.parametrize("dofs", [3, 6])
