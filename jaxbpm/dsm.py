@@ -917,9 +917,14 @@ def _contact_candidates(sample, model, skin):
     return pairs.astype(np.int32)
 
 
+# the linearised contacts' default candidate reach, in affine approaches of two touching mean-sized particles at the
+# linearisation state
+_LINEAR_REACH = 4.0
+
+
 def _check_contact_skin(sample, pairs, disp, skin, stats):
     """Record how many candidates touch at the linearisation state ``disp`` [n, 3] and the largest gap at rest of
-    one that does; warn when it comes near the candidate skin (pairs beyond it were never candidates)."""
+    one that does; True when it comes near the candidate skin (pairs beyond it were never candidates)."""
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     i, j = pairs[:, 0], pairs[:, 1]
     x = pos + disp
@@ -927,10 +932,7 @@ def _check_contact_skin(sample, pairs, disp, skin, stats):
     gap = np.linalg.norm(pos[j] - pos[i], axis=1) - rad[i] - rad[j]
     widest = float(gap[touching].max()) if touching.any() else 0.0
     stats.update(contact_skin=float(skin), contacts_touching=int(touching.sum()), contact_gap_max=widest)
-    if widest > 0.75 * skin:
-        warnings.warn(f"linearised contacts: a pair {widest:.3g} m apart at rest touches at the linearisation state, "
-                      f"near the candidate reach (contact_skin {skin:.3g} m): pairs beyond it may touch too; pass a "
-                      f"larger contact_skin", stacklevel=3)
+    return widest > 0.5 * skin
 
 
 def _affine_field(sample, model: Model, ax, delta):
@@ -945,8 +947,9 @@ def _affine_field(sample, model: Model, ax, delta):
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol=None, contact_skin=None, load_steps=4, throw=False,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
-                contact_passes=2):
+                contact_passes=2, _auto_skin=None):
     """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`."""
+    arguments = dict(locals())  # for a second try with a wider contact reach
     from jaxbpm.physics.model import default_params
     from jaxbpm.result import Result
 
@@ -974,14 +977,16 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         walls = (load.wall_points0 + load.wall_velocity * delta, load.wall_normals)  # top wall moved by delta
     pairs = None
     if scene.contacts:
-        skin = contact_skin
+        skin = contact_skin if _auto_skin is None else _auto_skin
+        reach = 0.5 * float(np.mean(sample.radii))  # the default reach, and the most the linear path widens to
         if skin is None:
-            skin = 0.5 * float(np.mean(sample.radii))
+            skin = reach
             if not nonlinear:
                 # the linearised contacts only see the state at `contact_fraction` of the strain: four times the
-                # affine approach of two touching mean-sized particles there (0.1 mean radii at 2 % strain)
+                # affine approach of two touching mean-sized particles there (0.1 mean radii at 2 % strain); it
+                # doubles while a touching pair comes near it (below)
                 frac = float(np.mean(scene.fit_range)) if contact_fraction is None else float(contact_fraction)
-                skin = min(skin, 4.0 * frac * scene.strain * 2.0 * float(np.mean(sample.radii)))
+                skin = min(skin, _LINEAR_REACH * frac * scene.strain * 2.0 * float(np.mean(sample.radii)))
         pairs = _contact_candidates(sample, model, skin)
     touching = None
     if scene.uses_walls:
@@ -1057,8 +1062,19 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
                      aggregates=0 if coarse is None else coarse.count,
                      stiffness_boundary=float(force_boundary) / delta)
         reaction = float(force_total)
-        if lin is not None:
-            _check_contact_skin(sample, pairs, frac * np.asarray(u)[:, :3], skin, stats)
+        if lin is not None and _check_contact_skin(sample, pairs, frac * np.asarray(u)[:, :3], skin, stats):
+            if contact_skin is None and skin < reach:
+                # the default reach was too short for this sample's motion: again with twice the reach, the time
+                # spent on this try counted in
+                again = solve_scene(**{**arguments, "_auto_skin": min(reach, 2.0 * skin)})
+                retries = again.stats.get("contact_skin_retries", 0) + 1
+                return dataclasses.replace(
+                    again, wall_time=again.wall_time + time.perf_counter() - t0,
+                    run_time=again.run_time + run_time, compile_time=again.compile_time + compile_time,
+                    stats={**again.stats, "contact_skin_retries": retries})
+            warnings.warn(f"linearised contacts: a pair {stats['contact_gap_max']:.3g} m apart at rest touches at "
+                          f"the linearisation state, near the candidate reach (contact_skin {skin:.3g} m): pairs "
+                          f"beyond it may touch too; pass a larger contact_skin", stacklevel=3)
     else:
         tol = 1e-3 if tol is None else tol
         u, disps, forces, info, compile_time, run_time = _newton(

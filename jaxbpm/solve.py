@@ -38,17 +38,18 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
     Newton when the reaction changes less than this, relative), ``slip`` (contacts slide at the Coulomb limit, True;
     False: no slip, Jarolin & Dosta's assumption, which overestimates K where contacts slide), ``contact_skin`` [m]
-    (pairs whose gap at rest is below it are contact candidates; default half the mean radius, with
-    ``nonlinear=False`` at most four times the affine approach of two touching mean-sized particles at the
-    linearisation state, 0.1 mean radii at 2 % strain),
+    (pairs whose gap at rest is below it are contact candidates; default half the mean radius; with
+    ``nonlinear=False`` four times the affine approach of two touching mean-sized particles at the linearisation
+    state, 0.1 mean radii at 2 % strain, doubled up to half a radius while a pair that touches there lies more than
+    half the reach apart at rest, each try's time counted in),
     ``load_steps`` (nonlinear: equal load increments, 4; K is their least-squares slope over the scene's fit range,
     as for the DEM), ``throw`` (raise :class:`ConvergenceError` instead of warning when a solve misses its
     tolerance); with ``nonlinear=False`` on a scene with contacts, the contacts are linearised (Hertz normal and
     secant Mindlin tangential stiffness, symmetric) at ``contact_fraction`` (default: the middle of the fit range)
     of the strain, first of the affine field, then of the previous solution (``contact_passes``, 2; each pass
     starts from the previous one's displacements and all but the last stop once the strain energy has settled to
-    1 %); the stats hold the candidates, how many touch, and the largest gap at rest of a touching pair (a warning
-    when it nears ``contact_skin``).
+    1 %); the stats hold the candidates, how many touch, the largest gap at rest of a touching pair and the
+    reach's retries (a warning when a given ``contact_skin`` is that close).
     options for ``"ste"`` (stiffness tensor estimation, no displacement computed): ``dofs`` (3, the paper's
     translations-only form, or 6), ``first_neighbour`` (Eq. 33-35 instead of Eq. 32), ``layered`` (layered
     springs in series along the load, for porous or shaped bodies), ``layer_thickness`` [m], ``contact_fraction``

@@ -1,6 +1,7 @@
 """Direct stiffness method: closed forms, agreement with the DEM, gradients, linearity, failure reports."""
 
 import dataclasses
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -99,11 +100,26 @@ def test_linear_dsm_linearises_the_contacts(packing):
     wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.5 * r)
     assert lin.stats["contact_candidates"] < wide.stats["contact_candidates"]
     assert lin.stats["contacts_touching"] == wide.stats["contacts_touching"] > 0
-    assert lin.stats["contact_gap_max"] < 0.75 * lin.stats["contact_skin"] < 0.01 * r
+    assert lin.stats["contact_gap_max"] < 0.5 * lin.stats["contact_skin"] < 0.01 * r
     np.testing.assert_allclose(lin.stiffness, wide.stiffness, rtol=1e-9)
     # a reach that misses touching pairs is reported
     with pytest.warns(UserWarning, match="contact_skin"):
         jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.9 * lin.stats["contact_gap_max"])
+
+
+def test_linearised_contacts_widen_a_short_default_reach(packing, monkeypatch):
+    s = packing.replace(particle_material=dataclasses.replace(packing.particle_material, E=5e9))
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.5 * float(np.mean(s.radii)))
+    # a default reach of an eighth of the affine approach: touching pairs lie near it, so it doubles until they do not
+    monkeypatch.setattr(dsm, "_LINEAR_REACH", 0.125)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        short = jaxbpm.solve(s, scene, method="dsm", nonlinear=False)
+    assert short.stats["contact_skin_retries"] >= 1
+    assert short.stats["contact_gap_max"] < 0.5 * short.stats["contact_skin"]
+    assert short.stats["contacts_touching"] == wide.stats["contacts_touching"]
+    np.testing.assert_allclose(short.stiffness, wide.stiffness, rtol=1e-9)
 
 
 def test_cg_starts_from_a_guess(packing):
