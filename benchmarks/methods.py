@@ -116,6 +116,9 @@ def run_sample(sample, case, strain, newton_maxiter=6):
         if method == "dsm":
             rec.update(converged=bool(r.stats["converged"]), iterations=r.stats.get("iterations"),
                        residual=r.stats.get("residual"))
+            if "contact_skin" in r.stats:  # linearised contacts: the candidates' reach and its retries
+                rec.update(contact_skin=r.stats["contact_skin"], contacts_touching=r.stats["contacts_touching"],
+                           contact_skin_retries=r.stats.get("contact_skin_retries", 0))
         out[name] = rec
     ref = out["DEM"].get("K")
     for name, *_ in runs[1:]:
