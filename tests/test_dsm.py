@@ -111,8 +111,9 @@ def test_linearised_contacts_widen_a_short_default_reach(packing, monkeypatch):
     s = packing.replace(particle_material=dataclasses.replace(packing.particle_material, E=5e9))
     scene = UniaxialCompression(strain=0.002, contacts=True)
     wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.5 * float(np.mean(s.radii)))
-    # a default reach of an eighth of the affine approach: touching pairs lie near it, so it doubles until they do not
-    monkeypatch.setattr(dsm, "_LINEAR_REACH", 0.125)
+    # a default reach of one affine approach (a quarter of the default): touching pairs lie near it, so it doubles
+    # until they do not
+    monkeypatch.setattr(dsm, "_LINEAR_REACH", 1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         short = jaxbpm.solve(s, scene, method="dsm", nonlinear=False)
