@@ -975,26 +975,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
     if scene.uses_walls:
         load = scene.loading(sample, speed=1.0)
         walls = (load.wall_points0 + load.wall_velocity * delta, load.wall_normals)  # top wall moved by delta
-    pairs = None
-    if scene.contacts:
-        skin = contact_skin if _auto_skin is None else _auto_skin
-        reach = 0.5 * float(np.mean(sample.radii))  # the default reach, and the most the linear path widens to
-        if skin is None:
-            skin = reach
-            if not nonlinear:
-                # the linearised contacts only see the state at `contact_fraction` of the strain: four times the
-                # affine approach of two touching mean-sized particles there (0.1 mean radii at 2 % strain); it
-                # doubles while a touching pair comes near it (below)
-                frac = float(np.mean(scene.fit_range)) if contact_fraction is None else float(contact_fraction)
-                skin = min(skin, _LINEAR_REACH * frac * scene.strain * 2.0 * float(np.mean(sample.radii)))
-        pairs = _contact_candidates(sample, model, skin)
-    touching = None
-    if scene.uses_walls:
-        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-        reach = float(np.mean(rad)) * 0.5 + delta
-        touching = ((pos[:, ax] - rad) <= (pos[:, ax] - rad).min() + reach) | (
-            (pos[:, ax] + rad) >= (pos[:, ax] + rad).max() - reach)
-    lin = None
+    frac = None
     if scene.contacts and not nonlinear:
         # the linear solve takes the contact candidates as springs linearised at `contact_fraction` of the target
         # strain (the middle of the fit range by default): first at the affine displacement field, then
@@ -1007,8 +988,26 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             raise SceneError(f"contact_fraction must lie in (0, 1], got {contact_fraction!r}")
         if int(contact_passes) < 1:
             raise SceneError(f"contact_passes must be at least 1, got {contact_passes!r}")
-        lin = [jnp.asarray(pairs, jnp.int32), _affine_field(sample, model, ax, delta),
-               jnp.asarray(frac, model.positions0.dtype), None]
+    pairs = lin = None
+    if scene.contacts:
+        skin = contact_skin if _auto_skin is None else _auto_skin
+        widest_skin = 0.5 * float(np.mean(sample.radii))  # the default reach, and the most the linear path widens to
+        if skin is None:
+            # the linearised contacts only see the state at `contact_fraction` of the strain: four times the affine
+            # approach of two touching mean-sized particles there (0.1 mean radii at 2 % strain); it doubles while a
+            # touching pair comes near it (below)
+            skin = widest_skin if frac is None else min(
+                widest_skin, _LINEAR_REACH * frac * scene.strain * 2.0 * float(np.mean(sample.radii)))
+        pairs = _contact_candidates(sample, model, skin)
+        if frac is not None:
+            lin = [jnp.asarray(pairs, jnp.int32), _affine_field(sample, model, ax, delta),
+                   jnp.asarray(frac, model.positions0.dtype), None]
+    touching = None
+    if scene.uses_walls:
+        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+        reach = float(np.mean(rad)) * 0.5 + delta
+        touching = ((pos[:, ax] - rad) <= (pos[:, ax] - rad).min() + reach) | (
+            (pos[:, ax] + rad) >= (pos[:, ax] + rad).max() - reach)
     _check_held(sample, model, free_np, clamped, pairs, touching)
     free = jnp.asarray(free_np)
     u_p = jnp.asarray(u_p, model.positions0.dtype)
@@ -1063,10 +1062,10 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
                      stiffness_boundary=float(force_boundary) / delta)
         reaction = float(force_total)
         if lin is not None and _check_contact_skin(sample, pairs, frac * np.asarray(u)[:, :3], skin, stats):
-            if contact_skin is None and skin < reach:
+            if contact_skin is None and skin < widest_skin:
                 # the default reach was too short for this sample's motion: again with twice the reach, the time
                 # spent on this try counted in
-                again = solve_scene(**{**arguments, "_auto_skin": min(reach, 2.0 * skin)})
+                again = solve_scene(**{**arguments, "_auto_skin": min(widest_skin, 2.0 * skin)})
                 retries = again.stats.get("contact_skin_retries", 0) + 1
                 return dataclasses.replace(
                     again, wall_time=again.wall_time + time.perf_counter() - t0,
