@@ -1,8 +1,10 @@
 """The ``jaxbpm`` command: generate, inspect and export bonded samples, and run the demo.
 
 Run ``jaxbpm --help`` (or ``python -m jaxbpm --help``) for the sub-commands. The command turns on JAX float64
-when it starts (library code never changes JAX settings). Errors about samples and files are printed as one
-``error: ...`` line on stderr with exit code 2; argparse usage errors also exit with 2.
+when it starts, and JAX's persistent compilation cache (:func:`jaxbpm.enable_compilation_cache`; ``--no-cache``
+to leave it off, ``--cache-dir DIR`` for another directory); library code never changes JAX settings. Errors about
+samples and files are printed as one ``error: ...`` line on stderr with exit code 2; argparse usage errors also
+exit with 2.
 """
 
 from __future__ import annotations
@@ -61,10 +63,42 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 def _cmd_info(args: argparse.Namespace) -> int:
     from jaxbpm.io import load_sample
 
-    sample = load_sample(args.sample)
-    print(f"sample file          {args.sample}")
-    print(sample.summary())
+    if args.sample is None and not args.cache:
+        args.usage_error("give a sample file, or --cache")
+    if args.sample is not None:
+        sample = load_sample(args.sample)
+        print(f"sample file          {args.sample}")
+        print(sample.summary())
+    if args.cache:
+        _print_cache_info(args)
     return 0
+
+
+def _print_cache_info(args: argparse.Namespace) -> None:
+    """The compilation cache in effect (or, when off, the default one): directory, entries, size."""
+    from jaxbpm._cache import _usage, compilation_cache_dir, default_cache_dir
+
+    directory = compilation_cache_dir()
+    if directory is not None:
+        state = "on" if not args.no_cache else "on (set through JAX's own settings)"
+    else:
+        directory = args.cache_dir if args.cache_dir is not None else default_cache_dir()
+        state = "off (--no-cache)" if args.no_cache else "off (the directory cannot be used)"
+    entries, size = _usage(directory)
+    print(f"compilation cache    {state}")
+    print(f"cache directory      {directory}")
+    print(f"cached programs      {entries}")
+    print(f"cache size           {_human_bytes(size)}")
+
+
+def _human_bytes(n: int) -> str:
+    if n < 1000:
+        return f"{n} bytes"
+    for unit in ("kB", "MB", "GB"):
+        n /= 1000
+        if n < 1000:
+            break
+    return f"{n:.1f} {unit}"
 
 
 def _cmd_export_vtk(args: argparse.Namespace) -> int:
@@ -249,11 +283,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress output while generating")
     p.set_defaults(func=_cmd_generate)
 
-    p = sub.add_parser("info", help="print a summary of a sample file",
+    p = sub.add_parser("info", help="print a summary of a sample file (or of the compilation cache)",
                        description="Print a summary of a sample file: counts, coordination, clusters, packing "
-                                   "fraction, radii, extent and mass.")
-    p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
-    p.set_defaults(func=_cmd_info)
+                                   "fraction, radii, extent and mass. With --cache, also (or, without a sample "
+                                   "file, only) the compilation cache: directory, number of cached programs, size.")
+    p.add_argument("sample", type=pathlib.Path, nargs="?", default=None, help="sample file (.h5) written by jaxbpm")
+    p.add_argument("--cache", action="store_true",
+                   help="print the compilation cache directory in effect (or the default one), its number of "
+                        "cached programs and its size")
+    p.set_defaults(func=_cmd_info, usage_error=p.error)
 
     p = sub.add_parser("export-vtk", help="export a sample file to VTK for ParaView",
                        description="Export a sample file to VTK: particles as points/vertices (radius, mass, "
@@ -288,7 +326,37 @@ def build_parser() -> argparse.ArgumentParser:
     from jaxbpm.calibrate._cli import add_parser as _add_calibrate
 
     _add_calibrate(sub)
+    # the cache options are global, accepted before the command and after it (SUPPRESS: an option absent after the
+    # command does not overwrite the value given before it)
+    _add_cache_options(parser, argparse.SUPPRESS)
+    for command_parser in sub.choices.values():
+        _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
+    parser.set_defaults(no_cache=False, cache_dir=None)
     return parser
+
+
+def _add_cache_options(parser, default) -> None:
+    parser.add_argument("--no-cache", action="store_true", default=default, dest="no_cache",
+                        help="do not turn on JAX's persistent compilation cache (default: on, so compiled programs "
+                             "are reused by later runs)")
+    parser.add_argument("--cache-dir", type=pathlib.Path, default=default, dest="cache_dir", metavar="DIR",
+                        help="directory of the compilation cache (default: $JAXBPM_CACHE_DIR, else "
+                             "~/.cache/jaxbpm/xla or the platform's cache folder)")
+
+
+def _enable_cache(args: argparse.Namespace) -> None:
+    """JAX's persistent compilation cache, on unless ``--no-cache``. A ``--cache-dir`` that cannot be used is an
+    error; the default directory that cannot be used only a warning (the command runs without the cache)."""
+    from jaxbpm._cache import enable_compilation_cache
+
+    if args.no_cache:
+        return
+    try:
+        enable_compilation_cache(args.cache_dir)
+    except OSError as exc:
+        if args.cache_dir is not None:
+            raise
+        print(f"warning: {exc}; running without the compilation cache (--no-cache skips it)", file=sys.stderr)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -300,8 +368,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.no_cache and args.cache_dir is not None:
+        parser.error("--no-cache and --cache-dir exclude each other")
     try:
+        _enable_cache(args)
         return args.func(args)
     except (JaxbpmError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -1,12 +1,42 @@
-"""Strict numerics for every test: float64, strict dtype promotion, no silent rank broadcasting."""
+"""Strict numerics for every test: float64, strict dtype promotion, no silent rank broadcasting.
 
+The test session (each pytest-xdist worker) gets a compilation cache directory of its own, removed at exit, through
+``JAXBPM_CACHE_DIR`` (so ``jaxbpm`` commands run by the tests, in process or as subprocesses, never touch the user's
+cache). The cache stays off in the test process except while a test turns it on: JAX's cache settings are put back
+after every test.
+"""
+
+import atexit
 import os
+import shutil
+import tempfile
 
+os.environ["JAXBPM_CACHE_DIR"] = _CACHE_DIR = tempfile.mkdtemp(prefix="jaxbpm-test-xla-")
+atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import jax  # noqa: E402
 import jax_md  # noqa: E402,F401  (jax-md's import-time code does not pass strict promotion: import it first)
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+_CACHE_OPTIONS = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+                  "jax_persistent_cache_min_entry_size_bytes", "jax_enable_compilation_cache")
+
+
+@pytest.fixture(autouse=True)
+def jax_cache_config():
+    """Put JAX's compilation cache settings back after the test (``jaxbpm.cli.main`` and
+    ``jaxbpm.enable_compilation_cache`` change them for the whole process)."""
+    saved = {name: jax.config.values[name] for name in _CACHE_OPTIONS if name in jax.config.values}
+    yield saved
+    changed = {name: value for name, value in saved.items() if jax.config.values[name] != value}
+    for name, value in changed.items():
+        jax.config.update(name, value)
+    if changed:
+        from jaxbpm._cache import _reset_jax_cache
+
+        _reset_jax_cache()
