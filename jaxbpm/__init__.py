@@ -5,6 +5,8 @@ jaxbpm never changes JAX's global settings at import. Stiffness solves want floa
 """
 
 from jaxbpm import errors, generate, io, scenes
+from jaxbpm._cache import compilation_cache_dir, default_cache_dir, enable_compilation_cache
+from jaxbpm.options import DEM, DSM, STE
 from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, SampleError, SampleFileError,
                            SceneError, SimulationInterrupted)
 from jaxbpm.result import Result
@@ -18,4 +20,26 @@ __all__ = [
     "generate", "io", "errors", "scenes", "solve", "Result",
     "JaxbpmError", "SampleError", "SampleFileError", "SceneError", "InstabilityError", "ConvergenceError",
     "SimulationInterrupted",
+    "enable_compilation_cache", "compilation_cache_dir", "default_cache_dir",
+    "DEM", "DSM", "STE", "count_compilations",
 ]
+
+# submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
+_LAZY = ("dem", "dsm", "ste", "sweep", "calibrate", "formats", "conventions", "records", "options", "physics",
+         "sample", "result")
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return importlib.import_module(f"jaxbpm.{name}")
+    if name == "count_compilations":
+        from jaxbpm._compile import count_compilations
+
+        return count_compilations
+    raise AttributeError(f"module 'jaxbpm' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY) | {"count_compilations"})

@@ -31,20 +31,23 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 import warnings
-from typing import Any
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._compile import Program, SetupCache, capacity, size_class
 from jaxbpm.errors import ConvergenceError, SceneError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics import wall as wall_mod
 from jaxbpm.physics.model import Model
+from jaxbpm.physics.padding import pad_model, pad_rows
 
 __all__ = ["bond_jacobians", "reduced_jacobians", "packed_jacobians", "block_diagonal", "stiffness_product",
            "tangent_operator", "linear_solve", "solve_scene", "stiffness_function", "load_cases"]
@@ -947,8 +950,14 @@ def _affine_field(sample, model: Model, ax, delta):
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol=None, contact_skin=None, load_steps=4, throw=False,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
-                contact_passes=2, _auto_skin=None):
-    """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`."""
+                contact_passes=2, pad=True, _auto_skin=None):
+    """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`.
+
+    pad: the linear bonds-only solve pads the sample to its size class (:func:`jaxbpm._compile.size_class`: held
+    padding particles joined by bonds of zero stiffness), so that samples of similar size share one compiled
+    program; the result is the same to round-off. Its setup (model, coarse space, bond geometry) is kept for the
+    last few samples solved (:class:`jaxbpm._compile.SetupCache`): solving one sample again costs the solve alone.
+    """
     arguments = dict(locals())  # for a second try with a wider contact reach
     from jaxbpm.physics.model import default_params
     from jaxbpm.result import Result
@@ -957,9 +966,13 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
     rotations = None if dofs is None else {3: False, 6: True}.get(int(dofs))
     if dofs is not None and rotations is None:
         raise SceneError(f"dofs must be 3 or 6 per particle, got {dofs!r}")
-    model = scene.model(sample, rotations=rotations, contacts=False)
     if nonlinear is None:
         nonlinear = bool(scene.contacts or scene.uses_walls)
+    if not nonlinear and not scene.contacts and not scene.uses_walls:
+        return _solve_linear(sample, scene, params, rotations=rotations, linear_tol=linear_tol, maxiter=maxiter,
+                             stiffness_tol=stiffness_tol, throw=throw, operator=operator,
+                             preconditioner=preconditioner, aggregate_size=aggregate_size, pad=pad, t0=t0)
+    model = scene.model(sample, rotations=rotations, contacts=False)
     if scene.uses_walls and not nonlinear:
         raise SceneError("a scene with walls needs the nonlinear DSM (walls are contacts); use nonlinear=True")
     params = default_params(sample) if params is None else params
@@ -1081,12 +1094,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             driven, delta, load_steps, preconditioner, aggregate_size, slip)
         converged = info["converged"]
         stats.update(info)
-    if not converged:
-        msg = (f"DSM did not converge: relative residual {stats['residual']:.3g} above tolerance "
-               f"{(tol if nonlinear else linear_tol):.3g}")
-        if throw:
-            raise ConvergenceError(msg)
-        warnings.warn(msg, stacklevel=3)
+    _report_convergence(converged, stats["residual"], tol if nonlinear else linear_tol, throw, stacklevel=4)
     if nonlinear:
         # the same measure as the DEM: least-squares slope of the load steps within the scene's fit range
         stiffness = scene.fit_stiffness(disps, forces, delta) if load_steps > 1 else float(forces[-1] / delta)
@@ -1101,15 +1109,137 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
                   state=u)
 
 
+class _LinearSetup(NamedTuple):
+    """What a linear bonds-only solve of one sample needs besides the parameters (built once per sample and options,
+    possibly padded to a size class): the Model, the free-DOF mask and prescribed displacements ``[n, nd]``, the
+    coarse space, the bond geometry and the first guess (the affine field); the real particle and bond counts, the
+    free DOF count and the target displacement."""
+
+    model: Any
+    free: Any
+    u_p: Any
+    coarse: Any
+    geometry: Any
+    guess: Any
+    n: int
+    nb: int
+    free_dofs: int
+    delta: float
+
+
+def _linear_setup(sample, scene, rotations, operator, preconditioner, aggregate_size, n_materials, pad):
+    model = scene.model(sample, rotations=rotations, contacts=False)
+    free_np, fixed, driven = _free_mask(model, scene, sample)
+    _check_held(sample, model, free_np, fixed | driven)
+    nd = free_np.shape[1]
+    length, _ = scene.geometry(sample)
+    delta = scene.strain * length
+    u_p = np.zeros((model.n, nd))
+    u_p[driven, scene.axis] = -delta
+    guess = np.asarray(_affine_field(sample, model, scene.axis, delta))
+    n, nb = model.n, int(model.bonds.shape[0])
+    free_dofs = int(free_np.sum())
+    coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
+    if pad:
+        n_cap, nb_cap, _ = size_class(n, nb)
+        model = pad_model(model, n_cap, nb_cap)
+        free_np, u_p, guess = pad_rows(free_np, n_cap, False), pad_rows(u_p, n_cap), pad_rows(guess, n_cap)
+        coarse = None if coarse is None else _pad_coarse(coarse, n_cap, nb, nb_cap, aggregate_size)
+    geometry = None
+    if operator in ("auto", "jacobians"):
+        geometry = bond_geometry(model, coarse, n_materials=n_materials)
+    dtype = model.positions0.dtype
+    return _LinearSetup(model=model, free=jnp.asarray(free_np), u_p=jnp.asarray(u_p, dtype), coarse=coarse,
+                        geometry=geometry, guess=jnp.asarray(guess, dtype), n=n, nb=nb, free_dofs=free_dofs,
+                        delta=delta)
+
+
+def _pad_coarse(coarse: CoarseSpace, n_cap: int, nb: int, nb_cap: int, aggregate_size=None) -> CoarseSpace:
+    """The coarse space of a model padded to ``n_cap`` particles and ``nb_cap`` bonds (bonds from ``nb`` on are
+    padding). The padding particles form no mode (zero basis rows, in the last aggregate); the aggregate count
+    rounds up to a capacity that depends on the size class alone (1.25 times the aggregates of the default size
+    that ``n_cap`` particles make, or more when the sample has more), empty aggregates getting a unit coarse
+    diagonal; the coupling bonds are padded with the padding bond ``nb`` up to ``nb_cap`` (they are only read when
+    the preconditioner's parts are built, once per sample)."""
+    per = max(100.0, n_cap / 250.0) if aggregate_size is None else float(aggregate_size)
+    count = capacity(max(coarse.count, math.ceil(1.25 * n_cap / per)), minimum=4)
+    labels = pad_rows(coarse.labels, n_cap, count - 1)
+    basis = pad_rows(coarse.basis, n_cap, 0.0)
+    bonds = pad_rows(coarse.bonds, nb_cap, nb)
+    return CoarseSpace(labels=jnp.asarray(labels, jnp.int32), basis=jnp.asarray(basis, coarse.basis.dtype),
+                       bonds=jnp.asarray(bonds, jnp.int32), count=count)
+
+
+def _linear_outputs(model, params, free, u_p, tol, stiffness_tol, coarse, geometry, guess, maxiter, operator):
+    """One linear solve (:func:`_linear_fn`) and the bond forces at its solution."""
+    out = _linear_fn(model, params, free, u_p, tol, maxiter, operator, stiffness_tol, coarse, geometry=geometry,
+                     guess=guess)
+    return out, _internal_forces(model, params, out[0])[1]["bonds"]
+
+
+_linear_program = Program(_linear_outputs, static_argnames=("maxiter", "operator"))
+_linear_setups = SetupCache()
+
+
+def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stiffness_tol, throw, operator,
+                  preconditioner, aggregate_size, pad, t0):
+    """The linear DSM on a bonds-only scene with clamped layers (see :func:`solve_scene`): setup (kept per sample),
+    one compiled program (per size class), one run."""
+    from jaxbpm.physics.model import default_params
+    from jaxbpm.result import Result
+
+    params = default_params(sample) if params is None else params
+    n_materials = int(jnp.shape(params["bond_E"])[0])
+    key = (scene, rotations, operator, preconditioner, aggregate_size, n_materials, bool(pad))
+    setup = _linear_setups.get(sample, key, lambda: _linear_setup(sample, scene, rotations, operator, preconditioner,
+                                                                   aggregate_size, n_materials, pad))
+    setup_time = time.perf_counter() - t0
+    ((u, force_total, force_boundary, res, iterations), bond_forces), compile_time, _ = _linear_program(
+        setup.model, params, setup.free, setup.u_p, linear_tol, stiffness_tol, setup.coarse, setup.geometry,
+        setup.guess, maxiter=maxiter, operator=operator)
+    n, nb, delta = setup.n, setup.nb, setup.delta
+    res, iterations, reaction = float(res), int(iterations), float(force_total)
+    u = np.asarray(u)[:n]
+    limit = 10 * int(setup.free.size) if maxiter is None else int(maxiter)
+    # converged: the residual test, or (with stiffness_tol) the energy test before the iteration limit
+    converged = res <= linear_tol * 1.01 or (stiffness_tol is not None and iterations < limit)
+    coarse = setup.coarse
+    stats = {"dofs": int(setup.free.shape[1]), "nonlinear": False, "free_dofs": setup.free_dofs,
+             "setup_time": setup_time, "residual": res, "residual_history": [res], "converged": converged,
+             "iterations": iterations, "operator": operator, "stiffness_tol": stiffness_tol,
+             "preconditioner": "jacobi" if coarse is None else "two-level",
+             "aggregates": 0 if coarse is None else coarse.count,
+             "stiffness_boundary": float(force_boundary) / delta,
+             "size_class": [setup.model.n, int(setup.model.bonds.shape[0])],
+             "bond_forces": jax.tree_util.tree_map(lambda a: np.asarray(a)[:nb], bond_forces)}
+    _report_convergence(converged, res, linear_tol, throw, stacklevel=5)
+    length, area = scene.geometry(sample)
+    stiffness = reaction / delta
+    wall = time.perf_counter() - t0
+    # what is neither setup nor compilation (the run, moving its outputs to the host) is the run time
+    return Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
+                  area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, reaction]), wall_time=wall,
+                  setup_time=setup_time, compile_time=compile_time, run_time=wall - setup_time - compile_time,
+                  stats=stats, state=u)
+
+
+def _report_convergence(converged, residual, tol, throw, stacklevel):
+    if converged:
+        return
+    msg = f"DSM did not converge: relative residual {residual:.3g} above tolerance {tol:.3g}"
+    if throw:
+        raise ConvergenceError(msg)
+    warnings.warn(msg, stacklevel=stacklevel)
+
+
 @jax.jit
 def _bond_forces_at(model, params, u):
     """Per-bond forces (:class:`BondForces`) at the DOF state ``u``."""
     return _internal_forces(model, params, u)[1]["bonds"]
 
 
-@functools.partial(jax.jit, static_argnames=("maxiter", "operator", "contact_passes"))
-def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffness_tol=None, coarse=None,
-                contacts=None, contact_passes=2, geometry=None, guess=None):
+def _linear_fn(model, params, free, u_p, tol, maxiter, operator="auto", stiffness_tol=None, coarse=None,
+               contacts=None, contact_passes=2, geometry=None, guess=None):
     """Linear solve of one load case; returns ``(u, reaction, boundary reaction, residual, iterations)``.
 
     reaction = ``u . K u / delta`` (twice the strain energy over the prescribed displacement ``delta``): at
@@ -1147,6 +1277,8 @@ def _linear_jit(model, params, free, u_p, tol, maxiter, operator="auto", stiffne
         total = total + out[4]
     return out[:4] + (total,)
 
+
+_linear_jit = jax.jit(_linear_fn, static_argnames=("maxiter", "operator", "contact_passes"))
 
 # how far the passes that only place the linearised contacts converge (relative change of the strain energy)
 _PLACING_TOL = 1e-2
@@ -1351,31 +1483,25 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
 
 # ---------------------------------------------------------------------------------------------------- pure functions
 def stiffness_function(sample, scene, *, dofs=None, tol=1e-6, maxiter=None, operator="auto", stiffness_tol=None,
-                       preconditioner="auto", aggregate_size=None):
+                       preconditioner="auto", aggregate_size=None, n_materials=None, pad=False):
     """A pure function ``params -> K`` [N/m] of the linear DSM on ``scene`` (clamped layers, bonds only).
 
     It can be ``jit``-ed, differentiated (``jax.grad``: implicit differentiation through the CG solve) and
     ``vmap``-ped over parameter sets, e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``.
+    n_materials: the length of ``params["bond_E"]`` (default: the sample's material count); pad: pad the sample to
+    its size class (same values to round-off; samples of one class then share compilations).
     """
     if scene.uses_walls or scene.contacts:
         raise SceneError("stiffness_function covers the linear DSM (clamped layers, bonds only)")
     rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]
-    model = scene.model(sample, rotations=rotations, contacts=False)
-    free_np, fixed, driven = _free_mask(model, scene, sample)
-    _check_held(sample, model, free_np, fixed | driven)
-    length, _ = scene.geometry(sample)
-    delta = scene.strain * length
-    u_p = np.zeros(free_np.shape)
-    u_p[driven, scene.axis] = -delta
-    free, u_p = jnp.asarray(free_np), jnp.asarray(u_p, model.positions0.dtype)
-    coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
-    geometry = (bond_geometry(model, coarse, n_materials=sample.n_materials) if operator in ("auto", "jacobians")
-                else None)
-    guess = _affine_field(sample, model, scene.axis, delta)
+    m = sample.n_materials if n_materials is None else int(n_materials)
+    key = (scene, rotations, operator, preconditioner, aggregate_size, m, bool(pad))
+    setup = _linear_setups.get(sample, key, lambda: _linear_setup(sample, scene, rotations, operator, preconditioner,
+                                                                   aggregate_size, m, pad))
 
     def stiffness(params):
-        return _linear_jit(model, params, free, u_p, tol, maxiter, operator, stiffness_tol, coarse,
-                           geometry=geometry, guess=guess)[1] / delta
+        return _linear_jit(setup.model, params, setup.free, setup.u_p, tol, maxiter, operator, stiffness_tol,
+                           setup.coarse, geometry=setup.geometry, guess=setup.guess)[1] / setup.delta
 
     return stiffness
 

@@ -16,8 +16,11 @@ class Result:
 
     stiffness: K = dF/d(displacement) over the linear range [N/m]. youngs_modulus: E = K l / A [Pa].
     displacement, force: the loading curve [m], [N] (compression positive); strain, stress: the same over l and A.
-    gauge_length l [m], area A [m^2]. wall_time, compile_time, run_time [s]. stats: solver details (steps, time
-    step, critical time step, iterations, ...). state: the solver's final state (for restarts and inspection).
+    gauge_length l [m], area A [m^2]. wall_time [s]: what the call took, ``setup_time + compile_time + run_time``:
+    setup_time (building the model, estimator, geometry, preconditioner or neighbour list, on the host), compile_time
+    (tracing and compiling the solver's programs; 0 when this process, or the persistent compilation cache, had them)
+    and run_time (the solver's kernel, run once). stats: solver details (steps, time step, critical time step,
+    iterations, ...). state: the solver's final state (for restarts and inspection).
     interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
     stats cover the part that was run (stiffness NaN when the fit range was not reached).
     """
@@ -35,6 +38,7 @@ class Result:
     stats: dict = dataclasses.field(default_factory=dict)
     state: Any = None
     interrupted: bool = False
+    setup_time: float = 0.0
 
     @property
     def strain(self) -> np.ndarray:
@@ -59,7 +63,8 @@ class Result:
             f"method            {self.method}",
             f"stiffness K       {self.stiffness:.6g} N/m",
             f"Young's modulus   {self.youngs_modulus:.6g} Pa  (l = {self.gauge_length:.4g} m, A = {self.area:.4g} m^2)",
-            f"wall time         {self.wall_time:.3f} s  (compile {self.compile_time:.3f} s, run {self.run_time:.3f} s)",
+            f"wall time         {self.wall_time:.3f} s  (setup {self.setup_time:.3f} s, compile {self.compile_time:.3f} s, "
+            f"run {self.run_time:.3f} s)",
         ]
         for k, v in self.stats.items():
             if isinstance(v, (int, float, np.integer, np.floating, str, bool)):

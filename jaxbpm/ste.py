@@ -76,17 +76,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._compile import Program, SetupCache, capacity, size_class
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model, default_params
+from jaxbpm.physics.padding import pad_model
 from jaxbpm.sample import Sample
 
 __all__ = [
     "Estimator", "estimator", "pair_stiffness", "local_tensors", "body_tensor", "raw_body_tensor", "voigt",
     "tensor_from_voigt", "moduli", "directional_modulus", "isotropic_fit", "layer_stiffness", "wall_series",
-    "scene_stiffness", "stiffness_function", "solve_scene", "LocalMap", "local_map", "save_local_map",
+    "SceneGeometry", "scene_geometry", "scene_stiffness", "stiffness_function", "solve_scene", "LocalMap", "local_map", "save_local_map",
     "export_local_map_vtk", "plot_local_map", "VOIGT",
 ]
 
@@ -109,7 +111,9 @@ class Estimator:
     ``K^nm`` (row-major 3x3) per unit value of each stiffness that enters it (``terms``, indices into
     (k_n, k_t, k_tw, k_b)): the Jacobian of the bond law at rest is linear in the stiffnesses, so
     ``K^nm = sum_s k_s geometry[s]``; contact_k ``[C, 9]``: the contacts' ``K^nm`` (parameter-free).
-    Static: ``dofs`` (3 or 6), ``first_neighbour``, ``n_layers``, ``axis``, ``terms``.
+    layer_count: the number of layers (``n_layers`` or fewer: the padding's are empty). counts ``[3]``: the real
+    numbers of particles, bonds and contacts (the arrays may be padded to a size class, see :func:`estimator`).
+    Static: ``dofs`` (3 or 6), ``first_neighbour``, ``n_layers`` (layer capacity), ``axis``, ``terms``.
     """
 
     model: Model
@@ -124,6 +128,8 @@ class Estimator:
     layer: Any
     geometry: Any = None
     contact_k: Any = None
+    layer_count: Any = None
+    counts: Any = None
     dofs: int = 3
     first_neighbour: bool = False
     n_layers: int = 1
@@ -132,7 +138,23 @@ class Estimator:
 
     @property
     def n(self) -> int:
+        """Rows of the particle arrays (with the padding)."""
         return int(self.volume.shape[0])
+
+    @property
+    def particles(self) -> int:
+        """Number of real particles."""
+        return self.n if self.counts is None else int(self.counts[0])
+
+    @property
+    def bonds(self) -> int:
+        """Number of real bonds."""
+        return self.n_bonds if self.counts is None else int(self.counts[1])
+
+    @property
+    def contacts(self) -> int:
+        """Number of real active contacts."""
+        return self.n_contacts if self.counts is None else int(self.counts[2])
 
     @property
     def n_bonds(self) -> int:
@@ -144,8 +166,8 @@ class Estimator:
 
     @property
     def skipped(self) -> int:
-        """Number of singular particles left out."""
-        return int(np.sum(~np.asarray(self.valid)))
+        """Number of singular particles left out (the padding not counted)."""
+        return self.particles - int(np.sum(np.asarray(self.valid)))
 
     @property
     def surface(self) -> int:
@@ -155,13 +177,14 @@ class Estimator:
 
 jax.tree_util.register_dataclass(
     Estimator, data_fields=["model", "pairs", "d", "contact_d", "contact_radii", "contact_params", "volume", "valid",
-                            "include", "layer", "geometry", "contact_k"],
+                            "include", "layer", "geometry", "contact_k", "layer_count", "counts"],
     meta_fields=["dofs", "first_neighbour", "n_layers", "axis", "terms"])
 
 
 def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: bool = False, contacts=None,
               contact_fraction: float | None = None, layer_thickness: float | None = None,
-              surface_depth: float | None = None, volumes=None, precision: str = "float64") -> Estimator:
+              surface_depth: float | None = None, volumes=None, precision: str = "float64",
+              pad: bool = False) -> Estimator:
     """Build the parameter-independent part of the STE for ``sample`` (and ``scene``, optional).
 
     Args:
@@ -182,6 +205,10 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         estimate 2-3x faster on CPU and moves it by ~1e-7 relative (the estimate itself is 5-20 % from the DEM);
         reverse-mode gradients lose more (~2e-3 relative on a 1k-particle packing: the backward pass sums terms
         that cancel), and finite differences drown in rounding: calibrate with float64 (the default).
+      pad: pad particles, pairs and layers to their size class (:func:`jaxbpm._compile.size_class`) so that samples
+        of similar size share compiled programs. Padding particles are singular (no interaction, zero volume),
+        padding pairs have zero stiffness: every result is that of the unpadded estimator (the local tensors and
+        layers of the padding are extra rows, NaN and empty). ``est.counts`` holds the real counts.
 
     Raises:
       SceneError / SampleError: bad options, or a sample with no interactions.
@@ -247,20 +274,44 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         raise SceneError(f"layer_thickness must be a positive length, got {layer_thickness!r}")
     layer, n_layers = _layers(sample, axis, h)
 
+    nb, nc = len(bonds), len(cpairs)
+    counts = np.array([n, nb, nc], np.int64)
+    n_cap, nb_cap, nc_cap, layers_cap = n, nb, nc, n_layers
+    if pad:
+        n_cap, nb_cap, nc_cap = size_class(n, nb, nc)
+        layers_cap = capacity(n_layers, minimum=4)
+        model = pad_model(model, n_cap, nb_cap)
+        # padding pairs join the two first padding particles along x with zero stiffness
+        pad_pair = np.array([[n, n + 1]], np.int32)
+        pairs = np.concatenate([pairs[:nb], np.repeat(pad_pair, nb_cap - nb, 0), pairs[nb:],
+                                np.repeat(pad_pair, nc_cap - nc, 0)])
+        pp = np.asarray(model.positions0)
+        gap = pp[n + 1:n + 2] - pp[n:n + 1]  # the padding bonds' vector (zero stiffness)
+        d = np.concatenate([d[:nb], np.repeat(gap, nb_cap - nb, 0), d[nb:], np.repeat(gap, nc_cap - nc, 0)])
+        r_pad = np.full((nc_cap - nc, 2), 0.25 * float(np.linalg.norm(gap)))
+        cd = np.concatenate([cd, np.repeat(gap, nc_cap - nc, 0)])  # twice the sum of their radii apart: no touch
+        crad = np.concatenate([rad[cpairs].reshape(-1, 2), r_pad])
+        extra = n_cap - n
+        vol, valid, include = (np.concatenate([vol, np.zeros(extra)]), np.concatenate([valid, np.zeros(extra, bool)]),
+                               np.concatenate([include, np.zeros(extra, bool)]))
+        layer = np.concatenate([layer, np.zeros(extra, np.int32)])
+    else:
+        crad = rad[cpairs].reshape(-1, 2)
+
     pm = sample.particle_material
     cparams = contact_mod.contact_params(jnp.asarray(pm.E, dtype), jnp.asarray(pm.nu, dtype),
                                          jnp.asarray(jnp.inf, dtype), jnp.asarray(pm.restitution, dtype))
     est = Estimator(model=model, pairs=jnp.asarray(pairs), d=jnp.asarray(d, dtype),
-                    contact_d=jnp.asarray(cd, dtype), contact_radii=jnp.asarray(rad[cpairs], dtype).reshape(-1, 2),
+                    contact_d=jnp.asarray(cd, dtype), contact_radii=jnp.asarray(crad, dtype).reshape(-1, 2),
                     contact_params=cparams, volume=jnp.asarray(vol, dtype), valid=jnp.asarray(valid),
-                    include=jnp.asarray(include),
-                    layer=jnp.asarray(layer, jnp.int32), dofs=int(dofs), first_neighbour=bool(first_neighbour),
-                    n_layers=int(n_layers), axis=axis)
+                    include=jnp.asarray(include), layer=jnp.asarray(layer, jnp.int32),
+                    layer_count=jnp.asarray(n_layers, jnp.int32), counts=counts, dofs=int(dofs),
+                    first_neighbour=bool(first_neighbour), n_layers=int(layers_cap), axis=axis)
     if dofs == 3:
         geometry, terms = _bond_geometry(model)
-        ck = (-_contact_jacobians_jit(est)[:, :3, 3:].reshape(-1, 9) if len(cpairs)
-              else jnp.zeros((0, 9), dtype))
-        est = dataclasses.replace(est, geometry=geometry, terms=terms, contact_k=ck.astype(dtype))
+        ck = (-np.asarray(_contact_jacobians_jit(est))[:, :3, 3:].reshape(-1, 9) if nc_cap else np.zeros((0, 9)))
+        ck[nc:] = 0.0  # padding contacts do not touch; their stiffness is zero to the last bit
+        est = dataclasses.replace(est, geometry=geometry, terms=terms, contact_k=jnp.asarray(ck, dtype))
     if precision == "float32":
         f32 = jnp.float32
         est = dataclasses.replace(est, d=est.d.astype(f32), volume=est.volume.astype(f32),
@@ -352,9 +403,9 @@ def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
     nb = int(r0.shape[0])
     if nb == 0:
         return jnp.zeros((0, 0, 9), r0.dtype), ()
-    g = _unit_jacobians(r0)
-    terms = tuple(s for s in range(4) if bool(jnp.any(g[s] != 0)))
-    return g[np.array(terms, int)], terms
+    g = np.asarray(_unit_jacobians(r0))
+    terms = tuple(s for s in range(4) if np.any(g[s] != 0))
+    return jnp.asarray(g[np.array(terms, int)]), terms
 
 
 def _bond_jacobians(est: Estimator, params) -> jnp.ndarray:
@@ -624,6 +675,9 @@ def local_tensors(est: Estimator, params) -> jnp.ndarray:
     return _local_tensors_edges(est, params)
 
 
+_local_tensors_jit = jax.jit(local_tensors)
+
+
 def _local_tensors_edges(est: Estimator, params) -> jnp.ndarray:
     e, f = _edge_forces(est, params)
     vi = np.array([p[0] for p in VOIGT])
@@ -704,10 +758,83 @@ def layer_stiffness(est: Estimator, params, gauge_length, area):
     c_layer = jnp.where(wsum[:, None, None] > 0, num / jnp.where(wsum > 0, wsum, 1.0)[:, None, None], body)
     e_layer = moduli(c_layer)["E"][:, ax]
     extent = jnp.sum(vol) / area  # the sample's extent along the axis, as the volume sees it
-    h = extent / est.n_layers
+    count = jnp.asarray(est.n_layers if est.layer_count is None else est.layer_count, jnp.int32)
+    h = extent / count.astype(vol.dtype)
     a_layer = jnp.where(vol > 0, vol / h, area)
-    compliance = jnp.sum(h / (e_layer * a_layer)) * gauge_length / extent
+    real = jnp.arange(est.n_layers, dtype=jnp.int32) < count  # layers beyond the count are padding
+    compliance = jnp.sum(jnp.where(real, h / (e_layer * a_layer), 0.0)) * gauge_length / extent
     return 1.0 / compliance
+
+
+class SceneGeometry(NamedTuple):
+    """What the STE needs of a scene besides the estimator (a pytree; built on the host by
+    :func:`scene_geometry`): gauge ``length`` [m], ``area`` [m^2], the compressive displacement ``load`` [m] at which
+    the walls are linearised (``s`` x the target displacement, ``s`` the middle of the fit range), the
+    ``wall_stiffness`` (E* [Pa] of a particle on a rigid wall, or k [N/m] for linear walls) and the masks ``[n]`` of
+    the particles that touch the bottom and the top wall."""
+
+    length: Any
+    area: Any
+    load: Any
+    wall_stiffness: Any
+    touch_bottom: Any
+    touch_top: Any
+
+
+def scene_geometry(est: Estimator, sample: Sample, scene, fraction: float | None = None):
+    """``(SceneGeometry, wall_law)`` of ``scene`` on ``sample`` for ``est`` (``wall_law`` ``None`` without walls).
+    NumPy work on the host; the masks have ``est.n`` rows (padding rows touch nothing)."""
+    length, area = scene.geometry(sample)
+    dtype = est.model.positions0.dtype
+    n, law, ws = est.n, None, 0.0
+    touch = [np.zeros(n, bool), np.zeros(n, bool)]
+    s = float(np.mean(scene.fit_range)) if fraction is None else float(fraction)
+    delta = scene.strain * length
+    if scene.uses_walls:
+        law = scene.wall_law
+        pm = sample.particle_material
+        if law == "hertz":
+            ws = float(pm.E) / (1.0 - float(pm.nu) ** 2) if scene.wall_stiffness is None else scene.wall_stiffness
+        elif law == "linear":
+            if scene.wall_stiffness is None:
+                raise SceneError("wall_law='linear' needs wall_stiffness [N/m]")
+            ws = scene.wall_stiffness
+        else:
+            raise SceneError(f"unknown wall law {law!r}; use 'hertz' or 'linear'")
+        ax = scene.axis
+        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+        m = len(rad)
+        lo_gap = (pos[:, ax] - rad) - (pos[:, ax] - rad).min()
+        hi_gap = (pos[:, ax] + rad).max() - (pos[:, ax] + rad)
+        touch[0][:m], touch[1][:m] = lo_gap <= 0.5 * delta, hi_gap <= 0.5 * delta
+    geo = SceneGeometry(length=jnp.asarray(length, dtype), area=jnp.asarray(area, dtype),
+                        load=jnp.asarray(s * delta, dtype), wall_stiffness=jnp.asarray(ws, dtype),
+                        touch_bottom=jnp.asarray(touch[0]), touch_top=jnp.asarray(touch[1]))
+    return geo, law
+
+
+def _wall_series(k_body, radii, geo: SceneGeometry, law: str):
+    dtype = jnp.result_type(k_body)
+    ws = geo.wall_stiffness.astype(dtype)
+    radii = radii.astype(dtype)
+
+    def wall_k(force, touch):
+        count = jnp.sum(touch.astype(dtype))
+        if law == "linear":
+            return ws * count + 0.0 * force
+        share = force / count
+        overlap = (3.0 * share / (4.0 * ws * jnp.sqrt(radii))) ** (2.0 / 3.0)
+        return jnp.sum(jnp.where(touch, 2.0 * ws * jnp.sqrt(radii * overlap), 0.0))
+
+    k = k_body
+    kw = (k_body, k_body)
+    load = geo.load.astype(dtype)
+    for _ in range(40):  # k_wall ~ F^(1/3): a contraction, converges to round-off in a few dozen steps
+        force = k * load
+        kw = (wall_k(force, geo.touch_bottom), wall_k(force, geo.touch_top))
+        k = 1.0 / (1.0 / k_body + 1.0 / kw[0] + 1.0 / kw[1])
+    counts = [jnp.sum(t.astype(jnp.int32)) for t in (geo.touch_bottom, geo.touch_top)]
+    return k, {"k_bottom": kw[0], "k_top": kw[1], "n_bottom": counts[0], "n_top": counts[1]}
 
 
 def wall_series(k_body, est: Estimator, scene, sample: Sample, fraction: float | None = None):
@@ -719,52 +846,31 @@ def wall_series(k_body, est: Estimator, scene, sample: Sample, fraction: float |
     (``delta`` = target displacement); ``K`` and ``F`` are solved for together (fixed point).
     Returns ``(K, {"k_bottom", "k_top", "n_bottom", "n_top"})``.
     """
-    model = scene.model(sample)  # the wall law and stiffness the DEM uses
-    law, ws = model.walls, model.wall_stiffness
-    ax = scene.axis
-    pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-    length, _ = scene.geometry(sample)
-    delta = scene.strain * length
-    s = float(np.mean(scene.fit_range)) if fraction is None else float(fraction)
-    lo_gap = (pos[:, ax] - rad) - (pos[:, ax] - rad).min()
-    hi_gap = (pos[:, ax] + rad).max() - (pos[:, ax] + rad)
-    touch = [lo_gap <= 0.5 * delta, hi_gap <= 0.5 * delta]
-    dtype = jnp.result_type(k_body)
-    ws = jnp.asarray(ws).astype(dtype)
-    radii = [jnp.asarray(rad[t]).astype(dtype) for t in touch]
-    counts = [int(t.sum()) for t in touch]
+    geo, law = scene_geometry(est, sample, scene, fraction)
+    return _wall_series(k_body, est.model.radii, geo, law)
 
-    def wall_k(force, r):
-        if law == "linear":
-            return ws * r.shape[0] + 0.0 * force
-        share = force / r.shape[0]
-        overlap = (3.0 * share / (4.0 * ws * jnp.sqrt(r))) ** (2.0 / 3.0)
-        return jnp.sum(2.0 * ws * jnp.sqrt(r * overlap))
 
+def _scene_stiffness(est: Estimator, params, geo: SceneGeometry, layered: bool, walls: str | None):
+    c6 = body_tensor(est, params)
+    e_axis = moduli(c6)["E"][est.axis]
+    length, area = geo.length.astype(c6.dtype), geo.area.astype(c6.dtype)
+    k_body = layer_stiffness(est, params, length, area) if layered else e_axis * area / length
+    parts = {"K_body": k_body, "E_axis": e_axis, "tensor": c6}
     k = k_body
-    kw = (k_body, k_body)
-    for _ in range(40):  # k_wall ~ F^(1/3): a contraction, converges to round-off in a few dozen steps
-        force = k * s * delta
-        kw = tuple(wall_k(force, r) for r in radii)
-        k = 1.0 / (1.0 / k_body + 1.0 / kw[0] + 1.0 / kw[1])
-    return k, {"k_bottom": kw[0], "k_top": kw[1], "n_bottom": counts[0], "n_top": counts[1]}
+    if walls is not None:
+        k, wall_parts = _wall_series(k_body, est.model.radii, geo, walls)
+        parts.update(wall_parts)
+    return k, parts
 
 
 def scene_stiffness(est: Estimator, params, sample: Sample, scene, *, layered: bool = False):
     """Stiffness K [N/m] of ``scene`` from the STE: ``E_axis A / l`` (or the layered model), walls in series.
 
-    Returns ``(K, parts)`` with ``parts = {"K_body", "E_axis", "tensor", ...}`` (jnp values).
+    Returns ``(K, parts)`` with ``parts = {"K_body", "E_axis", "tensor", ...}`` (jnp values). ``est.axis`` is the
+    load axis (the estimator is built for the scene).
     """
-    length, area = scene.geometry(sample)
-    c6 = body_tensor(est, params)
-    e_axis = moduli(c6)["E"][scene.axis]
-    k_body = layer_stiffness(est, params, length, area) if layered else e_axis * area / length
-    parts = {"K_body": k_body, "E_axis": e_axis, "tensor": c6}
-    k = k_body
-    if scene.uses_walls:
-        k, walls = wall_series(k_body, est, scene, sample)
-        parts.update(walls)
-    return k, parts
+    geo, law = scene_geometry(est, sample, scene)
+    return _scene_stiffness(est, params, geo, layered, law)
 
 
 def _check_scene(scene):
@@ -779,21 +885,41 @@ def stiffness_function(sample: Sample, scene, *, layered: bool = False, **option
     e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``). ``options`` go to :func:`estimator`."""
     _check_scene(scene)
     est = estimator(sample, scene, **options)
+    geo, law = scene_geometry(est, sample, scene)
 
     def stiffness(params):
-        return scene_stiffness(est, params, sample, scene, layered=layered)[0]
+        return _scene_stiffness(est, params, geo, layered, law)[0]
 
     return stiffness
 
 
-def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, **options):
+def _outputs(est: Estimator, params, geo: SceneGeometry, layered: bool, walls: str | None):
+    """Everything :func:`solve_scene` reports, from one program: K, its parts, the moduli and the isotropic fit."""
+    k, parts = _scene_stiffness(est, params, geo, layered, walls)
+    m = moduli(parts["tensor"])
+    e_iso, nu_iso = isotropic_fit(parts["tensor"])
+    return k, parts, m["E"], m["nu"], e_iso, nu_iso
+
+
+_solve_program = Program(_outputs, static_argnames=("layered", "walls"))
+_setups = SetupCache()
+
+
+def _setup(sample, scene, pad, options):
+    est = estimator(sample, scene, pad=pad, **options)
+    return (est,) + scene_geometry(est, sample, scene)
+
+
+def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pad: bool = True, **options):
     """Estimate the stiffness of ``scene`` with the STE; see :func:`jaxbpm.solve` (``method="ste"``).
 
+    pad: pad the estimator to its size class (:func:`estimator`), so that samples of similar size share one
+    compiled program (the result is the same to round-off).
     ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``, ``E_y``, ``E_z`` [Pa], ``nu`` (3x3),
     ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls), ``skipped`` (singular particles),
     ``surface`` (surface particles left out of the averages),
     ``particles``, ``bonds``, ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``,
-    ``k_top`` [N/m], ``n_bottom``, ``n_top``.
+    ``k_top`` [N/m], ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
     """
     from jaxbpm.result import Result
 
@@ -801,42 +927,29 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, **
     _check_scene(scene)
     params = default_params(sample) if params is None else params
     _check_params(params, sample)
-    est = estimator(sample, scene, **options)
-
-    def run(est, params):
-        k, parts = scene_stiffness(est, params, sample, scene, layered=layered)
-        m = moduli(parts["tensor"])
-        e_iso, nu_iso = isotropic_fit(parts["tensor"])
-        return k, parts, m["E"], m["nu"], e_iso, nu_iso
-
-    tc = time.perf_counter()
-    compiled = jax.jit(run).lower(est, params).compile()
-    compile_time = time.perf_counter() - tc
-    tr = time.perf_counter()
-    out = jax.block_until_ready(compiled(est, params))
-    run_time = time.perf_counter() - tr
-    if run_time < 1.0:
-        # a first execution also pays for allocating its buffers (~30 % of a 10k-particle estimate); a second one
-        # gives the time a repeated estimate (a calibration loop) takes, measured as the DSM's run time is
-        tr = time.perf_counter()
-        out = jax.block_until_ready(compiled(est, params))
-        run_time = time.perf_counter() - tr
+    est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
+                                lambda: _setup(sample, scene, pad, options))
+    setup_time = time.perf_counter() - t0
+    out, compile_time, run_time = _solve_program(est, params, geo, layered=bool(layered), walls=law)
     k, parts, e, nu, e_iso, nu_iso = jax.tree_util.tree_map(np.asarray, out)
-    length, area = scene.geometry(sample)
+    length, area = float(geo.length), float(geo.area)
     delta = scene.strain * length
     stats = {"tensor": parts["tensor"].tolist(), "E_x": float(e[0]), "E_y": float(e[1]), "E_z": float(e[2]),
              "nu": nu.tolist(), "E_iso": float(e_iso), "nu_iso": float(nu_iso), "K_body": float(parts["K_body"]),
-             "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface, "particles": est.n,
-             "bonds": est.n_bonds, "contacts": est.n_contacts, "dofs": est.dofs,
-             "first_neighbour": est.first_neighbour, "layered": bool(layered), "precision": str(est.d.dtype)}
+             "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface,
+             "particles": est.particles, "bonds": est.bonds, "contacts": est.contacts, "dofs": est.dofs,
+             "first_neighbour": est.first_neighbour, "layered": bool(layered), "precision": str(est.d.dtype),
+             "size_class": [est.n, est.n_bonds, est.n_contacts], "setup_time": setup_time}
     for name in ("k_bottom", "k_top", "n_bottom", "n_top"):
         if name in parts:
             stats[name] = float(parts[name]) if name.startswith("k") else int(parts[name])
     k = float(k)
+    wall = time.perf_counter() - t0
+    # what is neither setup nor compilation (moving the outputs to the host) counts as run time
     return Result(method="ste", stiffness=k, youngs_modulus=k * length / area, gauge_length=length, area=area,
                   displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
-                  wall_time=time.perf_counter() - t0, compile_time=compile_time, run_time=run_time, stats=stats,
-                  state=None)
+                  wall_time=wall, setup_time=setup_time, compile_time=compile_time,
+                  run_time=wall - setup_time - compile_time, stats=stats, state=None)
 
 
 def _check_params(params, sample: Sample):
@@ -877,8 +990,8 @@ def local_map(sample: Sample, params=None, *, scene=None, radius: float | None =
 
     params = default_params(sample) if params is None else params
     _check_params(params, sample)
-    est = estimator(sample, scene, **options)
-    c = np.asarray(jax.jit(local_tensors)(est, params))
+    est = estimator(sample, scene, pad=True, **options)
+    c = np.asarray(_local_tensors_jit(est, params))[:sample.n_particles]
     rad = np.asarray(sample.radii)
     radius = 3.0 * float(np.mean(rad)) if radius is None else float(radius)
     if not (radius > 0 and np.isfinite(radius)):
@@ -888,8 +1001,8 @@ def local_map(sample: Sample, params=None, *, scene=None, radius: float | None =
     pairs = cKDTree(pos).query_pairs(radius, output_type="ndarray")
     adj = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
     adj = (adj + adj.T + identity(n)).tocsr()
-    valid = np.asarray(est.valid)
-    w = np.where(valid, np.asarray(est.volume), 0.0)
+    valid = np.asarray(est.valid)[:n]
+    w = np.where(valid, np.asarray(est.volume)[:n], 0.0)
     cw = np.where(valid[:, None, None], c, 0.0) * w[:, None, None]  # the map shows the surface too
     wsum = adj @ w
     with np.errstate(invalid="ignore", divide="ignore"):

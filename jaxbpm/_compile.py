@@ -1,0 +1,205 @@
+"""Compile once, answer fast: ahead-of-time compiled programs keyed on shapes, and the size classes samples are
+padded to.
+
+A :class:`Program` wraps a module-level function in ``jax.jit`` and keeps one compiled executable per signature (the
+pytree structure, shapes and dtypes of the arguments, and the static options). A call returns the outputs with the
+time spent compiling (zero on a hit) and running (the executable once, to ``block_until_ready``), so a solver reports
+``compile_time`` and ``run_time`` without ever running its kernel twice. ``Program.compilations`` counts the misses
+(what the tests check: a second solve compiles nothing). With :func:`jaxbpm.enable_compilation_cache` a miss in a new
+process is read from JAX's persistent cache instead of being compiled again.
+
+:func:`capacity` and :func:`size_class` give the padded sizes: particle counts round up on a ladder of four steps per
+octave (1, 1.25, 1.5, 1.75 times a power of two: at most 25 % padding), and the bonds (contacts) per particle round up
+to a multiple of one half, so the samples a generator makes with one set of options (about the same coordination)
+share a class when their particle counts do.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import math
+import time
+import weakref
+from typing import Any, Callable
+
+import jax
+import numpy as np
+
+__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "count_compilations"]
+
+
+def capacity(count: int, minimum: int = 8) -> int:
+    """The smallest ``m * 2**e`` (``m`` in 4, 5, 6, 7) that is at least ``count`` (and at least ``minimum``)."""
+    count = max(int(count), int(minimum), 1)
+    e = max(math.ceil(math.log2(count)) - 3, 0)
+    while True:
+        for m in (4, 5, 6, 7, 8):
+            if m * 2 ** e >= count:
+                return m * 2 ** e
+        e += 1
+
+
+class SizeClass(tuple):
+    """``(particles, bonds, contacts)`` capacities of a padded sample."""
+
+    __slots__ = ()
+
+    def __new__(cls, particles: int, bonds: int, contacts: int = 0):
+        return super().__new__(cls, (int(particles), int(bonds), int(contacts)))
+
+    particles = property(lambda self: self[0])
+    bonds = property(lambda self: self[1])
+    contacts = property(lambda self: self[2])
+
+
+def _per_particle(count: int, n: int, n_cap: int) -> int:
+    """``count`` items on ``n`` particles padded to ``n_cap`` at a multiple of 1/2 item per particle (at least one
+    spare slot)."""
+    if count == 0:
+        return 0
+    ratio = math.ceil(2.0 * count / max(n, 1) + 1e-9) / 2.0
+    return max(int(math.ceil(ratio * n_cap)), count + 1)
+
+
+def size_class(n_particles: int, n_bonds: int, n_contacts: int = 0) -> SizeClass:
+    """The padded capacities of a sample: particles on the :func:`capacity` ladder (one spare particle at least, which
+    padding bonds connect to), bonds and contacts at the particles' capacity times their count per particle rounded up
+    to a half."""
+    n_cap = capacity(n_particles + 2)
+    return SizeClass(n_cap, _per_particle(n_bonds, n_particles, n_cap), _per_particle(n_contacts, n_particles, n_cap))
+
+
+def _signature(args, static) -> tuple:
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    shapes = tuple((np.shape(x), np.dtype(x.dtype).name, getattr(x, "weak_type", False))
+                   if hasattr(x, "dtype") else (type(x).__name__,) for x in leaves)
+    return treedef, shapes, tuple(sorted(static.items())), jax.config.jax_enable_x64
+
+
+class Program:
+    """A jitted function compiled ahead of time once per argument signature.
+
+    ``Program(fn, static_argnames=(...))(*args, **static)`` returns ``(outputs, compile_time, run_time)`` [s]:
+    ``compile_time`` is the tracing, lowering and compilation of a new signature (0 when it was compiled before in this
+    process), ``run_time`` one execution until its outputs are ready. ``compilations`` counts the signatures compiled;
+    ``maxsize`` executables are kept (least recently used dropped).
+    """
+
+    def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = (), maxsize: int = 32):
+        self.fn = fn
+        self.static_argnames = tuple(static_argnames)
+        self._jit = jax.jit(fn, static_argnames=self.static_argnames)
+        self._compiled: collections.OrderedDict = collections.OrderedDict()
+        self.maxsize = maxsize
+        self.compilations = 0
+        self.__name__ = getattr(fn, "__name__", "program")
+        self.__doc__ = fn.__doc__
+
+    def compiled(self, *args, **static) -> tuple[Any, float]:
+        """The executable for these arguments and the time it took to compile (0 when it was there)."""
+        unknown = set(static) - set(self.static_argnames)
+        if unknown:
+            raise TypeError(f"{self.__name__}: unknown static options {sorted(unknown)}")
+        key = _signature(args, static)
+        exe = self._compiled.get(key)
+        if exe is not None:
+            self._compiled.move_to_end(key)
+            return exe, 0.0
+        tc = time.perf_counter()
+        exe = self._jit.lower(*args, **static).compile()
+        compile_time = time.perf_counter() - tc
+        self.compilations += 1
+        self._compiled[key] = exe
+        if len(self._compiled) > self.maxsize:
+            self._compiled.popitem(last=False)
+        return exe, compile_time
+
+    def __call__(self, *args, **static):
+        exe, compile_time = self.compiled(*args, **static)
+        tr = time.perf_counter()
+        out = jax.block_until_ready(exe(*args))
+        return out, compile_time, time.perf_counter() - tr
+
+    def jit(self, *args, **static):
+        """The plain jitted function (for use inside other traced code: ``grad``, ``vmap``)."""
+        return self._jit(*args, **static)
+
+    def clear(self) -> None:
+        self._compiled.clear()
+
+
+def hashable(value) -> bool:
+    """Whether ``value`` can be part of a cache key."""
+    try:
+        hash(value)
+    except TypeError:
+        return False
+    return True
+
+
+class SetupCache:
+    """The last ``maxsize`` setups (estimators, bond geometry, preconditioner parts: everything a solver builds from a
+    sample before it runs) by sample object and options, so that solving the same sample again (other parameters, a
+    calibration loop) costs the kernel alone. A :class:`~jaxbpm.Sample` is immutable; an entry lives no longer than
+    its sample (held by a weak reference)."""
+
+    def __init__(self, maxsize: int = 4):
+        self.maxsize = maxsize
+        self._items: collections.OrderedDict = collections.OrderedDict()
+        self.builds = 0
+
+    def get(self, owner, key, build: Callable[[], Any]):
+        """The setup of ``owner`` under ``key`` (hashable options), built by ``build()`` when absent. An unhashable
+        key is built every time."""
+        if not hashable(key):
+            self.builds += 1
+            return build()
+        k = (id(owner), key)
+        hit = self._items.get(k)
+        if hit is not None and hit[0]() is owner:
+            self._items.move_to_end(k)
+            return hit[1]
+        value = build()
+        self.builds += 1
+        self._items[k] = (weakref.ref(owner), value)
+        while len(self._items) > self.maxsize:
+            self._items.popitem(last=False)
+        return value
+
+    def clear(self) -> None:
+        self._items.clear()
+
+
+_LOWERING_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
+_counters: list = []
+_listening = False
+
+
+def _on_event(name, duration, **kwargs):
+    if name == _LOWERING_EVENT:
+        for c in _counters:
+            c[0] += 1
+
+
+@contextlib.contextmanager
+def count_compilations():
+    """Count the XLA programs JAX builds inside the ``with`` block (jitted functions and eager operations alike;
+    a program read from the persistent compilation cache counts too, one held in memory does not)::
+
+        with count_compilations() as n:
+            jaxbpm.solve(sample, scene, method="ste")
+        print(n[0])
+    """
+    global _listening
+    if not _listening:
+        from jax import monitoring
+
+        monitoring.register_event_duration_secs_listener(_on_event)
+        _listening = True
+    counter = [0]
+    _counters.append(counter)
+    try:
+        yield counter
+    finally:
+        _counters.remove(counter)
