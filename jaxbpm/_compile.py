@@ -26,7 +26,7 @@ from typing import Any, Callable
 import jax
 import numpy as np
 
-__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "count_compilations"]
+__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "compile_clock", "count_compilations"]
 
 
 def capacity(count: int, minimum: int = 8) -> int:
@@ -72,8 +72,8 @@ def size_class(n_particles: int, n_bonds: int, n_contacts: int = 0) -> SizeClass
 
 def _signature(args, static) -> tuple:
     leaves, treedef = jax.tree_util.tree_flatten(args)
-    shapes = tuple((np.shape(x), np.dtype(x.dtype).name, getattr(x, "weak_type", False))
-                   if hasattr(x, "dtype") else (type(x).__name__,) for x in leaves)
+    shapes = tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if hasattr(x, "dtype") else type(x)
+                   for x in leaves)
     return treedef, shapes, tuple(sorted(static.items())), jax.config.jax_enable_x64
 
 
@@ -172,24 +172,43 @@ class SetupCache:
 
 
 _LOWERING_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
-_counters: list = []
+# what JAX spends to have a program ready: tracing, lowering, compiling or reading it from the persistent cache
+_COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", _LOWERING_EVENT,
+                   "/jax/core/compile/backend_compile_duration", "/jax/compilation_cache/cache_retrieval_time_sec")
+_clocks: list = []
 _listening = False
 
 
+class CompileClock:
+    """What :func:`compile_clock` measured: ``count`` programs lowered, ``seconds`` spent tracing, lowering,
+    compiling or reading programs from the persistent cache."""
+
+    __slots__ = ("count", "seconds")
+
+    def __init__(self):
+        self.count, self.seconds = 0, 0.0
+
+    def __getitem__(self, index):  # ``n[0]``: the count, as count_compilations() gives it
+        return (self.count, self.seconds)[index]
+
+
 def _on_event(name, duration, **kwargs):
-    if name == _LOWERING_EVENT:
-        for c in _counters:
-            c[0] += 1
+    if name in _COMPILE_EVENTS:
+        for c in _clocks:
+            c.seconds += duration
+            c.count += name == _LOWERING_EVENT
 
 
 @contextlib.contextmanager
-def count_compilations():
-    """Count the XLA programs JAX builds inside the ``with`` block (jitted functions and eager operations alike;
-    a program read from the persistent compilation cache counts too, one held in memory does not)::
+def compile_clock():
+    """Count the XLA programs JAX builds inside the ``with`` block (jitted functions and eager operations alike; one
+    read from the persistent compilation cache counts too, one held in memory does not) and the time they took::
 
-        with count_compilations() as n:
+        with compile_clock() as c:
             jaxbpm.solve(sample, scene, method="ste")
-        print(n[0])
+        print(c.count, c.seconds)
+
+    The solvers use it to report the compilation inside their setup as compile time.
     """
     global _listening
     if not _listening:
@@ -197,9 +216,12 @@ def count_compilations():
 
         monitoring.register_event_duration_secs_listener(_on_event)
         _listening = True
-    counter = [0]
-    _counters.append(counter)
+    clock = CompileClock()
+    _clocks.append(clock)
     try:
-        yield counter
+        yield clock
     finally:
-        _counters.remove(counter)
+        _clocks.remove(clock)
+
+
+count_compilations = compile_clock

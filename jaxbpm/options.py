@@ -10,6 +10,7 @@ keep the solver's defaults (see :func:`jaxbpm.solve`).
 from __future__ import annotations
 
 import difflib
+import functools
 import inspect
 import math
 import numbers
@@ -88,6 +89,7 @@ _CHECKS = {
 }
 
 
+@functools.lru_cache(maxsize=None)
 def accepted(method: str) -> tuple[str, ...]:
     """The option names ``method`` takes (from the solver's own signature: one list, no copy to keep in step)."""
     if method == "dem":
