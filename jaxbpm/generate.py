@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import importlib.util
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -136,6 +137,7 @@ def _check_cells(cells) -> tuple[int, int, int]:
 
 # ------------------------------------------------------------------------------------------------ random packing
 AUTO_PACKING_FRACTIONS = (0.60, 0.58, 0.56, 0.55)
+"""Packing fractions tried by :func:`random_packing` when none is given, densest first."""
 
 
 def random_packing(
@@ -171,6 +173,28 @@ def random_packing(
     (pairs and walls) is below ``overlap_tol * mean_radius``. Finally every pair with surface gap
     ``distance - r_i - r_j < bond_gap * mean_radius`` is bonded.
 
+    **Automatic packing fraction** (``packing_fraction=None``): the fractions of ``AUTO_PACKING_FRACTIONS``
+    (0.60, 0.58, 0.56, 0.55) are tried densest first, each from the insertion an explicit ``packing_fraction`` of
+    that value starts from, and the first that packs is kept. Walls pack loosely, so the fraction at which the
+    spheres jam grows with the sample. An empirical estimate of it, ``0.645 - 0.2 S / V`` (``S / V``: wall area
+    over domain volume, lengths in mean radii; fitted to boxes of 400 to 4000 spheres with 5 % radius spread, and
+    right for a 2000-sphere beam and cylinder too), decides how long a fraction is tried:
+
+    * above the estimate, a short trial: the fraction is given up when its largest overlap, extrapolated
+      geometrically from its decay over the second half of the attempt (from step 400 on), would not reach the
+      tolerance within 1500 FIRE steps, and after 1500 steps at the latest (a fraction that packs easily packs in
+      well under 1000 steps; a jammed one is typically given up after 400 to 600);
+    * at or below it, until it packs or stalls: its largest overlap, at its lowest so far, fell by less than 10 %
+      over the last 3000 steps (close to the jamming fraction, packing can take 10 000 steps);
+    * the last fraction, 0.55, under the rule of an explicit ``packing_fraction`` (see Raises).
+
+    On the boxes measured (5 % spread) this keeps the fractions that attempts run to the end keep (400 and 700
+    spheres 0.56, 1000 to 2500 0.58, 3000 and more 0.60), and the samples are alike: the overlaps are removed from
+    a random insertion at the fraction kept, so most bonded neighbours touch. A fraction just above the estimate
+    that would pack only after many thousand steps is given up, though (a 300-sphere cylinder, seed 2, packs 0.56
+    after 12 000 steps; here it gets 0.55). All attempts share one compiled program, which is why the result,
+    deterministic for a seed, is not bit for bit the sample of an explicit ``packing_fraction``.
+
     Args:
       n: number of particles.
       shape: ``"box"``, ``"cylinder"`` or ``"beam"``.
@@ -178,16 +202,18 @@ def random_packing(
       radius_spread: relative half-width of the uniform radius distribution [-], ``>= 0``.
       aspect: shape ratios, see above.
       packing_fraction: solid fraction of the domain [-]. Too high and the spheres jam: the overlaps cannot be
-        removed. Walls pack loosely, so small samples jam earlier: with 5 % spread a box of 400 spheres jams near
-        0.57, of 1000 near 0.59, while 10 000 spheres reach 0.6. ``None`` (default): the densest of
-        ``AUTO_PACKING_FRACTIONS`` (0.60, 0.58, 0.56, 0.55) that packs without jamming.
+        removed. Walls pack loosely, so small samples jam earlier: with 5 % spread a box of 400 spheres packs 0.56
+        but jams at 0.58, of 1000 packs 0.58 (slowly), of 2000 to 2500 jams at 0.6, of 3000 packs 0.6 (slowly).
+        ``None`` (default): the densest of ``AUTO_PACKING_FRACTIONS`` that packs, see above.
       overlap_tol: largest accepted overlap relative to ``mean_radius`` [-].
       bond_gap: bonding distance (surface gap) relative to ``mean_radius`` [-].
       bond_radius_ratio: bond radius / radius of the smaller particle of the pair.
       seed: seed of the NumPy generator used for the radii and the insertion (the result is deterministic).
-      max_steps: FIRE step budget.
-      progress: ``True`` prints one line per chunk of FIRE steps to stderr (step, largest overlap / mean radius,
-        elapsed s); a callable is called as ``progress(step, max_overlap_rel, elapsed_s)``; ``False``/``None``: off.
+      max_steps: FIRE step budget (per fraction tried).
+      progress: ``True`` prints to stderr, per fraction tried, a line (step, largest overlap / mean radius,
+        elapsed s) at most every 2 s and one line when it packed or was given up; a callable is called after
+        every chunk of FIRE steps as ``progress(step, max_overlap_rel, elapsed_s)`` (step and time counted per
+        fraction tried); ``False``/``None``: off.
       **sample_kw: forwarded to :meth:`Sample.from_arrays` (``materials``, ``density``, ``particle_material``,
         ``bond_contact``, ...).
 
@@ -196,21 +222,9 @@ def random_packing(
 
     Raises:
       SampleError: bad arguments, or the packing did not converge: ``max_steps`` ran out, or the spheres jammed
-        (the largest overlap stopped falling), which happens when ``packing_fraction`` is too high for the domain.
+        (the largest overlap fell by less than 0.1 % over 5000 steps), which happens when ``packing_fraction``
+        (with ``None``: the last of ``AUTO_PACKING_FRACTIONS``) is too high for the domain.
     """
-    if packing_fraction is None:
-        kw = dict(shape=shape, mean_radius=mean_radius, radius_spread=radius_spread, aspect=aspect,
-                  overlap_tol=overlap_tol, bond_gap=bond_gap, bond_radius_ratio=bond_radius_ratio, seed=seed,
-                  max_steps=max_steps, progress=progress, **sample_kw)
-        for k, phi in enumerate(AUTO_PACKING_FRACTIONS):
-            try:
-                return random_packing(n, packing_fraction=phi, **kw)
-            except SampleError as err:
-                if "did not converge" not in str(err) or k == len(AUTO_PACKING_FRACTIONS) - 1:
-                    raise
-                if progress:
-                    print(f"  packing fraction {phi} jammed; trying {AUTO_PACKING_FRACTIONS[k + 1]}",
-                          file=sys.stderr, flush=True)
     _check_sample_kw(sample_kw)
     n = _count("n", n, minimum=1)
     shape = str(shape).lower()
@@ -218,9 +232,12 @@ def random_packing(
         raise SampleError(f"random_packing: shape must be one of {_RANDOM_SHAPES}, got {shape!r}")
     mean_radius = _positive("mean_radius", mean_radius)
     spread = _nonnegative("radius_spread", radius_spread)
-    phi = _positive("packing_fraction", packing_fraction)
-    if phi >= 0.74:
-        raise SampleError(f"packing_fraction must be < 0.74 (random packings jam near 0.64), got {phi}")
+    if packing_fraction is None:
+        fractions = tuple(float(phi) for phi in AUTO_PACKING_FRACTIONS)
+    else:
+        fractions = (_positive("packing_fraction", packing_fraction),)
+        if fractions[0] >= 0.74:
+            raise SampleError(f"packing_fraction must be < 0.74 (random packings jam near 0.64), got {fractions[0]}")
     tol = _positive("overlap_tol", overlap_tol)
     gap = _nonnegative("bond_gap", bond_gap)
     max_steps = _count("max_steps", max_steps, minimum=1)
@@ -230,14 +247,24 @@ def random_packing(
 
     rng = np.random.default_rng(seed)
     radii = np.clip(1.0 + spread * rng.uniform(-1.0, 1.0, n), 1e-3, None)  # in units of mean_radius
-    walls = _walls(shape, aspect, float(np.sum(4.0 / 3.0 * np.pi * radii**3)) / phi, radii.max())
-    x0 = _insert(rng, walls, radii)
-    x = _pack(x0, radii, walls, 2.0 * (1.0 + spread), tol, max_steps, progress, phi)
+    solid = float(np.sum(4.0 / 3.0 * np.pi * radii**3))
+    walls = [_walls(shape, aspect, solid / phi, radii.max()) for phi in fractions]
+    cutoff = 2.0 * (1.0 + spread)
+    if packing_fraction is not None:
+        x0, k = _insert(rng, walls[0], radii), 0
+        x = _pack(x0, radii, walls[0], cutoff, tol, max_steps, progress, fractions[0])
+    else:
+        def start(domain: _Walls) -> np.ndarray:  # the insertion that an explicit packing_fraction starts from
+            again = np.random.default_rng(seed)
+            again.uniform(-1.0, 1.0, n)  # the radii
+            return _insert(again, domain, radii)
+
+        x, k = _pack_auto(start, radii, walls, fractions, cutoff, tol, max_steps, progress)
 
     positions, radii = x * mean_radius, radii * mean_radius
     bonds = bond_pairs(positions, radii, gap * mean_radius)
-    lo, hi = np.zeros(3), np.asarray(walls.size) * mean_radius
-    domain = Domain("cylinder" if walls.cylinder else "box", tuple(lo.tolist()), tuple(hi.tolist()))
+    lo, hi = np.zeros(3), np.asarray(walls[k].size) * mean_radius
+    domain = Domain("cylinder" if walls[k].cylinder else "box", tuple(lo.tolist()), tuple(hi.tolist()))
     return _build(positions, radii, bonds, domain, bond_radius_ratio, sample_kw)
 
 
@@ -321,6 +348,12 @@ _MARGIN = 3.0  # space around the domain in the cell-list box [mean radii]
 _CAPACITY = 1.3  # neighbour-list capacity multiplier
 _CHUNK = 500  # FIRE steps per jitted chunk
 _JAM_CHUNKS, _JAM_PROGRESS = 10, 1e-3  # jammed: the largest overlap fell by < 0.1 % over the last 10 chunks
+# Automatic packing fraction (random_packing, packing_fraction=None; the numbers are documented there).
+_PHI_BULK, _WALL_LOSS = 0.645, 0.2  # expected jamming fraction: _PHI_BULK - _WALL_LOSS * wall area / volume
+_AUTO_CHUNK = 100  # FIRE steps per chunk: the attempts are judged after each
+_TRIAL_STEPS, _TRIAL_FROM = 1500, 400  # a fraction above the expected one: step budget, extrapolated from step 400
+_STALL_STEPS, _STALL_DROP = 3000, 0.1  # stalled: the lowest largest overlap fell < 10 % over the last 3000 steps
+_PRINT_EVERY = 2.0  # seconds between progress lines
 
 
 class _Fire(NamedTuple):
@@ -388,11 +421,30 @@ def _fire_step(state: _Fire, nbrs, radii, walls, cell_box, cylinder: bool):
     return _Fire(x, v, f, max_overlap, dt, alpha, n_pos, step + 1), nbrs
 
 
+def _jax_md_neighbors():
+    """jax-md's ``partition`` and ``space`` modules, imported lazily (and, not being strict-promotion safe, within
+    the caller's promotion context). Unless jax-md is imported already, only these two modules and their own
+    imports are loaded: the package's ``__init__`` imports all of jax-md (neural networks, rigid bodies, with
+    computations at import), which takes seconds. A later ``import jax_md`` loads the rest as usual."""
+    if "jax_md" not in sys.modules:
+        spec = importlib.util.find_spec("jax_md")
+        if spec is not None and spec.submodule_search_locations:
+            sys.modules["jax_md"] = importlib.util.module_from_spec(spec)  # the package, __init__ not run
+            try:
+                from jax_md import partition, space
+                return partition, space
+            except ImportError:
+                pass
+            finally:
+                del sys.modules["jax_md"]
+    from jax_md import partition, space
+    return partition, space
+
+
 @functools.lru_cache(maxsize=8)
 def _packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool):
     """Neighbour-list functions and the jitted FIRE pieces for one cell-list box (cached: no recompilation)."""
-    from jax_md import partition, space  # heavy import, and not strict-promotion safe: done lazily, in context
-
+    partition, space = _jax_md_neighbors()
     box_arr = np.asarray(cell_box, dtype=np.float64)
     displacement, _ = space.free()
     neighbor_fn = partition.neighbor_list(displacement, box_arr, cutoff, dr_threshold=_SKIN,
@@ -428,56 +480,190 @@ def _packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool)
     return allocate, init, run
 
 
+class _Attempt(NamedTuple):
+    """One FIRE run at one packing fraction."""
+
+    x: np.ndarray  # [n, 3] float64 centres, mean-radius units, domain corner at the origin
+    nbrs: Any  # the neighbour list at the end (the next attempt reuses its capacity: no recompilation)
+    steps: list[int]  # step count after each chunk
+    overlaps: list[float]  # largest overlap / mean radius after each chunk
+    packed: bool
+
+
 def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, progress, phi: float) -> np.ndarray:
-    """Remove the overlaps of the spheres ``radii`` at ``x0`` (mean-radius units); returns ``[n, 3]`` float64."""
-    dtype = jnp.result_type(float)
-    size = np.asarray(walls.size)
-    cell_box = tuple(float(v) for v in np.ceil(size + 2.0 * _MARGIN))  # integers: reused across seeds
-    report = _reporter(progress)
-    t0 = time.perf_counter()
+    """Remove the overlaps of the spheres ``radii`` at ``x0`` (mean-radius units) at the fixed fraction ``phi``;
+    returns ``[n, 3]`` float64, or raises :class:`SampleError` when the spheres jam or ``max_steps`` run out."""
+    cell_box = _cell_box(walls)
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
-        allocate, init, run = _packer(cell_box, float(cutoff), walls.cylinder)
-        x = jnp.asarray(x0 + _MARGIN, dtype=dtype)
-        r = jnp.asarray(radii, dtype=dtype)
-        w = jnp.asarray(np.stack([np.full(3, _MARGIN), size + _MARGIN]), dtype=dtype)
-        # stop a little below tol, so that rounding (float32: ~eps * box size) cannot lift the result above it
-        target = max(tol - 16.0 * float(jnp.finfo(dtype).eps) * max(cell_box), 0.5 * tol)
-        tol_j = jnp.asarray(target, dtype=dtype)
+        packer = _packer(cell_box, float(cutoff), walls.cylinder)
+        run = _relax(packer, x0, radii, walls, _target(tol, cell_box), max_steps, _CHUNK, _jammed,
+                     _reporter(progress, phi))
+    if not run.packed:
+        raise SampleError(_not_converged(run, max_steps, tol, phi))
+    return run.x
+
+
+def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls], fractions: tuple[float, ...],
+               cutoff: float, tol: float, max_steps: int, progress) -> tuple[np.ndarray, int]:
+    """The densest of ``fractions`` (descending; ``walls`` their domains) at which the spheres ``radii``, inserted
+    at ``start(domain)``, pack (see :func:`random_packing`); returns the centres ``[n, 3]`` and the fraction's
+    index."""
+    cell_box = _cell_box(walls[-1])  # the largest domain: one cell list, one compiled program for all fractions
+    nbrs = None
+    with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
+        packer = _packer(cell_box, float(cutoff), walls[0].cylinder)
+        target = _target(tol, cell_box)
+        for k, (phi, wall) in enumerate(zip(fractions, walls)):
+            last = k == len(fractions) - 1
+            trial = None if phi <= _jamming_fraction(wall) else _TRIAL_STEPS
+            give_up = _jammed if last else functools.partial(_give_up, target=target, trial=trial)
+            t0 = time.perf_counter()
+            run = _relax(packer, start(wall), radii, wall, target, max_steps, _CHUNK if last else _AUTO_CHUNK,
+                         give_up, _reporter(progress, phi), nbrs)
+            if run.packed:
+                return run.x, k
+            if last:
+                raise SampleError(_not_converged(run, max_steps, tol, phi))
+            why = ("max_steps ran out" if run.steps[-1] >= max_steps
+                   else "would not pack within a trial" if trial else "stalled")
+            _say(progress, f"packing fraction {phi:g}: given up after {run.steps[-1]} FIRE steps ({why}; largest "
+                           f"overlap {run.overlaps[-1]:.2e} x mean radius, {time.perf_counter() - t0:.2f} s); "
+                           f"trying {fractions[k + 1]:g}")
+            nbrs = run.nbrs
+    raise AssertionError("unreachable")
+
+
+def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chunk: int,
+           give_up: Callable[[list[int], list[float]], bool], report, nbrs=None) -> _Attempt:
+    """FIRE from ``x0`` (mean-radius units, domain corner at the origin) in chunks of ``chunk`` steps until the
+    largest overlap is below ``target``, ``give_up(steps, overlaps)`` says so, or ``max_steps`` run out. ``nbrs``:
+    a neighbour list (of earlier positions) to update rather than allocate: its capacity is kept, so the compiled
+    chunk is reused; the attempt's first step then only updates the list and computes the forces."""
+    allocate, init, run = packer
+    dtype = jnp.result_type(float)
+    t0 = time.perf_counter()
+    size = np.asarray(walls.size)
+    x = jnp.asarray(x0 + _MARGIN, dtype=dtype)
+    r = jnp.asarray(radii, dtype=dtype)
+    w = jnp.asarray(np.stack([np.full(3, _MARGIN), size + _MARGIN]), dtype=dtype)
+    tol_j = jnp.asarray(target, dtype=dtype)
+    if nbrs is None:
         nbrs = allocate(x)
         state = init(x, nbrs, r, w)
-        history = []  # largest overlap after each chunk, to detect a jammed packing
-        while True:
-            stop = min(int(state.step) + _CHUNK, max_steps)
-            state, nbrs = run(state, nbrs, r, w, tol_j, jnp.asarray(stop, dtype=jnp.int32))
-            if bool(nbrs.did_buffer_overflow):  # the last step used a truncated list: rebuild, recompute forces
-                nbrs = allocate(state.x)
-                fresh = init(state.x, nbrs, r, w)
-                state = state._replace(f=fresh.f, max_overlap=fresh.max_overlap)
-            step, worst = int(state.step), float(state.max_overlap)
-            report(step, worst, time.perf_counter() - t0)
-            if worst < target:
-                break
-            history.append(worst)
-            jammed = len(history) > _JAM_CHUNKS and worst > (1.0 - _JAM_PROGRESS) * history[-1 - _JAM_CHUNKS]
-            if jammed or step >= max_steps:
-                why = (f"the spheres jammed (no progress in the last {_JAM_CHUNKS * _CHUNK} steps)" if jammed
-                       else f"max_steps={max_steps} FIRE steps were not enough")
-                raise SampleError(
-                    f"random packing did not converge: {why}; reached largest overlap {worst:.3g} x mean radius "
-                    f"(tolerance {tol:g}) at packing fraction {phi:g}. Try a lower packing_fraction (small samples "
-                    f"jam earlier: the spheres pack loosely along the walls)")
-        x = np.asarray(state.x, dtype=np.float64)
-    return x - _MARGIN
+    else:  # at rest, without force: the first step moves nothing, it rebuilds the list and computes the forces
+        scalar = functools.partial(np.asarray, dtype=x.dtype)
+        zeros, count = np.zeros(x.shape, x.dtype), np.zeros((), np.int32)
+        state = jax.tree.map(jnp.asarray, _Fire(x, zeros, zeros, scalar(np.inf), scalar(_DT_START),
+                                                scalar(_ALPHA0), count, count))
+    steps, overlaps = [], []
+    while True:
+        stop = min(int(state.step) + chunk, max_steps)
+        state, nbrs = run(state, nbrs, r, w, tol_j, jnp.asarray(stop, dtype=jnp.int32))
+        if bool(nbrs.did_buffer_overflow):  # the last step used a truncated list: rebuild, recompute forces
+            nbrs = allocate(state.x)
+            fresh = init(state.x, nbrs, r, w)
+            state = state._replace(f=fresh.f, max_overlap=fresh.max_overlap)
+        step, worst = int(state.step), float(state.max_overlap)
+        steps.append(step)
+        overlaps.append(worst)
+        packed = worst < target
+        report(step, worst, time.perf_counter() - t0, packed)
+        if packed or step >= max_steps or give_up(steps, overlaps):
+            break
+    return _Attempt(np.asarray(state.x, dtype=np.float64) - _MARGIN, nbrs, steps, overlaps, packed)
 
 
-def _reporter(progress) -> Callable[[int, float, float], Any]:
+def _cell_box(walls: _Walls) -> tuple[float, float, float]:
+    """The cell-list box around a domain (integers: the compiled program is reused across seeds)."""
+    return tuple(float(v) for v in np.ceil(np.asarray(walls.size) + 2.0 * _MARGIN))
+
+
+def _target(tol: float, cell_box) -> float:
+    """Stop a little below ``tol``, so that rounding (float32: ~eps * box size) cannot lift the result above it."""
+    return max(tol - 16.0 * float(jnp.finfo(jnp.result_type(float)).eps) * max(cell_box), 0.5 * tol)
+
+
+def _jammed(steps: list[int], overlaps: list[float]) -> bool:
+    """Whether the spheres jammed: the largest overlap fell by < 0.1 % over the last 10 chunks (the rule of an
+    explicit fraction and of the automatic mode's last one)."""
+    return len(overlaps) > _JAM_CHUNKS and overlaps[-1] > (1.0 - _JAM_PROGRESS) * overlaps[-1 - _JAM_CHUNKS]
+
+
+def _give_up(steps, overlaps, *, target: float, trial: int | None) -> bool:
+    """Whether an attempt of the automatic mode should be given up, from its history.
+
+    Args:
+      steps: ``[k]`` step count after each chunk (increasing).
+      overlaps: ``[k]`` largest overlap after each chunk.
+      target: the overlap to reach.
+      trial: the step budget of a fraction above the expected jamming fraction; ``None``: none.
+
+    Returns:
+      True when the attempt stalled: the lowest largest overlap so far fell by less than ``_STALL_DROP`` over the
+      last ``_STALL_STEPS`` steps. With a ``trial`` budget also when it is spent, or when, from step
+      ``_TRIAL_FROM`` on, the geometric decay of the lowest overlap so far over the second half of the history,
+      extrapolated, reaches ``target`` only after ``trial`` steps (or never: no decay).
+    """
+    steps = np.asarray(steps, dtype=np.int64)
+    best = np.minimum.accumulate(np.asarray(overlaps, dtype=np.float64))
+    now = int(steps[-1])
+    then = np.searchsorted(steps, now - _STALL_STEPS, side="right") - 1  # the last chunk _STALL_STEPS ago
+    if then >= 0 and best[-1] > (1.0 - _STALL_DROP) * best[then]:
+        return True
+    if trial is None:
+        return False
+    if now >= trial:
+        return True
+    half = np.searchsorted(steps, now // 2, side="right") - 1  # the last chunk at or before half the steps
+    if now < _TRIAL_FROM or half < 0 or best[-1] <= target:
+        return False
+    rate = np.log(best[half] / best[-1]) / (now - steps[half])  # per step
+    return bool(rate <= 0.0 or now + np.log(best[-1] / target) / rate > trial)
+
+
+def _jamming_fraction(walls: _Walls) -> float:
+    """The empirical packing fraction near which fresh insertions in ``walls`` jam: ``_PHI_BULK - _WALL_LOSS * S / V``
+    (wall area over volume, mean-radius units; fitted to boxes of 400 to 4000 spheres with 5 % radius spread)."""
+    a, b, c = walls.size
+    if walls.cylinder:
+        radius = 0.5 * a
+        area, volume = 2.0 * np.pi * radius * (radius + c), np.pi * radius**2 * c
+    else:
+        area, volume = 2.0 * (a * b + b * c + c * a), a * b * c
+    return _PHI_BULK - _WALL_LOSS * area / volume
+
+
+def _not_converged(run: _Attempt, max_steps: int, tol: float, phi: float) -> str:
+    why = (f"the spheres jammed (no progress in the last {_JAM_CHUNKS * _CHUNK} steps)"
+           if _jammed(run.steps, run.overlaps) else f"max_steps={max_steps} FIRE steps were not enough")
+    return (f"random packing did not converge: {why}; reached largest overlap {run.overlaps[-1]:.3g} x mean radius "
+            f"(tolerance {tol:g}) at packing fraction {phi:g}. Try a lower packing_fraction (small samples "
+            f"jam earlier: the spheres pack loosely along the walls)")
+
+
+def _reporter(progress, phi: float) -> Callable[[int, float, float, bool], None]:
+    """Progress of one attempt: a callable gets every chunk; ``True`` prints at most every ``_PRINT_EVERY`` s, and
+    a last line when the attempt packed."""
     if callable(progress):
-        return progress
-    if progress:
-        return lambda step, worst, elapsed: print(
-            f"random_packing: step {step:7d}  max overlap / mean radius {worst:.3e}  {elapsed:8.2f} s",
-            file=sys.stderr, flush=True)
-    return lambda step, worst, elapsed: None
+        return lambda step, worst, elapsed, packed: progress(step, worst, elapsed)
+    if not progress:
+        return lambda step, worst, elapsed, packed: None
+    printed = [0.0]
+
+    def report(step, worst, elapsed, packed):
+        if packed:
+            _say(True, f"packing fraction {phi:g}: packed after {step} FIRE steps ({elapsed:.2f} s)")
+        elif elapsed - printed[0] >= _PRINT_EVERY:
+            printed[0] = elapsed
+            _say(True, f"packing fraction {phi:g}: step {step:7d}  max overlap / mean radius {worst:.3e}  "
+                       f"{elapsed:8.2f} s")
+
+    return report
+
+
+def _say(progress, message: str) -> None:
+    if progress is True:
+        print(f"random_packing: {message}", file=sys.stderr, flush=True)
 
 
 # ----------------------------------------------------------------------------------------------------- from_shape

@@ -5,6 +5,8 @@ stored snapshots. Random packings are kept to a few hundred particles so the fil
 """
 
 import logging
+import subprocess
+import sys
 
 import jax
 import numpy as np
@@ -183,7 +185,8 @@ def test_packing_is_deterministic_and_reports_progress(box400, capsys, caplog):
     for name in ("positions", "radii", "bonds"):
         assert np.array_equal(getattr(again, name), getattr(box400, name))
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines and all(line.startswith("random_packing: step") for line in lines)
+    assert lines and all(line.startswith("random_packing: packing fraction 0.56: ") for line in lines)
+    assert lines[-1].startswith("random_packing: packing fraction 0.56: packed after ")
 
     calls = []
     other = g.random_packing(400, packing_fraction=0.56, seed=1, progress=lambda *a: calls.append(a))
@@ -191,6 +194,146 @@ def test_packing_is_deterministic_and_reports_progress(box400, capsys, caplog):
     steps = [c[0] for c in calls]
     assert steps == sorted(steps) and calls[-1][1] < TOL
     assert all(isinstance(c[0], int) and isinstance(c[1], float) and c[2] >= 0 for c in calls)
+
+
+def attempts(calls):
+    """Split progress calls ``(step, overlap, elapsed)`` into the attempts (the step count restarts at each)."""
+    out = []
+    for c in calls:
+        if not out or c[0] <= out[-1][-1][0]:
+            out.append([])
+        out[-1].append(c)
+    return out
+
+
+@pytest.fixture(scope="module")
+def auto400():
+    records = []
+    handler = logging.Handler()
+    handler.emit = lambda record: records.append(record.getMessage())
+    logger = logging.getLogger("jax")
+    logger.addHandler(handler)
+    calls = []
+    try:
+        with jax.log_compiles():
+            s = g.box(400, seed=0, progress=lambda *a: calls.append(a))
+    finally:
+        logger.removeHandler(handler)
+    return s, calls, records
+
+
+def test_auto_fraction_is_as_dense_as_before_and_quick(auto400):
+    # Before, 400 spheres tried 0.60 (8500 steps to jam) and 0.58 (9500), then packed 0.56 (1774 steps): now the
+    # same fraction or denser, and the fractions given up are given up quickly.
+    s, calls, records = auto400
+    check_packing(s, phi_min=0.56 - 1e-9)
+    phi = s.packing_fraction()[0]
+    assert phi in [pytest.approx(f, rel=1e-12) for f in g.AUTO_PACKING_FRACTIONS]
+    runs = attempts(calls)
+    assert len(runs) == 1 + g.AUTO_PACKING_FRACTIONS.index(round(phi, 2))
+    assert all(run[-1][0] <= 1500 and run[-1][1] >= TOL for run in runs[:-1])
+    assert runs[-1][-1][1] < TOL and sum(run[-1][0] for run in runs) < 4000
+    # one compiled FIRE chunk for all the fractions tried
+    assert sum(m.startswith("Compiling jit(run)") for m in records) == 1
+    # most bonded neighbours touch, as after an explicit packing_fraction
+    b, pos, rad = np.asarray(s.bonds), np.asarray(s.positions), np.asarray(s.radii)
+    gaps = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1) - rad[b[:, 0]] - rad[b[:, 1]]
+    assert np.mean(gaps < 2 * TOL * R) > 0.7
+
+
+def test_auto_fraction_is_deterministic(auto400, capsys):
+    again = g.box(400, seed=0, progress=True)
+    for name in ("positions", "radii", "bonds"):
+        assert np.array_equal(getattr(again, name), getattr(auto400[0], name))
+    lines = capsys.readouterr().err.strip().splitlines()
+    given_up = [line for line in lines if "given up after" in line]
+    assert len(given_up) == len(attempts(auto400[1])) - 1 and len(lines) <= 2 * len(given_up) + 2
+    assert lines[-1].startswith(f"random_packing: packing fraction {again.packing_fraction()[0]:g}: packed after")
+
+
+def test_explicit_jamming_fraction_still_raises():
+    with pytest.raises(SampleError, match=r"^random packing did not converge: the spheres jammed \(no progress in "
+                                          r"the last 5000 steps\); reached largest overlap .* at packing fraction "
+                                          r"0\.62\. Try a lower packing_fraction"):
+        g.random_packing(60, packing_fraction=0.62, seed=3)
+
+
+def test_packing_loads_only_the_neighbour_lists_of_jax_md():
+    # jax-md's package __init__ imports all of it (seconds); the packing needs two modules, and a later full import
+    # must still work, with the same module objects
+    code = ("import sys\n"
+            "from jaxbpm import generate as g\n"
+            "partition, space = g._jax_md_neighbors()\n"
+            "assert 'jax_md' not in sys.modules and 'jax_md.energy' not in sys.modules\n"
+            "import jax_md\n"
+            "assert jax_md.partition is partition and jax_md.space is space and jax_md.energy.soft_sphere\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+
+
+def geometric(rate, start=0.05, chunk=100, n=60):
+    steps = np.arange(1, n + 1) * chunk
+    return steps, start * np.exp(-rate * steps)
+
+
+def first_give_up(steps, overlaps, trial, target=TOL):
+    for k in range(1, len(steps) + 1):
+        if overlaps[k - 1] < target:
+            return None
+        if g._give_up(steps[:k], overlaps[:k], target=target, trial=trial):
+            return int(steps[k - 1])
+    return None
+
+
+def test_give_up_predicate_on_synthetic_histories():
+    assert (g._TRIAL_FROM, g._STALL_STEPS, g._STALL_DROP) == (400, 3000, 0.1)
+    # packs at step ln(50) / 0.005 = 782: kept, on trial or not, also with noise on top (the lowest value so far
+    # is what counts)
+    steps, fast = geometric(0.005)
+    assert first_give_up(steps, fast, trial=1500) is None and first_give_up(steps, fast, trial=None) is None
+    assert first_give_up(steps, fast * (1.0 + 0.3 * (np.arange(len(fast)) % 2)), trial=1500) is None
+    # packs at step 1400: kept to the end of a 1500-step trial
+    steps, late = geometric(np.log(50.0) / 1400.0)
+    assert first_give_up(steps, late, trial=1500) is None
+    # packs at step 3900: a trial is given up at step 400, where the extrapolation starts; an attempt at a
+    # fraction expected to pack is kept
+    steps, slow = geometric(0.001)
+    assert first_give_up(steps, slow, trial=1500) == 400
+    assert first_give_up(steps, slow, trial=None) is None
+    # jammed: falls from 0.06 to a plateau at 0.03 at step 1000
+    steps = np.arange(1, 101) * 100
+    jammed = np.maximum(0.06 - 3e-5 * steps, 0.03)
+    assert first_give_up(steps, jammed, trial=1500) == 400
+    assert not g._give_up(steps[:3], jammed[:3], target=TOL, trial=1500)  # too early to tell
+    assert 1000 + 0.5 * g._STALL_STEPS < first_give_up(steps, jammed, trial=None) <= 1000 + g._STALL_STEPS
+    # a trial's budget is a hard limit; slow progress (15 % per 3000 steps) is not a stall
+    assert g._give_up([100, 1500], [0.02, 0.0011], target=TOL, trial=1500)
+    assert not g._give_up([100, 1400], [0.02, 0.0011], target=TOL, trial=1500)
+    steps = np.arange(1, 200) * 100
+    assert first_give_up(steps, 0.02 * 0.85 ** (steps / 3000.0), trial=None) is None
+
+
+def test_jamming_fraction_estimate_grows_with_the_domain():
+    # boxes at 0.6 from fresh insertions: 2000 and 2500 spheres jam, 3000 pack (in 10 000 steps): the estimate
+    # must put 0.6 between them, so that 3000 spheres keep 0.6 and 2000 do not wait for it
+    def estimate(n, shape="box"):
+        return g._jamming_fraction(g._walls(shape, None, n * 4.0 / 3.0 * np.pi / 0.6, 1.05))
+
+    assert estimate(2000) < estimate(2500) < 0.6 < estimate(3000) < estimate(10_000) < g._PHI_BULK
+    assert estimate(2000, "cylinder") < 0.6 and estimate(2000, "beam") < estimate(2000)
+
+
+def test_progress_lines_are_throttled(capsys):
+    report = g._reporter(True, 0.6)
+    for k in range(100):  # 10 s of chunks every 0.1 s
+        report(100 * (k + 1), 0.01, 0.1 * (k + 1), False)
+    report(10_100, 1e-4, 10.05, True)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert 4 <= len(lines) <= 6 and lines[-1] == "random_packing: packing fraction 0.6: packed after 10100 FIRE " \
+                                                  "steps (10.05 s)"
+    calls = []
+    g._reporter(lambda *a: calls.append(a), 0.6)(5, 0.1, 0.2, False)
+    assert calls == [(5, 0.1, 0.2)]
 
 
 @pytest.mark.parametrize("shape, n, phi, aspect", [
