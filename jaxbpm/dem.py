@@ -16,8 +16,13 @@ Damping ``F_d`` is local non-viscous damping as in PFC and MUSEN: ``F_d = -alpha
 motion, which is what quasi-static loading needs; ``alpha = 0`` gives undamped, energy-conserving dynamics.
 
 Time step: :func:`critical_time_step` finds the highest natural frequency of the bonded network by power iteration on
-``M^-1/2 K M^-1/2`` (K from a Jacobian-vector product of the same forces), adds contact and wall stiffness at a
+``M^-1/2 K M^-1/2`` (K from the Jacobians of the same bond law at rest), adds contact and wall stiffness at a
 reference overlap, and returns ``dt_crit = 2 / omega_max``; the default step is ``safety * dt_crit``.
+
+Compile once: the set-up of a run is host work plus two jitted programs (the power iteration, and the initial state
+with the per-run constants); only scenes with contacts import jax-md (for its neighbour lists). A bonds-only model
+padded to a size class (``build_model(..., pad_to=...)``, :func:`pad_loading`, :func:`unpad_state`) runs the chunk
+compiled for any sample of that class.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import math
 import sys
 import time
 from typing import Any, Callable
@@ -32,15 +38,15 @@ from typing import Any, Callable
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax_md import partition, space
 
+from jaxbpm._compile import compile_clock
 from jaxbpm.errors import InstabilityError, SimulationInterrupted
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.model import Model
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
-           "potential_energy", "NeighborSettings", "progress_printer"]
+           "potential_energy", "NeighborSettings", "progress_printer", "pad_loading", "unpad_state"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +120,8 @@ def _jax_md_context():
 
 @functools.lru_cache(maxsize=32)
 def _neighbor_fns(box: tuple, cutoff: float, skin: float, capacity_multiplier: float):
+    from jax_md import partition, space  # heavy (seconds): imported by the scenes with contacts only
+
     displacement, _ = space.free()
     return partition.neighbor_list(displacement, jnp.asarray(box), r_cutoff=cutoff, dr_threshold=skin,
                                    capacity_multiplier=capacity_multiplier, format=partition.OrderedSparse)
@@ -127,7 +135,7 @@ class _Neighbors:
         self._setup(np.asarray(positions))
 
     def _setup(self, pos):
-        r_max = float(jnp.max(self.model.radii))
+        r_max = float(np.max(np.asarray(self.model.radii)))
         lo, hi = pos.min(axis=0) - r_max, pos.max(axis=0) + r_max
         pad = self.settings.box_margin * (hi - lo) + 4 * r_max
         self.origin = lo - pad
@@ -301,7 +309,18 @@ def _contact_motion(model: Model, state: DEMState, pairs, valid, dt):
 
 
 def init_state(model: Model, params, load: Loading, nbrs=None) -> DEMState:
-    """Reference configuration at rest (velocities of clamped particles as prescribed)."""
+    """Reference configuration at rest (velocities of clamped particles as prescribed), with the forces there
+    (one jitted program)."""
+    return _start(model, params, load, nbrs)[0]
+
+
+@jax.jit
+def _start(model: Model, params, load: Loading, nbrs):
+    """The initial state (see :func:`init_state`) and the per-run constants (:meth:`Model.precompute`)."""
+    return _initial_state(model, params, load, nbrs), model.precompute(params)
+
+
+def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
     n, dtype = model.n, model.positions0.dtype
     capacity = nbrs.idx.shape[1] if nbrs is not None else 0
     state = DEMState(
@@ -408,7 +427,32 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps):
 
     state, records = jax.lax.scan(body, state, None, length=n_steps)
     overflow = state.nbrs.did_buffer_overflow if model.contacts else jnp.zeros((), bool)
-    return state, records, overflow, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0)
+    finite = jnp.all(jnp.isfinite(state.positions))
+    return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0)
+
+
+def pad_loading(load: Loading, n: int) -> Loading:
+    """``load`` for a model padded to ``n`` particles: the extra ones clamped at rest (host work, no program)."""
+    clamped, velocity = np.asarray(load.clamped), np.asarray(load.velocity)
+    extra = n - clamped.shape[0]
+    if extra < 0:
+        raise ValueError(f"cannot pad a loading of {clamped.shape[0]} particles to {n}")
+    return dataclasses.replace(
+        load, clamped=jax.device_put(np.concatenate([clamped, np.ones(extra, bool)])),
+        velocity=jax.device_put(np.concatenate([velocity, np.zeros((extra, 3), velocity.dtype)])))
+
+
+def unpad_state(state: DEMState, n: int, n_bonds: int) -> DEMState:
+    """The state of the first ``n`` particles and ``n_bonds`` bonds of a padded run (sliced on the host: no
+    program is compiled for the sample's own sizes)."""
+    def cut(x, size):
+        return None if x is None else jax.device_put(np.asarray(x)[:size])
+
+    return dataclasses.replace(
+        state, positions=cut(state.positions, n), velocities=cut(state.velocities, n),
+        orientations=cut(state.orientations, n), omegas=cut(state.omegas, n), force=cut(state.force, n),
+        moment=cut(state.moment, n), intact=cut(state.intact, n_bonds), broken=cut(state.broken, n_bonds),
+        broken_time=cut(state.broken_time, n_bonds))
 
 
 def kinetic_energy(model: Model, state: DEMState):
@@ -430,14 +474,23 @@ def potential_energy(model: Model, params, state: DEMState):
 def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, iterations: int = 60) -> float:
     """Critical time step 2 / omega_max of the linearised model at rest [s].
 
-    omega_max^2 of the bonds is found by power iteration on ``M^-1/2 K M^-1/2`` (K v from a Jacobian-vector
-    product of the bond forces, translations and rotations). Contacts and walls add ``z k_c / m`` with the Hertz
-    (or cohesive-law) stiffness at an overlap of ``contact_overlap`` times the smallest radius (z = 12 neighbours,
-    1 wall).
+    omega_max^2 of the bonds is found by power iteration on ``M^-1/2 K M^-1/2`` (K v from the Jacobians of the bond
+    law at rest, translations and rotations, 81 numbers per bond; one jitted program), from a pseudo-random start
+    whose row for particle i depends on i alone, with a Rayleigh quotient summed exactly on the host: particles that
+    no bond with stiffness joins (e.g. the padding of a size class) leave the estimate unchanged to the last bit.
+    Contacts and walls add ``z k_c / m`` with the Hertz (or cohesive-law) stiffness at an overlap of
+    ``contact_overlap`` times the smallest radius (z = 12 neighbours, 1 wall).
     """
-    omega2 = float(_bond_omega2(model, params, iterations)) if model.bonds.shape[0] else 0.0
-    r_min = float(jnp.min(model.radii))
-    m_min = float(jnp.min(model.mass))
+    omega2 = 0.0
+    if model.bonds.shape[0]:
+        v0 = jax.device_put(_start_vector(model.n, model.positions0.dtype))
+        v, kv = _bond_omega2(model, params, v0, iterations=iterations)
+        v, kv = np.asarray(v, np.float64).ravel(), np.asarray(kv, np.float64).ravel()
+        # the Rayleigh quotient, exactly rounded sums: the same whatever zeros (padding) the vectors hold; it
+        # approaches omega_max^2 from below: a 2 % margin
+        omega2 = 1.02 * math.fsum(v * kv) / math.fsum(v * v) if np.all(np.isfinite(v)) else 0.0  # (no stiffness)
+    r_min = float(np.min(np.asarray(model.radii)))
+    m_min = float(np.min(np.asarray(model.mass)))
     delta = contact_overlap * r_min
     if model.contacts and model.contact_law == "cohesive":
         # linear spring-dashpot: k_N at the reference overlap; the dashpot lowers the stable step of an explicit
@@ -445,8 +498,8 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
         from jaxbpm.physics import cohesive as cohesive_mod
 
         c = model.cohesive
-        k_c = float(cohesive_mod.normal_stiffness(r_min, r_min, delta, c.E))
-        gamma = float(cohesive_mod.restitution_damping(c.restitution))
+        k_c = float(cohesive_mod.normal_stiffness(r_min, r_min, delta, float(c.E)))
+        gamma = float(cohesive_mod.restitution_damping(float(c.restitution)))
         omega2 += 12 * k_c / m_min / (np.sqrt(1.0 + gamma**2) - gamma) ** 2
     elif model.contacts:
         k_c = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r_min * delta)
@@ -460,35 +513,72 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
     return 2.0 / np.sqrt(omega2)
 
 
+def _start_vector(n: int, dtype) -> np.ndarray:
+    """``[n, 6]`` pseudo-random numbers in [-1, 1) made on the host, entry (i, k) a hash (splitmix64) of 6 i + k alone:
+    the start of the power iteration, the same for a particle whatever the number of particles after it."""
+    z = np.arange(6 * n, dtype=np.uint64) + np.uint64(0x9E3779B97F4A7C15)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return ((z >> np.uint64(11)).astype(np.float64) * 2.0**-52 - 1.0).reshape(n, 6).astype(dtype)
+
+
 @functools.partial(jax.jit, static_argnames=("iterations",))
-def _bond_omega2(model: Model, params, iterations):
+def _bond_omega2(model: Model, params, v0, iterations):
+    """The last iterate ``v`` of the power iteration on ``M^-1/2 K M^-1/2`` and ``M^-1/2 K M^-1/2 v``, ``[n, 6]``."""
+    from jaxbpm.physics.bond import bond_law
+
     n, dtype = model.n, model.positions0.dtype
     k = model.stiffness(params)
-    from jaxbpm.physics.bond import bond_forces
 
-    def f(u):
-        x = model.positions0 + u[:, :3]
-        q = rotation.from_rotation_vector(u[:, 3:]) if model.rotations else None
-        force, moment, _ = bond_forces(x, q, model.bonds, model.r0, k)
-        return jnp.concatenate([force, moment if model.rotations else jnp.zeros_like(moment)], axis=1)
+    def jacobian(r0, kn, kt, ktw, kb):
+        # one bond at rest: (f_i, m_i, m_j) against (d = x_j - x_i, the rotation vectors of i and j); a rotation
+        # vector w turns the identity by the quaternion (1, w / 2) to first order
+        def law(z):
+            one = jnp.ones(1, dtype)
+            q_i, q_j = jnp.concatenate([one, 0.5 * z[3:6]]), jnp.concatenate([one, 0.5 * z[6:]])
+            out = bond_law(r0 + z[:3], r0, q_i, q_j, kn, kt, ktw, kb)
+            return jnp.concatenate([out.f_i, out.m_i, out.m_j])
 
+        return jax.jacfwd(law)(jnp.zeros(9, dtype))
+
+    # the Jacobians once ([nb, 9, 9]: the same bond law, linearised), then each iteration is a gather, a small
+    # product and a scatter (a Jacobian-vector product of the whole force function costs ten DEM steps on CPU)
+    jac = jax.vmap(jacobian)(model.r0, k.kn, k.kt, k.ktw, k.kb)
+    if not model.rotations:
+        jac = jac[:, :3, :3]
+    i, j = model.bonds[:, 0], model.bonds[:, 1]
     scale = jnp.concatenate([jnp.broadcast_to(model.mass[:, None], (n, 3)),
                              jnp.broadcast_to(model.inertia[:, None], (n, 3))], axis=1) ** -0.5
-    u0 = jnp.zeros((n, 6), dtype)
 
     def apply(v):
-        return -scale * jax.jvp(f, (u0,), (scale * v,))[1]
+        u = scale * v
+        u_i, u_j = u[i], u[j]
+        if model.rotations:
+            z = jnp.concatenate([u_j[:, :3] - u_i[:, :3], u_i[:, 3:], u_j[:, 3:]], axis=1)
+            out = jnp.einsum("bkl,bl->bk", jac, z)
+            rows = jnp.concatenate([out[:, :6], jnp.concatenate([-out[:, :3], out[:, 6:]], axis=1)])
+        else:
+            f = jnp.einsum("bkl,bl->bk", jac, u_j[:, :3] - u_i[:, :3])
+            rows = jnp.concatenate([jnp.concatenate([f, jnp.zeros_like(f)], axis=1),
+                                    jnp.concatenate([-f, jnp.zeros_like(f)], axis=1)])
+        return -scale * jax.ops.segment_sum(rows, jnp.concatenate([i, j]), n)
 
-    v0 = jax.random.normal(jax.random.PRNGKey(0), (n, 6), dtype)
+    # particles without bond stiffness (loose ones, padding) start at rest: K is zero there, and leaving them out of
+    # the start makes every iterate, normalised by its largest entry (a maximum, in any order), the same to the bit
+    # with or without padding
+    per_bond = k.kn + k.kt + k.ktw + k.kb
+    stiff = jax.ops.segment_sum(jnp.concatenate([per_bond, per_bond]), jnp.concatenate([i, j]), n) > 0
+    v0 = jnp.where(stiff[:, None], v0, 0.0)
     if not model.rotations:
         v0 = v0.at[:, 3:].set(0.0)
 
     def body(v, _):
         w = apply(v)
-        return w / jnp.linalg.norm(w), None
+        return w / jnp.max(jnp.abs(w)), None
 
-    v, _ = jax.lax.scan(body, v0 / jnp.linalg.norm(v0), None, length=iterations)
-    return jnp.vdot(v, apply(v)) * 1.02  # Rayleigh quotient approaches from below: a 2 % margin
+    v, _ = jax.lax.scan(body, v0 / jnp.max(jnp.abs(v0)), None, length=iterations)
+    return v, apply(v)
 
 
 def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, alpha: float = 0.0,
@@ -499,8 +589,11 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
 
     records: dict of per-step arrays (``reaction [steps, W+2, 3]``, ``vmax [steps]``, ``time [steps]``; with
     breakage ``broken [steps, 2]``, the cumulative tensile and shear counts).
-    stats: compile time (first chunk minus a typical chunk; NaN for a one-chunk run) and run time [s], steps,
-    steps per second, number of neighbour-list re-allocations.
+    stats: ``wall_time`` = ``setup_time`` (neighbour list, initial state) + ``compile_time`` (tracing, compiling or
+    reading from the persistent cache the programs the run builds, see :func:`jaxbpm._compile.compile_clock`; 0 when
+    this process had them all) + ``run_time``
+    (the rest: the chunks, the checks between them, records and callbacks); ``kernel_time`` (the chunks alone),
+    steps, steps per second (the median chunk), number of neighbour-list re-allocations.
     progress: ``True`` prints progress (:func:`progress_printer`); a callable is called as
     ``progress(steps_done, steps_total, elapsed_s)`` after every chunk.
     on_chunk: called as ``on_chunk(steps_done, state, chunk_records)`` after every chunk (records of that chunk
@@ -510,42 +603,55 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     raises :class:`~jaxbpm.errors.SimulationInterrupted` carrying the state, records and stats of the chunks
     completed so far (a chunk in flight is dropped).
     """
+    with compile_clock() as compiling:
+        return _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progress, dt_crit, state,
+                         on_chunk, compiling)
+
+
+def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progress, dt_crit, state, on_chunk,
+              compiling):
     t0 = time.perf_counter()
-    r_min = float(jnp.min(model.radii))
-    nb_owner, origin = None, jnp.zeros(3, model.positions0.dtype)
+    dtype = model.positions0.dtype
+    r_min = float(np.min(np.asarray(model.radii)))
+    nb_owner, origin = None, jax.device_put(np.zeros(3, dtype))
+    clock = {"t0": t0, "compiling": compiling, "kernel": []}
     if model.contacts:
         nb_owner = _Neighbors(model, neighbors or NeighborSettings(skin=0.5 * r_min), model.positions0)
         nbrs = nb_owner.allocate(model.positions0 if state is None else state.positions)
-        origin = jnp.asarray(nb_owner.origin, model.positions0.dtype)
+        origin = jnp.asarray(nb_owner.origin, dtype)
         if state is not None and state.nbrs is not None:
             spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion)
             state = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
         elif state is not None:
-            state = dataclasses.replace(state, nbrs=nbrs, spring=jnp.zeros((nbrs.idx.shape[1], 3),
-                                                                           model.positions0.dtype))
+            state = dataclasses.replace(state, nbrs=nbrs, spring=jnp.zeros((nbrs.idx.shape[1], 3), dtype))
             if model.contact_law == "cohesive":
                 state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
     else:
         nbrs = None
     if state is None:
-        state = init_state(model, params, load, nbrs)
+        state, pre = _start(model, params, load, nbrs)
+    else:
+        pre = _precompute(model, params)
+    jax.block_until_ready((state, pre))
+    clock["setup_compile"] = compiling.seconds
     chunk = max(1, min(chunk, n_steps))
     n_chunks = -(-n_steps // chunk)  # every chunk has the same length, so the chunk function compiles once
-    pre = _precompute(model, params)
-    records, times, reallocs, stalled = [], [], 0, 0
+    records, reallocs, stalled = [], 0, 0
     crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"  # for the error messages
     report = _progress_fn(progress)
     done = state  # the state after the last completed chunk
+    clock["loop"] = time.perf_counter()
     try:
         while len(records) < n_chunks:
-            tc = time.perf_counter()
-            new, rec, overflow, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk)
+            tc, compiled = time.perf_counter(), compiling.seconds
+            new, rec, overflow, finite, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk)
             jax.block_until_ready(new.positions)
-            elapsed = time.perf_counter() - tc
+            elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
+            rec = jax.device_get(rec)
             # instability first: a blown-up chunk also overflows the neighbour buffer, and re-allocating for it
             # would only run it again (and again)
-            vmax = float(jnp.max(rec["vmax"]))
-            if not np.isfinite(vmax) or not bool(jnp.all(jnp.isfinite(new.positions))) or vmax * dt > 0.25 * r_min:
+            vmax = float(np.max(rec["vmax"]))
+            if not np.isfinite(vmax) or not bool(finite) or vmax * dt > 0.25 * r_min:
                 raise InstabilityError(
                     f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
                     f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
@@ -562,35 +668,36 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
                         f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
                 extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if bool(overflow) else 0
                 nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra)
-                origin = jnp.asarray(nb_owner.origin, model.positions0.dtype)
+                origin = jnp.asarray(nb_owner.origin, dtype)
                 spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring,
                                                   state.cohesion)
                 state = done = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
-                times = []  # the new buffer size compiles again
-                continue
-            times.append(elapsed)
+                continue  # (a new buffer size compiles the chunk again)
+            clock["kernel"].append(elapsed)
             stalled = 0
             state = done = new
-            rec = jax.device_get(rec)
             records.append(rec)
             if on_chunk is not None:
                 on_chunk(len(records) * chunk, state, rec)
             report(len(records) * chunk, n_chunks * chunk, time.perf_counter() - t0)
     except KeyboardInterrupt as err:
-        out, stats = _collect(model, done, records, times, chunk, reallocs, t0)
+        out, stats = _collect(model, done, records, chunk, reallocs, clock)
         stats.update(interrupted=True, steps_planned=n_chunks * chunk)
         raise SimulationInterrupted(done, out, stats) from err
-    out, stats = _collect(model, state, records, times, chunk, reallocs, t0)
+    out, stats = _collect(model, state, records, chunk, reallocs, clock)
     return state, out, stats
 
 
-def _collect(model, state, records, times, chunk, reallocs, t0):
-    """The records of the completed chunks, concatenated, and the run's statistics."""
-    per_chunk = float(np.median(times[1:])) if len(times) > 1 else (times[0] if times else float("nan"))
-    compile_time = max(times[0] - per_chunk, 0.0) if len(times) > 1 else float("nan")
+def _collect(model, state, records, chunk, reallocs, clock):
+    """The records of the completed chunks, concatenated, and the run's statistics (see :func:`simulate`)."""
+    kernel = clock["kernel"]
+    per_chunk = float(np.median(kernel)) if kernel else float("nan")
     out = {k: np.concatenate([r[k] for r in records]) for k in records[0]} if records else {}
-    stats = {"compile_time": compile_time, "run_time": per_chunk * len(times), "wall_time": time.perf_counter() - t0,
-             "steps": len(records) * chunk, "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
+    wall, compile_time = time.perf_counter() - clock["t0"], clock["compiling"].seconds
+    setup = clock["loop"] - clock["t0"] - clock["setup_compile"]
+    stats = {"setup_time": setup, "compile_time": compile_time, "run_time": wall - setup - compile_time,
+             "wall_time": wall, "kernel_time": float(np.sum(kernel)), "steps": len(records) * chunk,
+             "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
              "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0}
     return out, stats
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-import jax.numpy as jnp
+import jax
 import numpy as np
 
 from jaxbpm.errors import SceneError
@@ -26,6 +26,17 @@ def sample_breaks(sample: Sample, breakage) -> bool:
         return bool(breakage)
     m = sample.materials
     return bool(np.isfinite(m.tensile_strength).any() or np.isfinite(m.shear_strength).any())
+
+
+def _loading(clamped, velocity, wall_points=None, wall_normals=None, wall_velocity=None):
+    """A :class:`~jaxbpm.dem.Loading` from NumPy arrays (moved to the device as they are: no program is compiled)."""
+    from jaxbpm.dem import Loading
+
+    dtype = np.dtype(jax.dtypes.canonicalize_dtype(np.float64))
+    empty = np.zeros((0, 3))
+    put = lambda a, t=dtype: jax.device_put(np.asarray(empty if a is None else a, t))  # noqa: E731
+    return Loading(clamped=put(clamped, bool), velocity=put(velocity), wall_points0=put(wall_points),
+                   wall_normals=put(wall_normals), wall_velocity=put(wall_velocity))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -165,26 +176,18 @@ class UniaxialCompression:
 
     def loading(self, sample: Sample, speed: float):
         """DEM boundary conditions for a compression at ``speed`` [m/s] of the driven set / top wall."""
-        from jaxbpm.dem import Loading
-
         n, ax = sample.n_particles, self.axis
-        dtype = jnp.asarray(1.0).dtype
         e = np.zeros(3)
         e[ax] = 1.0
         if self.uses_walls:
             pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
             lo, hi = (pos[:, ax] - rad).min(), (pos[:, ax] + rad).max()
-            points = np.stack([lo * e, hi * e])
-            normals = np.stack([e, -e])
-            return Loading(clamped=jnp.zeros(n, bool), velocity=jnp.zeros((n, 3), dtype),
-                           wall_points0=jnp.asarray(points, dtype), wall_normals=jnp.asarray(normals, dtype),
-                           wall_velocity=jnp.asarray(np.stack([0 * e, -speed * e]), dtype))
+            return _loading(np.zeros(n, bool), np.zeros((n, 3)), np.stack([lo * e, hi * e]), np.stack([e, -e]),
+                            np.stack([0 * e, -speed * e]))
         fixed, driven = self.layers(sample)
         vel = np.zeros((n, 3))
         vel[driven] = -speed * e
-        empty = jnp.zeros((0, 3), dtype)
-        return Loading(clamped=jnp.asarray(fixed | driven), velocity=jnp.asarray(vel, dtype), wall_points0=empty,
-                       wall_normals=empty, wall_velocity=empty)
+        return _loading(fixed | driven, vel)
 
     def modulus(self, stiffness: float, sample: Sample) -> float:
         """Young's modulus E = K l / A [Pa]."""
@@ -314,16 +317,11 @@ class ThreePointBending:
         return build_model(sample, **kw)
 
     def loading(self, sample: Sample, speed: float):
-        from jaxbpm.dem import Loading
-
+        """DEM boundary conditions: supports fixed, punch moved down at ``speed`` [m/s]."""
         supports, punch = self.layers(sample)
-        n = sample.n_particles
-        dtype = jnp.asarray(1.0).dtype
-        vel = np.zeros((n, 3))
+        vel = np.zeros((sample.n_particles, 3))
         vel[punch, self.axis] = -speed
-        empty = jnp.zeros((0, 3), dtype)
-        return Loading(clamped=jnp.asarray(supports | punch), velocity=jnp.asarray(vel, dtype), wall_points0=empty,
-                       wall_normals=empty, wall_velocity=empty)
+        return _loading(supports | punch, vel)
 
     def compressive_force(self, reaction: np.ndarray) -> np.ndarray:
         """Punch force [N] (mean of the punch's push and the supports' reaction)."""

@@ -18,6 +18,7 @@ Parameters that calibrators change live in a small pytree ``params = {"bond_E": 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 from typing import Any
 
@@ -36,7 +37,18 @@ __all__ = ["Model", "build_model", "default_params"]
 
 def default_params(sample: Sample) -> dict:
     """The calibratable parameters of ``sample`` at their current values: ``{"bond_E", "bond_nu"}``."""
-    return {"bond_E": jnp.asarray(sample.materials.E), "bond_nu": jnp.asarray(sample.materials.nu)}
+    dtype = _float_dtype()
+    return {"bond_E": _put(sample.materials.E, dtype), "bond_nu": _put(sample.materials.nu, dtype)}
+
+
+def _float_dtype():
+    """float64 with ``jax_enable_x64``, float32 without (no array is made: that would compile a program)."""
+    return np.dtype(jax.dtypes.canonicalize_dtype(np.float64))
+
+
+def _put(x, dtype):
+    """A NumPy array (converted on the host) on the device: a transfer, never a compiled program."""
+    return jax.device_put(np.asarray(x, dtype))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,8 +110,13 @@ class Model:
         cohesion = jnp.asarray(get("bond_shear_strength", self.bond_cohesion))[mat]
         phi = get("bond_friction_angle", None)
         tan_phi = jnp.zeros_like(cohesion) if phi is None else jnp.tan(jnp.asarray(phi))[mat]
-        return bond_mod.BondStrength(tensile=tensile, cohesion=cohesion, tan_phi=tan_phi, radius=self.bond_radius,
-                                     area=self.bond_area, inertia=self.bond_I, polar=self.bond_J)
+        # a bond without cross-section (the padding of a size class) carries nothing and never breaks: infinite
+        # strengths, and a unit section so that its (zero) stresses are not 0 / 0
+        solid = self.bond_area > 0
+        area, inertia, polar = (jnp.where(solid, a, 1.0) for a in (self.bond_area, self.bond_I, self.bond_J))
+        return bond_mod.BondStrength(tensile=jnp.where(solid, tensile, jnp.inf),
+                                     cohesion=jnp.where(solid, cohesion, jnp.inf), tan_phi=tan_phi,
+                                     radius=self.bond_radius, area=area, inertia=inertia, polar=polar)
 
     #: params keys that override the cohesive law's scalars (see :meth:`cohesive_params`)
     COHESIVE_KEYS = {"contact_E": "E", "contact_nu": "nu", "friction": "friction", "restitution": "restitution",
@@ -187,7 +204,7 @@ jax.tree_util.register_dataclass(
 
 def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = None, rotations: bool | None = None,
                 contact_damping: bool = False, wall_stiffness: float | None = None,
-                breakage: bool = False, contact_law="hertz", cohesive=None) -> Model:
+                breakage: bool = False, contact_law="hertz", cohesive=None, pad_to=None) -> Model:
     """A :class:`Model` of ``sample`` with just the interactions asked for.
 
     rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
@@ -199,6 +216,15 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
     cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
     ``contact_law="cohesive"``. Particles with cohesive contacts and no bonds do not rotate by default (Irazabal et al.
     2023).
+    pad_to: ``(particles, bonds)`` capacities (a :class:`~jaxbpm._compile.SizeClass`) to pad a bonds-only model to,
+    so that the samples of one size class share compiled programs. The sample's particles and bonds come first; the
+    extra particles lie in a row beyond the sample, with the largest radius, mass and moment of inertia of the
+    sample's particles (so its minima and maxima stay those of the sample); the extra bonds join pairs of distinct
+    extra particles, with a zero cross-section (no stiffness, no force: ``r0`` is their actual distance) and unit
+    length, and never break. A padded model's DEM loading clamps the extra particles at rest
+    (:func:`jaxbpm.dem.pad_loading`) and its state holds the sample's first (:func:`jaxbpm.dem.unpad_state`). Not
+    with contacts or walls (they would see the extra particles). The setup is NumPy on the host: building a model compiles no program (beyond one, once
+    per process, for the contact parameters).
     """
     pm = sample.particle_material
     law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
@@ -207,16 +233,10 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
             rotations = sample.n_bonds > 0
         else:
             rotations = sample.n_bonds > 0 or (contacts and float(pm.friction) > 0)
-    dtype = jnp.asarray(1.0).dtype
-    if dtype != jnp.float64:
+    dtype = _float_dtype()
+    if dtype != np.float64:
         warnings.warn("jaxbpm: JAX is running in float32; bonded-particle stiffness solves lose precision. "
                       "Call jax.config.update('jax_enable_x64', True) first.", stacklevel=3)
-    pos = jnp.asarray(sample.positions, dtype)
-    bonds = np.asarray(sample.bonds)
-    n = sample.n_particles
-    all_keys = bonds[:, 0].astype(np.int64) * n + bonds[:, 1]
-    key_index = np.argsort(all_keys, kind="stable")
-    keys = all_keys[key_index]
     mats = sample.materials
     if walls == "hertz":
         ws = float(pm.E) / (1.0 - float(pm.nu) ** 2) if wall_stiffness is None else wall_stiffness
@@ -228,27 +248,36 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         ws = 0.0
     else:
         raise ValueError(f"unknown wall law {walls!r}; use 'hertz', 'linear' or None")
+    arrays = {"positions0": np.asarray(sample.positions, np.float64), "radii": np.asarray(sample.radii, np.float64),
+              "mass": np.asarray(sample.mass, np.float64), "inertia": np.asarray(sample.inertia, np.float64),
+              "bonds": np.asarray(sample.bonds, np.int64).reshape(-1, 2),
+              "bond_material": np.asarray(sample.bond_material, np.int64),
+              "bond_area": np.asarray(sample.bond_area, np.float64), "bond_I": np.asarray(sample.bond_I, np.float64),
+              "bond_J": np.asarray(sample.bond_J, np.float64),
+              "bond_length": np.asarray(sample.bond_length, np.float64),
+              "bond_radius": np.asarray(sample.bond_radius, np.float64)}
+    if pad_to is not None:
+        if contacts or walls is not None:
+            raise ValueError("pad_to pads bonds-only models: contacts and walls would see the extra particles")
+        arrays = _padded(arrays, int(pad_to[0]), int(pad_to[1]))
+    pos, bonds = arrays["positions0"], arrays["bonds"]
+    n = pos.shape[0]
+    all_keys = bonds[:, 0] * n + bonds[:, 1]
+    key_index = np.argsort(all_keys, kind="stable")
+    keys = all_keys[key_index]
+    floats = {k: _put(v, dtype) for k, v in arrays.items() if v.dtype == np.float64}
     return Model(
-        positions0=pos,
-        radii=jnp.asarray(sample.radii, dtype),
-        mass=jnp.asarray(sample.mass, dtype),
-        inertia=jnp.asarray(sample.inertia, dtype),
-        bonds=jnp.asarray(bonds, jnp.int32),
-        r0=pos[bonds[:, 1]] - pos[bonds[:, 0]],
-        bond_material=jnp.asarray(sample.bond_material, jnp.int32),
-        bond_area=jnp.asarray(sample.bond_area, dtype),
-        bond_I=jnp.asarray(sample.bond_I, dtype),
-        bond_J=jnp.asarray(sample.bond_J, dtype),
-        bond_length=jnp.asarray(sample.bond_length, dtype),
-        bond_keys=jnp.asarray(keys if jax.config.jax_enable_x64 else keys.astype(np.int32)),
-        bond_key_index=jnp.asarray(key_index, jnp.int32),
-        bond_radius=jnp.asarray(sample.bond_radius, dtype),
-        bond_tensile=jnp.asarray(mats.tensile_strength, dtype),
-        bond_cohesion=jnp.asarray(mats.shear_strength, dtype),
-        contact=contact_mod.contact_params(jnp.asarray(pm.E, dtype), jnp.asarray(pm.nu, dtype),
-                                           jnp.asarray(pm.friction, dtype), jnp.asarray(pm.restitution, dtype),
-                                           damping=contact_damping),
-        wall_stiffness=jnp.asarray(ws, dtype),
+        **floats,
+        bonds=_put(bonds, np.int32),
+        r0=_put(pos[bonds[:, 1]] - pos[bonds[:, 0]], dtype),
+        bond_material=_put(arrays["bond_material"], np.int32),
+        bond_keys=_put(keys, np.int64 if jax.config.jax_enable_x64 else np.int32),
+        bond_key_index=_put(key_index, np.int32),
+        bond_tensile=_put(mats.tensile_strength, dtype),
+        bond_cohesion=_put(mats.shear_strength, dtype),
+        contact=_contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
+                                bool(contact_damping)),
+        wall_stiffness=_put(ws, dtype),
         rotations=bool(rotations),
         contacts=bool(contacts),
         walls=walls,
@@ -257,3 +286,43 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         cohesive=None if law is None else law.params(pm, dtype),
         contact_law="hertz" if law is None else "cohesive",
     )
+
+
+def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:
+    """The NumPy arrays of :func:`build_model` padded to ``n_cap`` particles and ``nb_cap`` bonds (see its
+    ``pad_to``)."""
+    pos, n, nb = arrays["positions0"], arrays["positions0"].shape[0], arrays["bonds"].shape[0]
+    if n_cap < n or nb_cap < nb or (nb_cap > nb and n_cap < n + 2):
+        raise ValueError(f"cannot pad {n} particles and {nb} bonds to ({n_cap}, {nb_cap}): padding bonds need two "
+                         "extra particles")
+    r_max = float(arrays["radii"].max())
+    row = np.arange(1, n_cap - n + 1, dtype=np.float64)[:, None] * np.array([4.0 * r_max, 0.0, 0.0])
+    extra_n, extra_b = n_cap - n, nb_cap - nb
+
+    def grow(name, fill, count, shape=()):
+        a = arrays[name]
+        return np.concatenate([a, np.full((count, *shape), fill, a.dtype)])
+
+    out = dict(arrays)
+    out["positions0"] = np.concatenate([pos, pos.max(axis=0) + row])
+    for name in ("radii", "mass", "inertia"):
+        out[name] = grow(name, arrays[name].max(), extra_n)
+    # spread over the extra particles (many bonds on one pair would make the scatter of forces slow)
+    ring = np.arange(extra_b, dtype=np.int64) % extra_n
+    out["bonds"] = np.concatenate([arrays["bonds"], np.stack([n + ring, n + (ring + 1) % extra_n], axis=1)])
+    out["bond_material"] = grow("bond_material", 0, extra_b)
+    for name in ("bond_area", "bond_I", "bond_J", "bond_radius"):
+        out[name] = grow(name, 0.0, extra_b)
+    out["bond_length"] = grow("bond_length", 1.0, extra_b)
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str, damping: bool):
+    """:func:`jaxbpm.physics.contact.contact_params` as one small program (not a dozen eager operations), once per
+    material."""
+    a = lambda v: np.asarray(v, dtype)  # noqa: E731
+    return _contact_params_jit(a(E), a(nu), a(friction), a(restitution), damping=damping)
+
+
+_contact_params_jit = jax.jit(contact_mod.contact_params, static_argnames=("damping",))
