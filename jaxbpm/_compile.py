@@ -26,7 +26,13 @@ from typing import Any, Callable
 import jax
 import numpy as np
 
-__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "compile_clock", "count_compilations"]
+__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "compile_clock", "count_compilations", "put"]
+
+
+def put(a, dtype=None) -> jax.Array:
+    """A host array (or scalar) on the default device as ``dtype``. Unlike ``jnp.asarray``, which builds a small XLA
+    program per shape for most dtypes, this compiles nothing: setup code uses it for everything it builds in NumPy."""
+    return jax.device_put(np.asarray(a, dtype))
 
 
 def capacity(count: int, minimum: int = 8) -> int:
@@ -54,20 +60,35 @@ class SizeClass(tuple):
 
 
 def _per_particle(count: int, n: int, n_cap: int) -> int:
-    """``count`` items on ``n`` particles padded to ``n_cap`` at a multiple of 1/2 item per particle (at least one
-    spare slot)."""
+    """Room for ``count`` items on ``n`` particles padded to ``n_cap``: their count per particle with 0.15 to spare,
+    rounded up to a quarter, times ``n_cap`` (and one spare slot at least)."""
     if count == 0:
         return 0
-    ratio = math.ceil(2.0 * count / max(n, 1) + 1e-9) / 2.0
+    ratio = math.ceil(4.0 * (count / max(n, 1) + 0.15)) / 4.0
     return max(int(math.ceil(ratio * n_cap)), count + 1)
 
 
+# the size classes handed out in this process, per particle capacity: a sample that fits one of them (at most 25 %
+# larger than the class it would get on its own) reuses it, so that samples whose bond count per particle straddles
+# a step of the ladder still share their programs
+_classes: dict[int, set] = collections.defaultdict(set)
+
+
 def size_class(n_particles: int, n_bonds: int, n_contacts: int = 0) -> SizeClass:
-    """The padded capacities of a sample: particles on the :func:`capacity` ladder (one spare particle at least, which
-    padding bonds connect to), bonds and contacts at the particles' capacity times their count per particle rounded up
-    to a half."""
+    """The padded capacities of a sample: particles on the :func:`capacity` ladder (two spare particles at least,
+    which padding bonds connect to); bonds and contacts at the particles' capacity times their count per particle
+    with 0.15 to spare, rounded up to a quarter -- or the smallest class already handed out in this process for that
+    particle capacity which has room for them and is at most 25 % larger."""
     n_cap = capacity(n_particles + 2)
-    return SizeClass(n_cap, _per_particle(n_bonds, n_particles, n_cap), _per_particle(n_contacts, n_particles, n_cap))
+    own = SizeClass(n_cap, _per_particle(n_bonds, n_particles, n_cap),
+                    _per_particle(n_contacts, n_particles, n_cap))
+    fits = [c for c in _classes[n_cap]
+            if n_bonds < c.bonds <= 1.25 * own.bonds or (n_bonds == 0 and c.bonds == 0)
+            if n_contacts < c.contacts <= 1.25 * own.contacts or (n_contacts == 0 and c.contacts == 0)]
+    if fits:
+        return min(fits, key=lambda c: (c.bonds, c.contacts))
+    _classes[n_cap].add(own)
+    return own
 
 
 def _signature(args, static) -> tuple:

@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import Program, SetupCache, capacity, compile_clock, size_class
+from jaxbpm._compile import Program, SetupCache, capacity, compile_clock, put, size_class
 from jaxbpm.errors import ConvergenceError, SceneError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import contact as contact_mod
@@ -249,7 +249,7 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
     reduced, err = _geometry_parts(model)
     if not float(err) < 1e-10:
         raise RuntimeError(f"bond stiffness is not of the form E (k_E + k_G / (2 (1 + nu))) (mismatch {err:.3g})")
-    geometry = BondGeometry(reduced=reduced, packed=jax.vmap(packed_jacobians)(reduced))
+    geometry = BondGeometry(reduced=reduced, packed=_packed_all(reduced))
     nd = 6 if model.rotations else 3
     per_material = 2 * (model.n * nd * nd + (0 if coarse is None else (6 * coarse.count) ** 2))
     if (n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS
@@ -341,6 +341,9 @@ def packed_jacobians(jr) -> jnp.ndarray:
     if jr.shape[0] == 9:
         parts += blk(0, 3, False) + blk(0, 6, False) + blk(3, 3, True) + blk(3, 6, False) + blk(6, 6, True)
     return jnp.stack(parts)
+
+
+_packed_all = jax.jit(jax.vmap(packed_jacobians))
 
 
 def _symmetrised(jr) -> jnp.ndarray:
@@ -581,8 +584,8 @@ def coarse_space(model: Model, free, *, aggregate_size=None) -> CoarseSpace:
     # a bond inside one aggregate with both ends free moves rigidly under every coarse mode: it adds nothing
     coupling = np.flatnonzero((labels[b[:, 0]] != labels[b[:, 1]]) | held[b[:, 0]] | held[b[:, 1]])
     dtype = model.positions0.dtype
-    return CoarseSpace(labels=jnp.asarray(labels, jnp.int32), basis=jnp.asarray(basis, dtype),
-                       bonds=jnp.asarray(coupling, jnp.int32), count=count)
+    return CoarseSpace(labels=put(labels, np.int32), basis=put(basis, dtype),
+                       bonds=put(coupling, np.int32), count=count)
 
 
 def _coarse_factor(model: Model, jac, coarse: CoarseSpace):
@@ -918,7 +921,7 @@ def _contact_candidates(sample, model, skin):
         gap = np.linalg.norm(pos[pairs[:, 1]] - pos[pairs[:, 0]], axis=1) - rad[pairs[:, 0]] - rad[pairs[:, 1]]
         pairs = pairs[gap < skin]
     if sample.bond_contact == "replace" and len(pairs):
-        bonded = np.asarray(model.bonded(jnp.asarray(pairs, jnp.int32)))
+        bonded = np.asarray(model.bonded(put(pairs, np.int32)))
         pairs = pairs[~bonded]
     return pairs.astype(np.int32)
 
@@ -1016,7 +1019,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
                 widest_skin, _LINEAR_REACH * frac * scene.strain * 2.0 * float(np.mean(sample.radii)))
         pairs = _contact_candidates(sample, model, skin)
         if frac is not None:
-            lin = [jnp.asarray(pairs, jnp.int32), _affine_field(sample, model, ax, delta),
+            lin = [put(pairs, np.int32), _affine_field(sample, model, ax, delta),
                    jnp.asarray(frac, model.positions0.dtype), None]
     touching = None
     if scene.uses_walls:
@@ -1040,8 +1043,8 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             # one coarse space (its aggregates do not depend on the springs): the bonds' part of the coarse matrix
             # comes from the bond geometry, the contacts' part is assembled from the pairs that couple its modes
             nb, cb = model.bonds.shape[0], np.asarray(coarse.bonds)
-            lin[3] = dataclasses.replace(coarse, bonds=jnp.asarray(cb[cb >= nb] - nb, jnp.int32))
-            coarse = dataclasses.replace(coarse, bonds=jnp.asarray(cb[cb < nb], jnp.int32))
+            lin[3] = dataclasses.replace(coarse, bonds=put(cb[cb >= nb] - nb, np.int32))
+            coarse = dataclasses.replace(coarse, bonds=put(cb[cb < nb], np.int32))
         lin = None if lin is None else tuple(lin)
         geometry = None
         if operator in ("auto", "jacobians"):
@@ -1144,8 +1147,8 @@ def _linear_setup(sample, scene, rotations, operator, preconditioner, aggregate_
     if operator in ("auto", "jacobians"):
         geometry = bond_geometry(model, coarse, n_materials=n_materials)
     dtype = model.positions0.dtype
-    return _LinearSetup(model=model, free=jnp.asarray(free_np), u_p=jnp.asarray(u_p, dtype), coarse=coarse,
-                        geometry=geometry, guess=jnp.asarray(guess, dtype), n=n, nb=nb, free_dofs=free_dofs,
+    return _LinearSetup(model=model, free=put(free_np), u_p=put(u_p, dtype), coarse=coarse,
+                        geometry=geometry, guess=put(guess, dtype), n=n, nb=nb, free_dofs=free_dofs,
                         delta=delta)
 
 
@@ -1161,8 +1164,9 @@ def _pad_coarse(coarse: CoarseSpace, n_cap: int, nb: int, nb_cap: int, aggregate
     labels = pad_rows(coarse.labels, n_cap, count - 1)
     basis = pad_rows(coarse.basis, n_cap, 0.0)
     bonds = pad_rows(coarse.bonds, nb_cap, nb)
-    return CoarseSpace(labels=jnp.asarray(labels, jnp.int32), basis=jnp.asarray(basis, coarse.basis.dtype),
-                       bonds=jnp.asarray(bonds, jnp.int32), count=count)
+    return CoarseSpace(labels=put(labels, np.int32),
+                       basis=jnp.asarray(basis, coarse.basis.dtype),
+                       bonds=put(bonds, np.int32), count=count)
 
 
 def _linear_outputs(model, params, free, u_p, tol, stiffness_tol, coarse, geometry, guess, maxiter, operator):

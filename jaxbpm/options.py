@@ -51,7 +51,9 @@ def _optional_whole(name, v, minimum=1):
 def _choice(*allowed):
     def check(name, v):
         if v not in allowed:
-            raise SceneError(f"{name} must be one of {allowed}, got {v!r}")
+            names = [repr(a) for a in allowed]
+            choices = " or ".join(names) if len(names) == 2 else "one of " + ", ".join(names)
+            raise SceneError(f"{name} must be {choices}, got {v!r}")
     return check
 
 

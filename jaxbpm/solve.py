@@ -16,8 +16,13 @@ __all__ = ["solve", "METHODS"]
 METHODS = ("dem", "dsm", "ste")
 
 
-def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options) -> Result:
+def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Result:
     """Solve ``scene`` on ``sample`` with ``method`` and return a :class:`~jaxbpm.result.Result`.
+
+    method: ``"dem"``, ``"dsm"`` or ``"ste"`` with keyword options, or an options object -- ``jaxbpm.DEM(...)``,
+    ``jaxbpm.DSM(...)``, ``jaxbpm.STE(...)`` (:mod:`jaxbpm.options`: checked when built, hashable) -- whose options
+    keywords given here override. An unknown option raises :class:`~jaxbpm.errors.SceneError` with the closest
+    names.
 
     params: ``{"bond_E": [...], "bond_nu": [...]}`` overriding the sample's material table (for calibration).
     options for ``"dem"``: ``dt`` (time step [s], default ``safety`` x critical), ``safety`` (0.5), ``damping`` (local
@@ -32,7 +37,15 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     ``break_mode`` and ``broken_time``). A ``KeyboardInterrupt`` during the run (Ctrl-C, or raised by the
     ``progress`` callable) raises :class:`~jaxbpm.errors.SimulationInterrupted`, whose ``result`` is the
     :class:`Result` of the part that was run (``interrupted=True``; the record file is kept, status
-    ``"interrupted"``).
+    ``"interrupted"``). ``pad`` (True): a bonds-only scene (no contacts, no walls) runs on the sample padded to its
+    size class (:func:`jaxbpm._compile.size_class`: extra particles clamped at rest, joined by bonds without
+    stiffness that never break), so that another sample of that class reuses the compiled programs; curves, time
+    step, records, frames and the returned state are the sample's own (``pad=False`` runs the sample as it is). The
+    default ``chunk`` is a power of two (32 to 4096 steps, 20-40 chunks a run where that range allows), so that
+    samples with about the same number of steps share the compiled chunk. ``Result.setup_time`` is what comes
+    before the first chunk (model, time step, loading, neighbour list, padding, initial state), ``compile_time`` the
+    tracing and compiling of the programs the solve builds (0 when the process had them) and ``run_time`` the rest
+    (the chunks and the work between them).
     options for ``"dsm"``: ``dofs`` (3 or 6 per particle; default: the Model's choice, 6 with bonds), ``nonlinear``
     (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
     ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
@@ -49,15 +62,20 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
     of the strain, first of the affine field, then of the previous solution (``contact_passes``, 2; each pass
     starts from the previous one's displacements and all but the last stop once the strain energy has settled to
     1 %); the stats hold the candidates, how many touch, the largest gap at rest of a touching pair and the
-    reach's retries (a warning when a given ``contact_skin`` is that close).
+    reach's retries (a warning when a given ``contact_skin`` is that close). ``pad`` (True): the linear bonds-only solve runs on the sample
+    padded to its size class (held padding particles, bonds without stiffness; same answer to round-off), so that
+    samples of a class share one compiled program; its setup is kept for the last few samples, so a second solve of
+    one sample costs the solve alone.
     options for ``"ste"`` (stiffness tensor estimation, no displacement computed): ``dofs`` (3, the paper's
     translations-only form, or 6), ``first_neighbour`` (Eq. 33-35 instead of Eq. 32), ``layered`` (layered
     springs in series along the load, for porous or shaped bodies), ``layer_thickness`` [m], ``contact_fraction``
     (contacts: fraction of the target strain at which Hertz contacts are linearised), ``volumes`` (``[n]`` particle
-    volumes V^n), ``precision`` (``"float64"``, or ``"float32"``: 2-3x faster, ~1e-7 relative change). The stats hold the Voigt tensor, E_x, E_y, E_z, nu, an isotropic fit and the skipped particles.
+    volumes V^n), ``precision`` (``"float64"``, or ``"float32"``: 2-3x faster, ~1e-7 relative change). ``pad``
+    (True: the estimator is padded to the sample's size class and kept for the last few samples, as for the DSM). The stats hold the Voigt tensor, E_x, E_y, E_z, nu, an isotropic fit and the skipped particles.
     """
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
+    from jaxbpm.options import options_for
+
+    method, options = options_for(method, options)
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
     if method != "dem" and getattr(scene, "contacts", False) and getattr(scene, "cohesive_law", None) is not None:
@@ -76,16 +94,33 @@ def solve(sample: Sample, scene, method: str = "dem", *, params=None, **options)
 
 def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
                chunk=None, progress=False, neighbors=None, max_records=2000, record_to=None, snapshots=None,
-               vtu=None) -> Result:
+               vtu=None, pad=True) -> Result:
+    t0 = time.perf_counter()
+    from jaxbpm._compile import compile_clock
+
+    with compile_clock() as compiling:  # (the setup's compilations count as compile time)
+        return _run_dem(t0, compiling, sample, scene, params, dt=dt, safety=safety, damping=damping,
+                        loading_time=loading_time, transits=transits, chunk=chunk, progress=progress,
+                        neighbors=neighbors, max_records=max_records, record_to=record_to, snapshots=snapshots,
+                        vtu=vtu, pad=pad)
+
+
+def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loading_time, transits, chunk, progress,
+             neighbors, max_records, record_to, snapshots, vtu, pad) -> Result:
     from jaxbpm import dem
+    from jaxbpm._compile import size_class
     from jaxbpm.errors import SimulationInterrupted
     from jaxbpm.physics.model import default_params
 
     from jaxbpm.scenes import sample_breaks
 
-    t0 = time.perf_counter()
     breaks = sample_breaks(sample, getattr(scene, "breakage", False))
-    model = scene.model(sample, breakage=breaks)
+    # bonds only (no contacts, no walls): the model is padded to the sample's size class, so that the next sample of
+    # that class reuses the compiled programs (the extra particles and bonds never act: see build_model's pad_to)
+    size = None
+    if pad and not getattr(scene, "contacts", True) and not getattr(scene, "uses_walls", True):
+        size = size_class(sample.n_particles, sample.n_bonds)
+    model = scene.model(sample, breakage=breaks, **({} if size is None else {"pad_to": size}))
     params = default_params(sample) if params is None else params
     if (snapshots is None) != (vtu is None):
         raise SceneError("snapshots=K and vtu='dir/run.pvd' go together: give both or neither")
@@ -109,10 +144,11 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     if loading_time is None:
         # a wave crossing the sample along its longest loaded path (the gauge length; a beam's span)
         path = scene.transit_length(sample) if hasattr(scene, "transit_length") else length
-        loading_time = transits * _transit_time(model, params, path)
+        loading_time = transits * _transit_time(sample, model, params, path)
     n_steps = int(np.ceil(loading_time / dt))
     if chunk is None:
-        chunk = int(np.clip(n_steps // 20, 50, 5000))
+        # a power of two: samples with about the same number of steps share the compiled chunk
+        chunk = 1 << int(np.log2(np.clip(n_steps // 20, 32, 4096)))
         if snapshots is not None and snapshots > 1:  # at least one chunk per frame after the first
             chunk = max(1, min(chunk, n_steps // (snapshots - 1)))
     n_steps = -(-n_steps // chunk) * chunk
@@ -120,6 +156,8 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
     speed = target / (n_steps * dt)
     n_chunks = n_steps // chunk
     load = scene.loading(sample, speed)
+    if size is not None:
+        load = dem.pad_loading(load, size.particles)
     if progress is True:
         progress = dem.progress_printer(strain_per_step=speed * dt / length)
     run_attrs = dict(method="dem", scene=type(scene).__name__, dt=float(dt), dt_crit=float(dt_crit),
@@ -153,6 +191,9 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
         for w in writers:
             w(done, state, rec)
 
+    def unpadded(state):
+        return state if size is None else dem.unpad_state(state, sample.n_particles, sample.n_bonds)
+
     def finish(state, rec, stats, interrupted):
         disp = speed * rec["time"] if rec else np.zeros(0)
         force = scene.compressive_force(rec["reaction"]) if rec else np.zeros(0)
@@ -165,7 +206,12 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
         keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
         stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
                      damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks,
-                     contact_law=model.contact_law, interrupted=interrupted)
+                     contact_law=model.contact_law, interrupted=interrupted,
+                     padded_to=None if size is None else (size.particles, size.bonds))
+        # wall = setup (before the first chunk, less the compilations in it) + compile + run (the rest)
+        setup = t_sim - t0 - setup_compile + stats["setup_time"]
+        compile_time = compiling.seconds
+        stats.update(setup_time=setup, compile_time=compile_time)
         if record_to is not None:
             stats["record_file"] = str(record_to)
         if snapshots is not None:
@@ -185,21 +231,27 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
                 stats["past_peak"] = bool(peak < len(force) - 1 and force[-1] < force[peak])
         modulus = scene.modulus(stiffness, sample) if hasattr(scene, "modulus") else stiffness * length / area
         if recorder is not None:
+            wall = time.perf_counter() - t0
+            stats.update(wall_time=wall, run_time=wall - setup - compile_time)
             recorder.finish("interrupted" if interrupted else "complete",
-                            {k: v for k, v in stats.items() if k != "broken_curve"})
+                            {k: v for k, v in stats.items() if k not in ("broken_curve", "padded_to")})
+        wall = time.perf_counter() - t0
+        stats.update(wall_time=wall, run_time=wall - setup - compile_time)
         return Result(method="dem", stiffness=stiffness, youngs_modulus=modulus, gauge_length=length,
-                      area=area, displacement=disp[keep], force=force[keep], wall_time=time.perf_counter() - t0,
-                      compile_time=stats["compile_time"], run_time=stats["run_time"], stats=stats, state=state,
-                      interrupted=interrupted)
+                      area=area, displacement=disp[keep], force=force[keep], wall_time=wall,
+                      setup_time=setup, compile_time=compile_time, run_time=wall - setup - compile_time,
+                      stats=stats, state=state, interrupted=interrupted)
 
+    t_sim, setup_compile = time.perf_counter(), compiling.seconds
     try:
         state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping,
                                          chunk=chunk, neighbors=neighbors, progress=progress, dt_crit=dt_crit,
                                          on_chunk=on_chunk if writers else None)
     except SimulationInterrupted as stop:
+        stop.state = unpadded(stop.state)
         stop.result = finish(stop.state, stop.records, stop.stats, True)
         raise
-    return finish(state, rec, stats, False)
+    return finish(unpadded(state), rec, stats, False)
 
 
 def _snapshot_writer(sample, model, vtu, snapshots, n_chunks, chunk):
@@ -223,10 +275,10 @@ def _write_frame(series, model, state, sample, t):
     if state is None:  # at rest
         pos, vel, frc = np.asarray(sample.positions), np.zeros((n, 3)), np.zeros((n, 3))
         mode, when = np.zeros(nb, np.int32), np.full(nb, np.nan)
-    else:
-        pos, vel, frc = (np.asarray(a, np.float64) for a in (state.positions, state.velocities, state.force))
-        mode = np.asarray(state.broken, np.int32)
-        when = np.asarray(state.broken_time, np.float64)
+    else:  # (the state of a padded run holds the sample's particles and bonds first)
+        pos, vel, frc = (np.asarray(a, np.float64)[:n] for a in (state.positions, state.velocities, state.force))
+        mode = np.asarray(state.broken, np.int32)[:nb]
+        when = np.asarray(state.broken_time, np.float64)[:nb]
     b = np.asarray(sample.bonds)
     point = {"velocity": vel, "force": frc,
              "broken_tensile": np.bincount(b[mode == 1].ravel(), minlength=n).astype(np.int32),
@@ -235,18 +287,23 @@ def _write_frame(series, model, state, sample, t):
                  bond_data={"break_mode": mode, "broken_time": when})
 
 
-def _transit_time(model, params, length) -> float:
-    """Time for an elastic wave to cross ``length``, from the mean bond (or contact) stiffness and particle mass."""
-    m = float(np.mean(model.mass))
-    if model.bonds.shape[0]:
-        k = model.stiffness(params)
-        kn, spacing = float(np.mean(k.kn)), float(np.mean(model.bond_length))
+def _transit_time(sample, model, params, length) -> float:
+    """Time for an elastic wave to cross ``length``, from the sample's mean bond (or contact) stiffness and particle
+    mass (NumPy on the host: the model may be padded)."""
+    from jaxbpm.physics.bond import stiffness as bond_stiffness
+
+    m = float(np.mean(sample.mass))
+    if sample.n_bonds:
+        mat = np.asarray(sample.bond_material)
+        E, nu = (np.asarray(params[key], np.float64)[mat] for key in ("bond_E", "bond_nu"))
+        k = bond_stiffness(E, nu, sample.bond_area, sample.bond_I, sample.bond_J, sample.bond_length)
+        kn, spacing = float(np.mean(k.kn)), float(np.mean(sample.bond_length))
     else:
-        r = float(np.mean(model.radii))
+        r = float(np.mean(sample.radii))
         if model.contact_law == "cohesive":
             from jaxbpm.physics.cohesive import normal_stiffness
 
-            kn = float(normal_stiffness(r, r, 0.01 * r, model.cohesive.E))
+            kn = float(normal_stiffness(r, r, 0.01 * r, float(model.cohesive.E)))
         else:
             kn = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r)
         spacing = 2.0 * r

@@ -76,12 +76,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import Program, SetupCache, capacity, compile_clock, size_class
+from jaxbpm._compile import Program, SetupCache, capacity, compile_clock, put, size_class
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
-from jaxbpm.physics.model import Model, default_params
+from jaxbpm.physics.model import Model, _contact_params, default_params
 from jaxbpm.physics.padding import pad_model
 from jaxbpm.sample import Sample
 
@@ -299,13 +299,11 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         crad = rad[cpairs].reshape(-1, 2)
 
     pm = sample.particle_material
-    cparams = contact_mod.contact_params(jnp.asarray(pm.E, dtype), jnp.asarray(pm.nu, dtype),
-                                         jnp.asarray(jnp.inf, dtype), jnp.asarray(pm.restitution, dtype))
-    est = Estimator(model=model, pairs=jnp.asarray(pairs), d=jnp.asarray(d, dtype),
-                    contact_d=jnp.asarray(cd, dtype), contact_radii=jnp.asarray(crad, dtype).reshape(-1, 2),
-                    contact_params=cparams, volume=jnp.asarray(vol, dtype), valid=jnp.asarray(valid),
-                    include=jnp.asarray(include), layer=jnp.asarray(layer, jnp.int32),
-                    layer_count=jnp.asarray(n_layers, jnp.int32), counts=counts, dofs=int(dofs),
+    cparams = _contact_params(float(pm.E), float(pm.nu), float("inf"), float(pm.restitution), dtype.name, False)
+    est = Estimator(model=model, pairs=put(pairs), d=put(d, dtype), contact_d=put(cd, dtype),
+                    contact_radii=put(crad, dtype).reshape(-1, 2), contact_params=cparams, volume=put(vol, dtype),
+                    valid=put(valid), include=put(include), layer=put(layer, np.int32),
+                    layer_count=put(n_layers, np.int32), counts=counts, dofs=int(dofs),
                     first_neighbour=bool(first_neighbour), n_layers=int(layers_cap), axis=axis)
     if dofs == 3:
         geometry, terms = _bond_geometry(model)
@@ -405,7 +403,7 @@ def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
         return jnp.zeros((0, 0, 9), r0.dtype), ()
     g = np.asarray(_unit_jacobians(r0))
     terms = tuple(s for s in range(4) if np.any(g[s] != 0))
-    return jnp.asarray(g[np.array(terms, int)]), terms
+    return put(g[np.array(terms, int)]), terms
 
 
 def _bond_jacobians(est: Estimator, params) -> jnp.ndarray:
@@ -807,9 +805,8 @@ def scene_geometry(est: Estimator, sample: Sample, scene, fraction: float | None
         lo_gap = (pos[:, ax] - rad) - (pos[:, ax] - rad).min()
         hi_gap = (pos[:, ax] + rad).max() - (pos[:, ax] + rad)
         touch[0][:m], touch[1][:m] = lo_gap <= 0.5 * delta, hi_gap <= 0.5 * delta
-    geo = SceneGeometry(length=jnp.asarray(length, dtype), area=jnp.asarray(area, dtype),
-                        load=jnp.asarray(s * delta, dtype), wall_stiffness=jnp.asarray(ws, dtype),
-                        touch_bottom=jnp.asarray(touch[0]), touch_top=jnp.asarray(touch[1]))
+    geo = SceneGeometry(length=put(length, dtype), area=put(area, dtype), load=put(s * delta, dtype),
+                        wall_stiffness=put(ws, dtype), touch_bottom=put(touch[0]), touch_top=put(touch[1]))
     return geo, law
 
 

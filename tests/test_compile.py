@@ -1,11 +1,13 @@
 """Compile once: size classes, padding that changes no result, and solves that compile nothing the second time."""
 
+import collections
+
 import jax
 import numpy as np
 import pytest
 
 import jaxbpm
-from jaxbpm import dsm, ste
+from jaxbpm import _compile, dsm, ste
 from jaxbpm._compile import Program, SetupCache, capacity, count_compilations, size_class
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
@@ -39,6 +41,25 @@ def test_size_class_has_room_for_padding():
     for n, nb in [(10, 0), (127, 300), (128, 400), (2999, 9509)]:
         c = size_class(n, nb)
         assert c.particles >= n + 2 and c.bonds >= nb + (1 if nb else 0)
+
+
+def test_samples_of_one_generator_fall_in_three_classes(monkeypatch):
+    # 20 samples with 2500..3500 particles and ~3.0-3.2 bonds per particle (a box packing's): the three particle
+    # capacities of that range, one bond capacity each, although the bond counts straddle steps of the ladder
+    monkeypatch.setattr(_compile, "_classes", collections.defaultdict(set))
+    rng = np.random.default_rng(0)
+    n = rng.integers(2500, 3501, 20)
+    nb = (n * rng.uniform(2.99, 3.2, 20)).astype(int)
+    classes = {size_class(a, b) for a, b in zip(n, nb)}
+    assert len(classes) == 3 and len({c.particles for c in classes}) == 3
+    for a, b in zip(n, nb):
+        c = size_class(a, b)
+        assert c in classes and c.bonds > b and c.bonds <= c.particles * 3.5
+    # a sample whose own class would be larger still reuses a handed-out one that has room for it
+    low, high = size_class(2541, 7612), size_class(2516, int(2516 * 3.2))
+    assert low == high and _compile._per_particle(int(2516 * 3.2), 2516, low.particles) > low.bonds
+    # ...but not one much larger than its own
+    assert size_class(2541, 2541 * 2).bonds < low.bonds
 
 
 def test_program_compiles_once_per_signature():

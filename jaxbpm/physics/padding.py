@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._compile import put
 from jaxbpm.physics.model import Model
 
 __all__ = ["pad_model", "pad_rows"]
@@ -36,7 +36,7 @@ def pad_model(model: Model, n_cap: int, nb_cap: int) -> Model:
     dtype = model.positions0.dtype
 
     def grow(a, size, fill):
-        return jnp.asarray(pad_rows(a, size, fill))
+        return put(pad_rows(a, size, fill))
 
     pos0 = np.asarray(model.positions0)
     length = float(np.mean(np.asarray(model.bond_length))) if nb else float(np.asarray(model.radii)[0])
@@ -50,13 +50,13 @@ def pad_model(model: Model, n_cap: int, nb_cap: int) -> Model:
         return np.asarray(a)[0]
 
     return dataclasses.replace(
-        model, positions0=jnp.asarray(pos, dtype), radii=grow(model.radii, n_cap, first(model.radii)),
+        model, positions0=put(pos, dtype), radii=grow(model.radii, n_cap, first(model.radii)),
         mass=grow(model.mass, n_cap, first(model.mass)), inertia=grow(model.inertia, n_cap, first(model.inertia)),
-        bonds=jnp.asarray(bonds, model.bonds.dtype), r0=jnp.asarray(r0, dtype),
+        bonds=put(bonds, model.bonds.dtype), r0=put(r0, dtype),
         bond_material=grow(model.bond_material, nb_cap, 0),
         bond_area=grow(model.bond_area, nb_cap, 0.0), bond_I=grow(model.bond_I, nb_cap, 0.0),
         bond_J=grow(model.bond_J, nb_cap, 0.0), bond_length=grow(model.bond_length, nb_cap, length),
         bond_keys=grow(model.bond_keys, nb_cap, big),
-        bond_key_index=jnp.asarray(np.concatenate([np.asarray(model.bond_key_index), np.arange(nb, nb_cap)]),
+        bond_key_index=put(np.concatenate([np.asarray(model.bond_key_index), np.arange(nb, nb_cap)]),
                                    model.bond_key_index.dtype),
         bond_radius=grow(model.bond_radius, nb_cap, 0.0))
