@@ -1,9 +1,10 @@
 """Strict numerics for every test: float64, strict dtype promotion, no silent rank broadcasting.
 
-The test session (each pytest-xdist worker) gets a compilation cache directory of its own, removed at exit, through
-``JAXBPM_CACHE_DIR`` (so ``jaxbpm`` commands run by the tests, in process or as subprocesses, never touch the user's
-cache). The cache stays off in the test process except while a test turns it on: JAX's cache settings are put back
-after every test.
+The test session has a persistent compilation cache of its own, a temporary directory shared by the pytest-xdist
+workers (the first process of the session makes it and passes it on through ``JAXBPM_TEST_XLA_CACHE``; it is
+removed when that process exits): a program one worker compiled is read by the other instead of compiled again.
+It is also ``JAXBPM_CACHE_DIR``, so ``jaxbpm`` commands run by the tests, in process or as subprocesses, never touch
+the user's cache. Tests that change JAX's cache settings get them put back afterwards.
 """
 
 import atexit
@@ -11,8 +12,11 @@ import os
 import shutil
 import tempfile
 
-os.environ["JAXBPM_CACHE_DIR"] = _CACHE_DIR = tempfile.mkdtemp(prefix="jaxbpm-test-xla-")
-atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
+_CACHE_DIR = os.environ.get("JAXBPM_TEST_XLA_CACHE")
+if not _CACHE_DIR:  # the session's first process (the xdist controller, or the only process): it owns the directory
+    os.environ["JAXBPM_TEST_XLA_CACHE"] = _CACHE_DIR = tempfile.mkdtemp(prefix="jaxbpm-test-xla-")
+    atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
+os.environ["JAXBPM_CACHE_DIR"] = _CACHE_DIR
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import jax  # noqa: E402
@@ -22,6 +26,10 @@ import pytest  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+from jaxbpm import _cache  # noqa: E402
+
+_cache.enable_compilation_cache(_CACHE_DIR)
 
 _CACHE_OPTIONS = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
                   "jax_persistent_cache_min_entry_size_bytes", "jax_enable_compilation_cache")

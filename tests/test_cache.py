@@ -1,7 +1,7 @@
 """The persistent compilation cache: ``jaxbpm.enable_compilation_cache`` and the command's cache options.
 
 Every test here runs under the ``jax_cache_config`` fixture of conftest.py, which puts JAX's cache settings back
-afterwards, so the rest of the suite runs with the cache off.
+afterwards, so the rest of the suite runs with the session's cache (conftest.py).
 """
 
 import os
@@ -51,9 +51,10 @@ def test_enable_writes_entries_and_switches_directory(tmp_path, jax_cache_config
     assert entries == len(_entries(second)) and size >= sum(p.stat().st_size for p in second.iterdir()) > 0
 
 
-def test_fixture_left_the_cache_off():
-    # the test above (and the in-process commands of test_cli) leave no cache behind in this process
-    assert jax.config.jax_compilation_cache_dir == os.environ.get("JAX_COMPILATION_CACHE_DIR")
+def test_fixture_put_the_session_cache_back():
+    # the test above (and the in-process commands of test_cli) leave the session's cache as it was
+    assert jax.config.jax_compilation_cache_dir == os.environ["JAXBPM_TEST_XLA_CACHE"]
+    assert jaxbpm.compilation_cache_dir() == pathlib.Path(os.environ["JAXBPM_TEST_XLA_CACHE"])
 
 
 def test_default_dir(monkeypatch, tmp_path):
@@ -124,7 +125,9 @@ def test_cli_cache_errors(tmp_path, capsys, monkeypatch, jax_cache_config):
     assert cli.main(["info", "--cache", "--cache-dir", str(blocker)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and str(blocker) in err and err.count("\n") == 1
-    # the default directory that cannot be used: a warning, and the command runs without the cache
+    # the default directory that cannot be used: a warning, and the command runs without the cache (the session's
+    # cache turned off first, as in a new process)
+    jax.config.update("jax_enable_compilation_cache", False)
     monkeypatch.setenv("JAXBPM_CACHE_DIR", str(blocker))
     assert cli.main(["info", "--cache"]) == 0
     out, err = capsys.readouterr()
