@@ -60,11 +60,11 @@ class SizeClass(tuple):
 
 
 def _per_particle(count: int, n: int, n_cap: int) -> int:
-    """Room for ``count`` items on ``n`` particles padded to ``n_cap``: their count per particle with 0.15 to spare,
+    """Room for ``count`` items on ``n`` particles padded to ``n_cap``: their count per particle with 0.05 to spare,
     rounded up to a quarter, times ``n_cap`` (and one spare slot at least)."""
     if count == 0:
         return 0
-    ratio = math.ceil(4.0 * (count / max(n, 1) + 0.15)) / 4.0
+    ratio = math.ceil(4.0 * (count / max(n, 1) + 0.05)) / 4.0
     return max(int(math.ceil(ratio * n_cap)), count + 1)
 
 
@@ -77,7 +77,7 @@ _classes: dict[int, set] = collections.defaultdict(set)
 def size_class(n_particles: int, n_bonds: int, n_contacts: int = 0) -> SizeClass:
     """The padded capacities of a sample: particles on the :func:`capacity` ladder (two spare particles at least,
     which padding bonds connect to); bonds and contacts at the particles' capacity times their count per particle
-    with 0.15 to spare, rounded up to a quarter -- or the smallest class already handed out in this process for that
+    with 0.05 to spare, rounded up to a quarter -- or the smallest class already handed out in this process for that
     particle capacity which has room for them and is at most 25 % larger."""
     n_cap = capacity(n_particles + 2)
     own = SizeClass(n_cap, _per_particle(n_bonds, n_particles, n_cap),

@@ -1155,17 +1155,17 @@ def _linear_setup(sample, scene, rotations, operator, preconditioner, aggregate_
 def _pad_coarse(coarse: CoarseSpace, n_cap: int, nb: int, nb_cap: int, aggregate_size=None) -> CoarseSpace:
     """The coarse space of a model padded to ``n_cap`` particles and ``nb_cap`` bonds (bonds from ``nb`` on are
     padding). The padding particles form no mode (zero basis rows, in the last aggregate); the aggregate count
-    rounds up to a capacity that depends on the size class alone (1.25 times the aggregates of the default size
+    rounds up to a capacity that depends on the size class alone (the aggregates of the default size
     that ``n_cap`` particles make, or more when the sample has more), empty aggregates getting a unit coarse
     diagonal; the coupling bonds are padded with the padding bond ``nb`` up to ``nb_cap`` (they are only read when
     the preconditioner's parts are built, once per sample)."""
     per = max(100.0, n_cap / 250.0) if aggregate_size is None else float(aggregate_size)
-    count = capacity(max(coarse.count, math.ceil(1.25 * n_cap / per)), minimum=4)
+    count = capacity(max(coarse.count, math.ceil(n_cap / per)), minimum=4)
     labels = pad_rows(coarse.labels, n_cap, count - 1)
     basis = pad_rows(coarse.basis, n_cap, 0.0)
     bonds = pad_rows(coarse.bonds, nb_cap, nb)
     return CoarseSpace(labels=put(labels, np.int32),
-                       basis=jnp.asarray(basis, coarse.basis.dtype),
+                       basis=put(basis, coarse.basis.dtype),
                        bonds=put(bonds, np.int32), count=count)
 
 
