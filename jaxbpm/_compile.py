@@ -26,7 +26,14 @@ from typing import Any, Callable
 import jax
 import numpy as np
 
-__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "compile_clock", "count_compilations", "put"]
+__all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "compile_clock", "count_compilations", "put",
+           "traced"]
+
+
+def traced(tree) -> bool:
+    """Whether any leaf of ``tree`` is a tracer (inside ``jit``, ``grad``, ``vmap``): a pure function then traces its
+    body; called with concrete values it can run a compiled program instead."""
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 def put(a, dtype=None) -> jax.Array:

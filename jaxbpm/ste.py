@@ -76,7 +76,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import Program, SetupCache, capacity, compile_clock, put, size_class
+from jaxbpm._compile import Program, SetupCache, capacity, compile_clock, put, size_class, traced
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import contact as contact_mod
@@ -877,14 +877,19 @@ def _check_scene(scene):
         raise SceneError(f"the STE knows the UniaxialCompression scene, got {type(scene).__name__}")
 
 
-def stiffness_function(sample: Sample, scene, *, layered: bool = False, **options):
+def stiffness_function(sample: Sample, scene, *, layered: bool = False, pad: bool = True, **options):
     """A pure function ``params -> K`` [N/m] of ``scene`` estimated by the STE (``jit``/``grad``/``vmap``-able,
-    e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``). ``options`` go to :func:`estimator`."""
+    e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``). ``options`` go to :func:`estimator`. The
+    estimator is the one :func:`solve_scene` keeps for the sample (padded to its size class unless ``pad=False``),
+    and a call with concrete parameters runs the program :func:`solve_scene` compiled (no compilation when the
+    process solved a sample of that class before)."""
     _check_scene(scene)
-    est = estimator(sample, scene, **options)
-    geo, law = scene_geometry(est, sample, scene)
+    est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
+                                lambda: _setup(sample, scene, pad, options))
 
     def stiffness(params):
+        if not traced(params):
+            return _solve_program(est, params, geo, layered=bool(layered), walls=law)[0][0]
         return _scene_stiffness(est, params, geo, layered, law)[0]
 
     return stiffness
