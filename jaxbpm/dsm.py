@@ -1045,7 +1045,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             nb, cb = model.bonds.shape[0], np.asarray(coarse.bonds)
             lin[3] = dataclasses.replace(coarse, bonds=put(cb[cb >= nb] - nb, np.int32))
             coarse = dataclasses.replace(coarse, bonds=put(cb[cb < nb], np.int32))
-        lin = None if lin is None else tuple(lin)
+        lin = None if lin is None else tuple(_pad_candidates(lin, sample, ax))
         geometry = None
         if operator in ("auto", "jacobians"):
             # parameter-independent, once per sample: the bond Jacobians and the preconditioner's parts per unit
@@ -1286,6 +1286,26 @@ def _contacts_outputs(model, params, free, u_p, tol, stiffness_tol, coarse, cont
                       operator, contact_passes):
     return _linear_fn(model, params, free, u_p, tol, maxiter, operator, stiffness_tol, coarse, contacts,
                       contact_passes, geometry, guess)
+
+
+def _pad_candidates(lin, sample, axis):
+    """The linearised contacts' candidates (and their coarse couplings) padded to a :func:`capacity`, so that samples
+    and reaches with about as many candidates share the compiled solve: the padding pairs join the two particles
+    farthest apart along ``axis``, which never touch (no stiffness). Left as they are when those two are not far
+    enough apart."""
+    pairs = np.asarray(lin[0])
+    pos, rad = np.asarray(sample.positions)[:, axis], np.asarray(sample.radii)
+    i, j = int(np.argmin(pos)), int(np.argmax(pos))
+    if len(pairs) == 0 or pos[j] - pos[i] <= 4.0 * (rad[i] + rad[j]):
+        return lin
+    c = len(pairs)
+    cap = capacity(c + 1)
+    lin = list(lin)
+    lin[0] = put(np.concatenate([pairs, np.tile(np.array([[i, j]], pairs.dtype), (cap - c, 1))]), np.int32)
+    if lin[3] is not None:
+        cb = np.asarray(lin[3].bonds)
+        lin[3] = dataclasses.replace(lin[3], bonds=put(pad_rows(cb, capacity(len(cb) + 1), c), np.int32))
+    return lin
 
 
 def _energy_test(stiffness_tol):

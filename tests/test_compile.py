@@ -1,6 +1,7 @@
 """Compile once: size classes, padding that changes no result, and solves that compile nothing the second time."""
 
 import collections
+import dataclasses
 
 import jax
 import numpy as np
@@ -180,3 +181,26 @@ def test_one_size_class_shares_its_program(method):
     assert ra.stats["size_class"] == rb.stats["size_class"]
     # and the answers are each sample's own (the closed form of a simple cubic column: k_n per column)
     assert rb.stiffness != ra.stiffness
+
+
+def test_linearised_contact_candidates_are_padded(packing, monkeypatch):
+    # the linear DSM with linearised contacts pads its candidates (a far-apart pair that never touches): the same
+    # answer, and another reach with about as many candidates runs the same compiled program
+    s = packing.replace(particle_material=dataclasses.replace(packing.particle_material, E=5e9))
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    model = scene.model(s)
+    r = float(np.mean(s.radii))
+    skins = [r * f for f in np.linspace(0.02, 0.2, 10)]
+    counts = [len(dsm._contact_candidates(s, model, k)) for k in skins]
+    k1, k2 = next((skins[i], skins[i + 1]) for i in range(len(skins) - 1)
+                  if counts[i] != counts[i + 1] and capacity(counts[i] + 1) == capacity(counts[i + 1] + 1))
+    a = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k1)
+    with monkeypatch.context() as m:
+        m.setattr(dsm, "_pad_candidates", lambda lin, sample, axis: lin)
+        b = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k1)
+    assert a.stats["contacts_touching"] > 0
+    np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-12)
+    before = dsm._contacts_program.compilations
+    c = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k2)
+    assert c.stats["contact_candidates"] != a.stats["contact_candidates"]
+    assert dsm._contacts_program.compilations == before and c.compile_time == 0.0
