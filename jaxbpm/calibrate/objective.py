@@ -570,16 +570,26 @@ class Problem:
             return False, "some bond moduli are held fixed (K is then not proportional to the free ones)"
         return True, "stiffness is linear in a common factor on the bond moduli (bonds-only elasticity)"
 
+    def _vector(self):
+        """The model's target elements ``(values, base) -> [m]`` as a plain function. Called with concrete values (one
+        parameter set), the solvers' stiffness functions run the programs ``solve`` compiles, so a calibration after
+        a solve of the same sample compiles no solver again."""
+        targets, space, pure = self.targets, self.space, self.forward.pure
+
+        def vector(values, base):
+            obs = pure(space.to_params(values, base))
+            return jnp.concatenate([jnp.reshape(t.extract(obs), (-1,)) for t in targets])
+
+        return vector
+
     def _compiled(self, what):
         """Jitted pure functions, cached on the model per parameter and target structure: problems that differ only
         in values (targets, initial values, bases) share one compilation."""
-        targets, space, pure = self.targets, self.space, self.forward.pure
+        targets, space = self.targets, self.space
         key = (what, space.structure, tuple((t.observable, t.scene, t.at, t.size) for t in targets))
         cache = self.forward._compiled
         if key not in cache:
-            def vector(values, base):
-                obs = pure(space.to_params(values, base))
-                return jnp.concatenate([jnp.reshape(t.extract(obs), (-1,)) for t in targets])
+            vector = self._vector()
 
             if what == "vector":
                 fn = vector
@@ -642,8 +652,8 @@ class Problem:
                 size = 1 << (len(vb) - 1).bit_length() if len(vb) <= 8 else len(vb)
                 pad = np.concatenate([vb, np.repeat(vb[-1:], size - len(vb), axis=0)])
                 y = np.asarray(self._compiled("batch")(jnp.asarray(pad), base))[:len(vb)]
-            else:
-                y = np.asarray(self._compiled("vector")(jnp.asarray(vb[0]), base))[None]
+            else:  # one set: not jitted here (the solvers run their own compiled programs)
+                y = np.asarray(self._vector()(jnp.asarray(vb[0]), base))[None]
         else:
             rows = []
             for v in vb:
