@@ -209,12 +209,28 @@ _listening = False
 
 class CompileClock:
     """What :func:`compile_clock` measured: ``count`` programs lowered, ``seconds`` spent tracing, lowering,
-    compiling or reading programs from the persistent cache."""
+    compiling or reading programs from the persistent cache (the time those steps cover: a trace nested in another,
+    as a jitted function's inside the function that calls it, counts once)."""
 
-    __slots__ = ("count", "seconds")
+    __slots__ = ("count", "_spans")
 
     def __init__(self):
-        self.count, self.seconds = 0, 0.0
+        self.count, self._spans = 0, []
+
+    def add(self, start: float, end: float) -> None:
+        """A step that ran from ``start`` to ``end`` (merged with the steps it overlaps)."""
+        keep = []
+        for a, b in self._spans:
+            if b < start or a > end:
+                keep.append((a, b))
+            else:
+                start, end = min(a, start), max(b, end)
+        keep.append((start, end))
+        self._spans = keep
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(b - a for a, b in self._spans))
 
     def __getitem__(self, index):  # ``n[0]``: the count, as count_compilations() gives it
         return (self.count, self.seconds)[index]
@@ -222,8 +238,9 @@ class CompileClock:
 
 def _on_event(name, duration, **kwargs):
     if name in _COMPILE_EVENTS:
+        end = time.perf_counter()  # the event comes when the step ends
         for c in _clocks:
-            c.seconds += duration
+            c.add(end - duration, end)
             c.count += name == _LOWERING_EVENT
 
 
