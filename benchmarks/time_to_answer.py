@@ -612,7 +612,13 @@ def main(argv=None):
     ap.add_argument("--png", default=None, help="bar chart: per method and size, where the time goes")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--spec", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--quick", action="store_true",
+                    help="a short run: 1000 particles, no demo, calibration on the same sample")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.sizes, args.calibrate_n, args.skip_demo = [1000], 1000, True
+        if args.out == "results/time_to_answer.json":
+            args.out = "results/time_to_answer_quick.json"
 
     if args.child:
         out = CHILDREN[args.child](json.loads(args.spec))
