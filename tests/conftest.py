@@ -4,7 +4,8 @@ The test session has a persistent compilation cache of its own, a temporary dire
 workers (the first process of the session makes it and passes it on through ``JAXBPM_TEST_XLA_CACHE``; it is
 removed when that process exits): a program one worker compiled is read by the other instead of compiled again.
 It is also ``JAXBPM_CACHE_DIR``, so ``jaxbpm`` commands run by the tests, in process or as subprocesses, never touch
-the user's cache. Tests that change JAX's cache settings get them put back afterwards.
+the user's cache. Tests that change JAX's cache settings get them put back afterwards. XLA's CPU runtime runs on one
+thread per process (the xdist workers share the cores).
 """
 
 import atexit
@@ -18,6 +19,9 @@ if not _CACHE_DIR:  # the session's first process (the xdist controller, or the 
     atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
 os.environ["JAXBPM_CACHE_DIR"] = _CACHE_DIR
 os.environ.setdefault("MPLBACKEND", "Agg")
+# each xdist worker keeps to one thread of XLA's CPU runtime: the workers already fill the cores
+if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_multi_thread_eigen=false").strip()
 
 import jax  # noqa: E402
 import jax_md  # noqa: E402,F401  (jax-md's import-time code does not pass strict promotion: import it first)
