@@ -78,7 +78,7 @@ _CHECKS = {
             "max_records": _whole, "snapshots": _optional_whole, "pad": _flag},
     "dsm": {"dofs": _choice(None, 3, 6), "nonlinear": _optional_flag, "tol": _optional_positive,
             "linear_tol": _positive, "maxiter": _optional_whole, "newton_maxiter": _whole,
-            "stiffness_tol": _optional_positive, "contact_skin": _optional_positive, "load_steps": _whole,
+            "stiffness_tol": lambda n, v: None if isinstance(v, str) and v == "auto" else _optional_positive(n, v), "contact_skin": _optional_positive, "load_steps": _whole,
             "throw": _flag, "operator": _choice("auto", "jacobians", "jvp"),
             "preconditioner": _choice("auto", "two-level", "jacobi"), "aggregate_size": _optional_positive,
             "slip": _flag, "contact_fraction": lambda n, v: None if v is None else _fraction(n, v),

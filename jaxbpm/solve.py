@@ -48,8 +48,11 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     (the chunks and the work between them).
     options for ``"dsm"``: ``dofs`` (3 or 6 per particle; default: the Model's choice, 6 with bonds), ``nonlinear``
     (default: True when the scene has contacts or walls), ``tol`` (nonlinear relative residual, 1e-3),
-    ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (stop
-    Newton when the reaction changes less than this, relative), ``slip`` (contacts slide at the Coulomb limit, True;
+    ``linear_tol`` (CG relative residual, 1e-6), ``maxiter``, ``newton_maxiter`` (30), ``stiffness_tol`` (linear
+    solves: CG also stops once the strain energy, hence K, has settled to this relative change; nonlinear: Newton
+    stops when the reaction changes less than this, relative; default ``"auto"``: 1e-6 for the linear bonds-only
+    solve -- K within about 1e-7 of the residual-converged answer, a third fewer CG iterations -- and off elsewhere;
+    ``None``: the residual tests alone), ``slip`` (contacts slide at the Coulomb limit, True;
     False: no slip, Jarolin & Dosta's assumption, which overestimates K where contacts slide), ``contact_skin`` [m]
     (pairs whose gap at rest is below it are contact candidates; default half the mean radius; with
     ``nonlinear=False`` four times the affine approach of two touching mean-sized particles at the linearisation
