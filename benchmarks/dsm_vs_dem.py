@@ -80,7 +80,7 @@ class LinearSystem:
 
         self.model = scene.model(sample, rotations=dofs == 6, contacts=False)
         self.params = params
-        free, fixed, driven = dsm._free_mask(self.model, scene, sample)
+        free, fixed, driven = dsm.free_mask(self.model, scene, sample)
         self.free_np, self.fixed, self.driven = free, fixed, driven
         length, _ = scene.geometry(sample)
         self.delta = scene.strain * length
@@ -93,7 +93,7 @@ class LinearSystem:
         self.nd = free.shape[1]
 
     def reaction(self, gen):
-        """Reaction [N] from generalised internal forces ``gen [n, nd]`` (numpy or jax), as ``dsm._linear_jit``."""
+        """Reaction [N] from generalised internal forces ``gen [n, nd]`` (numpy or jax), as ``dsm.linear.linear_jit``."""
         comp = gen[:, self.axis]
         return 0.5 * (comp[self.driven].sum() - comp[self.fixed].sum())
 
@@ -159,7 +159,7 @@ def splu_solve(system: LinearSystem, repeats: int, budget: float = float("inf"),
         v = np.random.default_rng(1).normal(size=(model.n, nd))
 
         def f(w):
-            return dsm._internal_forces(model, params, w)[0]
+            return dsm.operator.internal_forces(model, params, w)[0]
 
         jv = np.asarray(jax.jvp(f, (jnp.zeros((model.n, nd)),), (jnp.asarray(v),))[1]).ravel()
         kv = K @ v.ravel()

@@ -173,7 +173,7 @@ def test_one_size_class_shares_its_program(method):
     a, b = _lattice((4, 4, 8)), _lattice((4, 5, 7))
     assert a.n_particles != b.n_particles and a.n_bonds != b.n_bonds
     assert size_class(a.n_particles, a.n_bonds) == size_class(b.n_particles, b.n_bonds)
-    program = {"ste": ste._solve_program, "dsm": dsm._linear_program}[method]
+    program = {"ste": ste._solve_program, "dsm": dsm.linear.linear_program}[method]
     ra = jaxbpm.solve(a, SCENE, method=method)
     before = program.compilations
     rb = jaxbpm.solve(b, SCENE, method=method)
@@ -191,16 +191,16 @@ def test_linearised_contact_candidates_are_padded(packing, monkeypatch):
     model = scene.model(s)
     r = float(np.mean(s.radii))
     skins = [r * f for f in np.linspace(0.02, 0.2, 10)]
-    counts = [len(dsm._contact_candidates(s, model, k)) for k in skins]
+    counts = [len(dsm.contact_candidates(s, model, k)) for k in skins]
     k1, k2 = next((skins[i], skins[i + 1]) for i in range(len(skins) - 1)
                   if counts[i] != counts[i + 1] and capacity(counts[i] + 1) == capacity(counts[i + 1] + 1))
     a = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k1)
     with monkeypatch.context() as m:
-        m.setattr(dsm, "_pad_candidates", lambda lin, sample, axis: lin)
+        m.setattr(dsm.scene, "pad_candidates", lambda lin, sample, axis: lin)
         b = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k1)
     assert a.stats["contacts_touching"] > 0
     np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-12)
-    before = dsm._contacts_program.compilations
+    before = dsm.linear.contacts_program.compilations
     c = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k2)
     assert c.stats["contact_candidates"] != a.stats["contact_candidates"]
-    assert dsm._contacts_program.compilations == before and c.compile_time == 0.0
+    assert dsm.linear.contacts_program.compilations == before and c.compile_time == 0.0

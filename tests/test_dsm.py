@@ -113,7 +113,7 @@ def test_linearised_contacts_widen_a_short_default_reach(packing, monkeypatch):
     wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.5 * float(np.mean(s.radii)))
     # a default reach of one affine approach (a quarter of the default): touching pairs lie near it, so it doubles
     # until they do not
-    monkeypatch.setattr(dsm, "_LINEAR_REACH", 1.0)
+    monkeypatch.setattr(dsm.scene, "LINEAR_REACH", 1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         short = jaxbpm.solve(s, scene, method="dsm", nonlinear=False)
@@ -126,33 +126,33 @@ def test_linearised_contacts_widen_a_short_default_reach(packing, monkeypatch):
 def test_cg_starts_from_a_guess(packing):
     scene = UniaxialCompression(strain=0.002)
     model = scene.model(packing, contacts=False)
-    free_np, fixed, driven = dsm._free_mask(model, scene, packing)
+    free_np, fixed, driven = dsm.free_mask(model, scene, packing)
     delta = scene.strain * scene.geometry(packing)[0]
     u_p = np.zeros(free_np.shape)
     u_p[driven, scene.axis] = -delta
     free, u_p = jnp.asarray(free_np), jnp.asarray(u_p)
     full, jac = dsm.tangent_operator(model, default_params(packing))
-    precond = dsm._preconditioner(model, default_params(packing), free, jac)
-    cold = dsm._cg(full, precond, free, u_p, 1e-10, None)
-    affine = dsm._cg(full, precond, free, u_p, 1e-10, None, x0=dsm._affine_field(packing, model, scene.axis, delta))
+    precond = dsm.build_preconditioner(model, default_params(packing), free, jac)
+    cold = dsm.cg(full, precond, free, u_p, 1e-10, None)
+    affine = dsm.cg(full, precond, free, u_p, 1e-10, None, x0=dsm.affine_field(packing, model, scene.axis, delta))
     # the same solution from a start closer to it (the guess's prescribed DOFs are not used)
     assert affine[1] <= 1e-10 and int(affine[2]) < int(cold[2]), (int(affine[2]), int(cold[2]))
     scale = np.abs(np.asarray(cold[0])).max(axis=0)  # displacements and rotations apart
     assert np.abs(np.asarray(affine[0] - cold[0]) / scale).max() < 1e-6
     np.testing.assert_allclose(affine[3], cold[3], rtol=1e-12)  # the energy, tracked from the guess's own
     # started at the solution, nothing is left to do
-    assert int(dsm._cg(full, precond, free, u_p, 1e-8, None, x0=cold[0])[2]) == 0
+    assert int(dsm.cg(full, precond, free, u_p, 1e-8, None, x0=cold[0])[2]) == 0
 
 
 @pytest.mark.parametrize("dofs", [3, 6])
 def test_symmetrised_jacobians_are_the_symmetric_part(packing, dofs):
     model = UniaxialCompression().model(packing, rotations=dofs == 6)
     jr = dsm.reduced_jacobians(model, default_params(packing))
-    np.testing.assert_allclose(dsm._symmetrised(jr), jr, atol=1e-12 * float(jnp.abs(jr).max()))  # bonds at rest
+    np.testing.assert_allclose(dsm.symmetrised(jr), jr, atol=1e-12 * float(jnp.abs(jr).max()))  # bonds at rest
     pairs = jnp.asarray(np.asarray(model.bonds)[:50])
     d = (model.positions0[pairs[:, 1]] - model.positions0[pairs[:, 0]]) * 0.999  # a small overlap
-    jc = dsm._contact_jacobians(model, pairs, None, d)
-    full, sym = dsm._full_jacobians(jc), dsm._full_jacobians(dsm._symmetrised(jc))
+    jc = dsm.contact_jacobians(model, pairs, None, d)
+    full, sym = dsm.full_jacobians(jc), dsm.full_jacobians(dsm.symmetrised(jc))
     np.testing.assert_allclose(sym, 0.5 * (full + jnp.swapaxes(full, 1, 2)), atol=1e-12 * float(jnp.abs(full).max()))
     assert float(jnp.abs(full - jnp.swapaxes(full, 1, 2)).max()) > 0  # the preloaded contact is not symmetric
 
@@ -247,12 +247,12 @@ def test_element_by_element_operator_equals_the_force_jvp(packing, dofs):
 
 def test_coarse_matrix_needs_only_the_coupling_bonds(packing):
     model = UniaxialCompression().model(packing)
-    free = dsm._free_mask(model, UniaxialCompression(), packing)[0]
+    free = dsm.free_mask(model, UniaxialCompression(), packing)[0]
     coarse = dsm.coarse_space(model, free, aggregate_size=25)
     assert 4 <= coarse.count <= 16 and 0 < coarse.bonds.shape[0] < model.bonds.shape[0]
     jac = dsm.reduced_jacobians(model, default_params(packing))
     every = dataclasses.replace(coarse, bonds=jnp.arange(model.bonds.shape[0]))
-    a, b = dsm._coarse_factor(model, jac, coarse), dsm._coarse_factor(model, jac, every)
+    a, b = dsm.preconditioner.coarse_factor(model, jac, coarse), dsm.preconditioner.coarse_factor(model, jac, every)
     np.testing.assert_allclose(a @ a.T, b @ b.T, rtol=1e-8, atol=1e-10 * float(jnp.abs(b @ b.T).max()))
     # and it is P^T K_ff P: compare with the operator applied to the coarse basis (one column per rigid mode)
     basis = np.zeros((coarse.count * 6,) + free.shape)
@@ -274,19 +274,19 @@ def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, 
     s = jaxbpm.generate.mix_materials(packing, [0.5, 0.5], seed=2, materials={"E": [1e9, 3e9], "nu": [0.2, 0.35]})
     scene = UniaxialCompression(strain=0.002)
     model = scene.model(s, rotations=dofs == 6)
-    free = dsm._free_mask(model, scene, s)[0]
+    free = dsm.free_mask(model, scene, s)[0]
     coarse = dsm.coarse_space(model, free, aggregate_size=25)
     geo = dsm.bond_geometry(model, coarse, n_materials=2)
     p = default_params(s)
     ref = dsm.reduced_jacobians(model, p)
-    jr, jp, _ = dsm._geometric_jacobians(model, p, geo)
+    jr, jp, _ = dsm.operator.geometric_jacobians(model, p, geo)
     scale = float(jnp.abs(ref).max())
     np.testing.assert_allclose(jr, ref, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(jp, dsm.packed_jacobians(ref), rtol=0, atol=1e-12 * scale)
-    w = dsm._weights(p)
+    w = dsm.operator.material_weights(p)
     np.testing.assert_allclose(jnp.einsum("mp,mpnab->nab", w, geo.blocks), dsm.block_diagonal(model, p, ref),
                                rtol=0, atol=1e-12 * scale)
-    direct = dsm._coarse_matrix(model, ref, coarse)
+    direct = dsm.preconditioner.coarse_matrix(model, ref, coarse)
     np.testing.assert_allclose(jnp.einsum("mp,mpab->ab", w, geo.coarse), direct, rtol=0,
                                atol=1e-12 * float(jnp.abs(direct).max()))
     # the solve through the geometry equals the one that differentiates the bond law, and so do its gradients
@@ -326,7 +326,7 @@ def test_preconditioner_building_blocks_match_dense_linear_algebra(m):
     x = rng.normal(size=(m, m))
     a = x @ x.T + m * np.eye(m)
     r = rng.normal(size=m)
-    got = dsm._CholeskyBlocks.of(jnp.linalg.cholesky(jnp.asarray(a))).solve(jnp.asarray(r))
+    got = dsm.CholeskyBlocks.of(jnp.linalg.cholesky(jnp.asarray(a))).solve(jnp.asarray(r))
     np.testing.assert_allclose(got, np.linalg.solve(a, r), rtol=1e-10, atol=1e-12 * np.abs(np.linalg.solve(a, r)).max())
 
 

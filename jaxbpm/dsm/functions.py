@@ -1,0 +1,89 @@
+"""Pure functions of the parameters: the stiffness of a scene (``jit``, ``grad``, ``vmap``) and several load cases on
+one operator.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxbpm._compile import traced
+from jaxbpm.dsm.boundary import _check_held, free_mask
+from jaxbpm.dsm.krylov import cg, tangent_operator
+from jaxbpm.dsm.linear import (
+    _energy_test, _linear_setup, _linear_setups, _linear_stiffness_tol, linear_jit, linear_program)
+from jaxbpm.dsm.preconditioner import _coarse_for, bond_geometry, build_preconditioner
+from jaxbpm.errors import SceneError
+
+
+def stiffness_function(sample, scene, *, dofs=None, tol=1e-6, maxiter=None, operator="auto", stiffness_tol="auto",
+                       preconditioner="auto", aggregate_size=None, n_materials=None, pad=True):
+    """A pure function ``params -> K`` [N/m] of the linear DSM on ``scene`` (clamped layers, bonds only).
+
+    It can be ``jit``-ed, differentiated (``jax.grad``: implicit differentiation through the CG solve) and
+    ``vmap``-ped over parameter sets, e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``.
+    n_materials: the length of ``params["bond_E"]`` (default: the sample's material count); pad: pad the sample to
+    its size class (same values to round-off; samples of one class then share compilations). A call with concrete
+    parameters runs the program :func:`solve_scene` compiles (none is compiled when the process solved a sample of
+    that class with these options before); a traced call (``jit``, ``grad``, ``vmap``) traces the solve.
+    """
+    if scene.uses_walls or scene.contacts:
+        raise SceneError("stiffness_function covers the linear DSM (clamped layers, bonds only)")
+    rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]
+    stiffness_tol = _linear_stiffness_tol(stiffness_tol)
+    m = sample.n_materials if n_materials is None else int(n_materials)
+    key = (scene, rotations, operator, preconditioner, aggregate_size, m, bool(pad))
+    setup = _linear_setups.get(sample, key, lambda: _linear_setup(sample, scene, rotations, operator, preconditioner,
+                                                                   aggregate_size, m, pad))
+
+    def stiffness(params):
+        if not traced(params):
+            out = linear_program(setup.model, params, setup.free, setup.u_p, tol, _energy_test(stiffness_tol),
+                                  setup.coarse, setup.geometry, setup.guess, maxiter=maxiter, operator=operator)[0]
+            return out[0][1] / setup.delta
+        return linear_jit(setup.model, params, setup.free, setup.u_p, tol, maxiter, operator, stiffness_tol,
+                           setup.coarse, geometry=setup.geometry, guess=setup.guess)[1] / setup.delta
+
+    return stiffness
+
+
+def load_cases(sample, scene, directions, params=None, *, dofs=None, tol=1e-8, preconditioner="auto",
+               aggregate_size=None):
+    """Reactions of several load cases on the same operator: the driven layer moved by ``strain * l`` along each
+    unit vector in ``directions [L, 3]`` (e.g. the three axes: compression and two shears), all solved at once with
+    ``vmap``. Returns the ``[L, 3]`` matrix of reaction forces per unit displacement [N/m] (row: load case)."""
+    from jaxbpm.physics.model import default_params
+
+    rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]
+    model = scene.model(sample, rotations=rotations, contacts=False)
+    params = default_params(sample) if params is None else params
+    free_np, fixed, driven = free_mask(model, scene, sample)
+    _check_held(sample, model, free_np, fixed | driven)
+    length, _ = scene.geometry(sample)
+    delta = scene.strain * length
+    dirs = np.asarray(directions, float).reshape(-1, 3)
+    u_p = np.zeros((len(dirs),) + free_np.shape)
+    u_p[:, driven, :3] = delta * dirs[:, None, :]
+    free = jnp.asarray(free_np)
+    coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
+    geometry = bond_geometry(model, coarse, n_materials=sample.n_materials)
+
+    out = _load_case_reactions(model, params, free, coarse, geometry, jnp.asarray(driven),
+                               jnp.asarray(u_p, model.positions0.dtype), tol)
+    return np.asarray(out) / delta
+
+
+@jax.jit
+def _load_case_reactions(model, params, free, coarse, geometry, driven, u_p, tol):
+    """Reaction on the driven layer ``[L, 3]`` of each load case ``u_p [L, n, nd]`` (one operator, vmapped CG)."""
+    full, jac = tangent_operator(model, params, geometry=geometry)
+    precond = build_preconditioner(model, params, free, jac, coarse, geometry)
+
+    def one(up):
+        u = cg(full, precond, free, up, tol, None)[0]
+        gen = -full(u)
+        # force the machine applies to the driven layer = minus the internal force on it
+        return -jnp.sum(jnp.where(driven[:, None], gen[:, :3], 0.0), axis=0)
+
+    return jax.vmap(one)(u_p)
