@@ -7,8 +7,8 @@ jaxbpm never changes JAX's global settings at import. Stiffness solves want floa
 from jaxbpm import errors, generate, io, scenes
 from jaxbpm._cache import compilation_cache_dir, default_cache_dir, enable_compilation_cache
 from jaxbpm.options import DEM, DSM, STE
-from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, SampleError, SampleFileError,
-                           SceneError, SimulationInterrupted)
+from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotFiniteError, SampleError,
+                           SampleFileError, SceneError, SimulationInterrupted, SolveError)
 from jaxbpm.result import Result
 from jaxbpm.sample import BondMaterials, Domain, ParticleMaterial, Sample, SampleSummary
 from jaxbpm.solve import solve
@@ -18,7 +18,8 @@ __version__ = "0.1.0"
 __all__ = [
     "Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary",
     "generate", "io", "errors", "scenes", "solve", "Result",
-    "JaxbpmError", "SampleError", "SampleFileError", "SceneError", "InstabilityError", "ConvergenceError",
+    "JaxbpmError", "SampleError", "SampleFileError", "SceneError", "SolveError", "InstabilityError", "ConvergenceError",
+    "NotFiniteError",
     "SimulationInterrupted",
     "enable_compilation_cache", "compilation_cache_dir", "default_cache_dir",
     "DEM", "DSM", "STE", "count_compilations",

@@ -680,6 +680,12 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             if on_chunk is not None:
                 on_chunk(len(records) * chunk, state, rec)
             report(len(records) * chunk, n_chunks * chunk, time.perf_counter() - t0)
+    except InstabilityError as err:
+        # what was computed before the blow-up travels with the error (jaxbpm.solve makes a Result of it)
+        out, stats = _collect(model, done, records, chunk, reallocs, clock)
+        stats.update(unstable=True, steps_planned=n_chunks * chunk)
+        err.state, err.records, err.stats = done, out, stats
+        raise
     except KeyboardInterrupt as err:
         out, stats = _collect(model, done, records, chunk, reallocs, clock)
         stats.update(interrupted=True, steps_planned=n_chunks * chunk)

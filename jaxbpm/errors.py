@@ -6,6 +6,8 @@ __all__ = [
     "SampleFileError",
     "InstabilityError",
     "ConvergenceError",
+    "NotFiniteError",
+    "SolveError",
     "SceneError",
     "SimulationInterrupted",
 ]
@@ -27,12 +29,28 @@ class SceneError(JaxbpmError, ValueError):
     """A scene (boundary conditions, loading) does not fit the sample or is ill-posed."""
 
 
-class InstabilityError(JaxbpmError, RuntimeError):
-    """An explicit time integration blew up (NaN or runaway kinetic energy)."""
+class SolveError(JaxbpmError, RuntimeError):
+    """A solve did not produce a trustworthy answer (``Result.status`` other than ``"converged"``; raised by
+    ``throw=True``, the default). ``result``: the :class:`~jaxbpm.result.Result` of what was computed (its
+    ``status`` says which failure), or ``None`` where the failure left nothing to report."""
+
+    result = None
+
+    def __init__(self, *args, result=None):
+        super().__init__(*args)
+        self.result = result
 
 
-class ConvergenceError(JaxbpmError, RuntimeError):
-    """An iterative solve did not reach its tolerance."""
+class InstabilityError(SolveError):
+    """An explicit time integration blew up (NaN or runaway kinetic energy): status ``"unstable"``."""
+
+
+class ConvergenceError(SolveError):
+    """An iterative solve did not reach its tolerance within its iteration budget: status ``"max_iterations"``."""
+
+
+class NotFiniteError(SolveError):
+    """A solve returned a stiffness that is NaN or infinite: status ``"not_finite"``."""
 
 
 class ConventionError(JaxbpmError, ValueError):

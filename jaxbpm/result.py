@@ -7,7 +7,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Result"]
+__all__ = ["Result", "STATUSES"]
+
+STATUSES = ("converged", "max_iterations", "unstable", "interrupted", "not_finite")
+"""What ``Result.status`` can be: ``"converged"`` (the answer is what the method promises), ``"max_iterations"``
+(an iterative solve stopped at its iteration budget above its tolerance), ``"unstable"`` (the DEM's time
+integration blew up), ``"interrupted"`` (a DEM run stopped early by Ctrl-C or a callback) and ``"not_finite"``
+(the stiffness came out NaN or infinite)."""
 
 
 @dataclasses.dataclass
@@ -23,6 +29,10 @@ class Result:
     iterations, ...). state: the solver's final state (for restarts and inspection).
     interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
     stats cover the part that was run (stiffness NaN when the fit range was not reached).
+    status: one of :data:`STATUSES`, the same for every method; ``ok`` is ``status == "converged"``. With
+    ``throw=True`` (the default of every method) a status other than ``"converged"`` raises the matching
+    :class:`~jaxbpm.errors.SolveError` (which carries this result); ``throw=False`` returns the result and leaves
+    the status to the caller. ``stats["failure"]`` says what went wrong.
     """
 
     method: str
@@ -39,6 +49,12 @@ class Result:
     state: Any = None
     interrupted: bool = False
     setup_time: float = 0.0
+    status: str = "converged"
+
+    @property
+    def ok(self) -> bool:
+        """Whether the solve converged (``status == "converged"``)."""
+        return self.status == "converged"
 
     @property
     def strain(self) -> np.ndarray:
@@ -72,5 +88,33 @@ class Result:
         return "\n".join(lines)
 
     def __repr__(self) -> str:
+        status = "" if self.status == "converged" else f", status={self.status!r}"
         return (f"Result(method={self.method!r}, stiffness={self.stiffness:.6g}, "
-                f"youngs_modulus={self.youngs_modulus:.6g}, wall_time={self.wall_time:.3g})")
+                f"youngs_modulus={self.youngs_modulus:.6g}, wall_time={self.wall_time:.3g}{status})")
+
+
+def settle(result: Result, throw: bool) -> Result:
+    """Give ``result`` its status from what the solver reported (an interruption, ``stats["converged"]``, a
+    stiffness that is not finite) and, with ``throw``, raise the matching :class:`~jaxbpm.errors.SolveError`
+    carrying it (an interruption is raised by the DEM itself, as a ``KeyboardInterrupt``)."""
+    from jaxbpm.errors import ConvergenceError, InstabilityError, NotFiniteError
+
+    status = result.status
+    if status == "converged":
+        if result.interrupted:
+            status = "interrupted"
+        elif result.stats.get("converged") is False:
+            status = "max_iterations"
+        elif not np.isfinite(result.stiffness):
+            status = "not_finite"
+            result.stats.setdefault("failure", f"the {result.method.upper()} stiffness is {result.stiffness} (check the "
+                                               "parameters: bond E > 0, -1 < bond nu < 0.5)")
+    if status not in STATUSES:
+        raise ValueError(f"unknown status {status!r}; one of {STATUSES}")
+    result.status = status
+    if throw and status in ("max_iterations", "unstable", "not_finite"):
+        error = {"max_iterations": ConvergenceError, "unstable": InstabilityError, "not_finite": NotFiniteError}
+        message = result.stats.get("failure") or f"{result.method.upper()} solve ended with status {status!r}"
+        raise error[status](f"{message} (status {status!r}; pass throw=False to get the result with its status)",
+                            result=result)
+    return result

@@ -7,7 +7,7 @@ import warnings
 
 import numpy as np
 
-from jaxbpm.errors import SceneError
+from jaxbpm.errors import InstabilityError, SceneError
 from jaxbpm.result import Result
 from jaxbpm.sample import Sample
 
@@ -23,6 +23,14 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     ``jaxbpm.DSM(...)``, ``jaxbpm.STE(...)`` (:mod:`jaxbpm.options`: checked when built, hashable) -- whose options
     keywords given here override. An unknown option raises :class:`~jaxbpm.errors.SceneError` with the closest
     names.
+
+    Failure is data: ``Result.status`` is ``"converged"``, ``"max_iterations"`` (an iterative solve stopped above its
+    tolerance), ``"unstable"`` (the DEM blew up), ``"interrupted"`` or ``"not_finite"`` (the stiffness is NaN or
+    infinite), the same for every method. ``throw`` (every method, default True) raises the matching
+    :class:`~jaxbpm.errors.SolveError` -- :class:`~jaxbpm.errors.ConvergenceError`,
+    :class:`~jaxbpm.errors.InstabilityError`, :class:`~jaxbpm.errors.NotFiniteError` -- carrying the result in its
+    ``result``; ``throw=False`` returns the result and the caller reads its status (``stats["failure"]`` says what
+    went wrong). An interruption always raises :class:`~jaxbpm.errors.SimulationInterrupted`.
 
     params: ``{"bond_E": [...], "bond_nu": [...]}`` overriding the sample's material table (for calibration).
     options for ``"dem"``: ``dt`` (time step [s], default ``safety`` x critical), ``safety`` (0.5), ``damping`` (local
@@ -59,8 +67,7 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     state, 0.1 mean radii at 2 % strain, doubled up to half a radius while a pair that touches there lies more than
     half the reach apart at rest, each try's time counted in),
     ``load_steps`` (nonlinear: equal load increments, 4; K is their least-squares slope over the scene's fit range,
-    as for the DEM), ``throw`` (raise :class:`ConvergenceError` instead of warning when a solve misses its
-    tolerance); with ``nonlinear=False`` on a scene with contacts, the contacts are linearised (Hertz normal and
+    as for the DEM); with ``nonlinear=False`` on a scene with contacts, the contacts are linearised (Hertz normal and
     secant Mindlin tangential stiffness, symmetric) at ``contact_fraction`` (default: the middle of the fit range)
     of the strain, first of the affine field, then of the previous solution (``contact_passes``, 2; each pass
     starts from the previous one's displacements and all but the last stop once the strain energy has settled to
@@ -97,15 +104,22 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 
 def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
                chunk=None, progress=False, neighbors=None, max_records=2000, record_to=None, snapshots=None,
-               vtu=None, pad=True) -> Result:
+               vtu=None, pad=True, throw=True) -> Result:
     t0 = time.perf_counter()
     from jaxbpm._compile import compile_clock
+    from jaxbpm.result import settle
 
-    with compile_clock() as compiling:  # (the setup's compilations count as compile time)
-        return _run_dem(t0, compiling, sample, scene, params, dt=dt, safety=safety, damping=damping,
-                        loading_time=loading_time, transits=transits, chunk=chunk, progress=progress,
-                        neighbors=neighbors, max_records=max_records, record_to=record_to, snapshots=snapshots,
-                        vtu=vtu, pad=pad)
+    try:
+        with compile_clock() as compiling:  # (the setup's compilations count as compile time)
+            result = _run_dem(t0, compiling, sample, scene, params, dt=dt, safety=safety, damping=damping,
+                              loading_time=loading_time, transits=transits, chunk=chunk, progress=progress,
+                              neighbors=neighbors, max_records=max_records, record_to=record_to,
+                              snapshots=snapshots, vtu=vtu, pad=pad)
+    except InstabilityError as err:
+        if throw or err.result is None:
+            raise
+        return err.result
+    return settle(result, throw)
 
 
 def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loading_time, transits, chunk, progress,
@@ -197,13 +211,13 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
     def unpadded(state):
         return state if size is None else dem.unpad_state(state, sample.n_particles, sample.n_bonds)
 
-    def finish(state, rec, stats, interrupted):
+    def finish(state, rec, stats, interrupted, status="converged"):
         disp = speed * rec["time"] if rec else np.zeros(0)
         force = scene.compressive_force(rec["reaction"]) if rec else np.zeros(0)
         try:
             stiffness = scene.fit_stiffness(disp, force, target)
         except SceneError:
-            if not interrupted:
+            if not interrupted and status == "converged":
                 raise
             stiffness = float("nan")  # the run stopped before the fit range was loaded
         keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
@@ -236,14 +250,15 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
         if recorder is not None:
             wall = time.perf_counter() - t0
             stats.update(wall_time=wall, run_time=wall - setup - compile_time)
-            recorder.finish("interrupted" if interrupted else "complete",
+            recorder.finish("interrupted" if interrupted else ("complete" if status == "converged" else status),
                             {k: v for k, v in stats.items() if k not in ("broken_curve", "padded_to")})
         wall = time.perf_counter() - t0
         stats.update(wall_time=wall, run_time=wall - setup - compile_time)
         return Result(method="dem", stiffness=stiffness, youngs_modulus=modulus, gauge_length=length,
                       area=area, displacement=disp[keep], force=force[keep], wall_time=wall,
                       setup_time=setup, compile_time=compile_time, run_time=wall - setup - compile_time,
-                      stats=stats, state=state, interrupted=interrupted)
+                      stats=stats, state=state, interrupted=interrupted,
+                      status="interrupted" if interrupted else status)
 
     t_sim, setup_compile = time.perf_counter(), compiling.seconds
     try:
@@ -253,6 +268,11 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
     except SimulationInterrupted as stop:
         stop.state = unpadded(stop.state)
         stop.result = finish(stop.state, stop.records, stop.stats, True)
+        raise
+    except InstabilityError as err:
+        if getattr(err, "stats", None) is not None:  # a Result of what was run before the blow-up
+            err.stats["failure"] = str(err)
+            err.result = finish(unpadded(err.state), err.records, err.stats, False, status="unstable")
         raise
     return finish(unpadded(state), rec, stats, False)
 

@@ -912,18 +912,20 @@ def _setup(sample, scene, pad, options):
     return (est,) + scene_geometry(est, sample, scene)
 
 
-def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pad: bool = True, **options):
+def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pad: bool = True, throw: bool = True,
+                **options):
     """Estimate the stiffness of ``scene`` with the STE; see :func:`jaxbpm.solve` (``method="ste"``).
 
     pad: pad the estimator to its size class (:func:`estimator`), so that samples of similar size share one
-    compiled program (the result is the same to round-off).
+    compiled program (the result is the same to round-off). throw: raise :class:`~jaxbpm.errors.NotFiniteError`
+    when the stiffness is not finite (``False``: return the result with ``status="not_finite"``).
     ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``, ``E_y``, ``E_z`` [Pa], ``nu`` (3x3),
     ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls), ``skipped`` (singular particles),
     ``surface`` (surface particles left out of the averages),
     ``particles``, ``bonds``, ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``,
     ``k_top`` [N/m], ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
     """
-    from jaxbpm.result import Result
+    from jaxbpm.result import Result, settle
 
     t0 = time.perf_counter()
     _check_scene(scene)
@@ -950,10 +952,10 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
     k = float(k)
     wall = time.perf_counter() - t0
     # what is neither setup nor compilation (moving the outputs to the host) counts as run time
-    return Result(method="ste", stiffness=k, youngs_modulus=k * length / area, gauge_length=length, area=area,
-                  displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
-                  wall_time=wall, setup_time=setup_time, compile_time=compile_time,
-                  run_time=wall - setup_time - compile_time, stats=stats, state=None)
+    return settle(Result(method="ste", stiffness=k, youngs_modulus=k * length / area, gauge_length=length,
+                         area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
+                         wall_time=wall, setup_time=setup_time, compile_time=compile_time,
+                         run_time=wall - setup_time - compile_time, stats=stats, state=None), throw)
 
 
 def _check_params(params, sample: Sample):

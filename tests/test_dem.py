@@ -160,10 +160,17 @@ def test_hertz_impact_contact_time():
 
 def test_time_step_above_critical_raises():
     s = jaxbpm.generate.lattice("sc", (2, 2, 4), R)
-    with pytest.raises(jaxbpm.InstabilityError, match=r"time step dt = .* critical time step estimate"):
+    dt = 3.0 * dem.critical_time_step(build_model(s), default_params(s))
+    with pytest.raises(jaxbpm.InstabilityError, match=r"time step dt = .* critical time step estimate") as err:
         with pytest.warns(UserWarning, match=r"above the critical time step estimate"):
-            jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), safety=1.0,
-                         dt=3.0 * dem.critical_time_step(build_model(s), default_params(s)), damping=0.0)
+            jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), safety=1.0, dt=dt, damping=0.0)
+    # the error carries the result of what ran before the blow-up; throw=False returns it
+    assert err.value.result.status == "unstable" and not err.value.result.ok
+    with pytest.warns(UserWarning, match=r"above the critical time step estimate"):
+        res = jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), jaxbpm.DEM(dt=dt, damping=0.0),
+                           throw=False)
+    assert res.status == "unstable" and "unstable" in res.stats["failure"] and res.stats["unstable"]
+    assert res.stats["steps"] < res.stats["steps_planned"]
 
 
 def test_unstable_run_with_contacts_raises_instead_of_reallocating():

@@ -62,8 +62,8 @@ def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
     scene = UniaxialCompression(strain=0.005, contacts=True)
     dem = jaxbpm.solve(s, scene, method="dem")
     slip = jaxbpm.solve(s, scene, method="dsm")
-    with pytest.warns(UserWarning, match="did not converge"):  # Newton stalls without slip here (a known limit)
-        stick = jaxbpm.solve(s, scene, method="dsm", slip=False)
+    stick = jaxbpm.solve(s, scene, method="dsm", slip=False, throw=False)
+    assert stick.status == "max_iterations"  # Newton stalls without slip here (a known limit)
     assert slip.stats["slip"] and not stick.stats["slip"]
     err_slip, err_stick = slip.stiffness / dem.stiffness - 1, stick.stiffness / dem.stiffness - 1
     assert abs(err_slip) < 0.03 and err_stick > 0.1, (err_slip, err_stick)
@@ -196,11 +196,23 @@ def test_three_load_cases_share_one_operator(column):
 
 def test_non_convergence_is_reported(packing):
     scene = UniaxialCompression(strain=0.002, contacts=True)
-    with pytest.warns(UserWarning, match="did not converge"):
-        res = jaxbpm.solve(packing, scene, method="dsm", newton_maxiter=1, tol=1e-12)
+    # failure as data: the status, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = jaxbpm.solve(packing, scene, method="dsm", newton_maxiter=1, tol=1e-12, throw=False)
+    assert res.status == "max_iterations" and not res.ok and "relative residual" in res.stats["failure"]
     assert res.stats["converged"] is False and res.stats["residual"] > 1e-12
-    with pytest.raises(ConvergenceError, match="relative residual"):
-        jaxbpm.solve(packing, scene, method="dsm", newton_maxiter=1, tol=1e-12, throw=True)
+    # throw=True is the default: the error carries the result
+    with pytest.raises(ConvergenceError, match="relative residual") as err:
+        jaxbpm.solve(packing, scene, jaxbpm.DSM(newton_maxiter=1, tol=1e-12))
+    assert err.value.result.status == "max_iterations" and err.value.result.stiffness == res.stiffness
+    # the linear solve too, with an iteration budget too small for its tolerance
+    lin = jaxbpm.solve(packing, UniaxialCompression(strain=0.002), "dsm", maxiter=2, stiffness_tol=None, throw=False)
+    assert lin.status == "max_iterations" and lin.stats["iterations"] == 2
+    with pytest.raises(ConvergenceError):
+        jaxbpm.solve(packing, UniaxialCompression(strain=0.002), "dsm", maxiter=2, stiffness_tol=None)
+    ok = jaxbpm.solve(packing, UniaxialCompression(strain=0.002), "dsm")
+    assert ok.status == "converged" and ok.ok
 
 
 def test_floating_cluster_is_reported(column):

@@ -367,6 +367,16 @@ STRENGTH_OBSERVABLES = ("strength", "peak_force", "broken_tensile", "broken_shea
 [Pa]), the peak force [N] and the broken bond counts."""
 
 
+def _checked(result, key, params):
+    """``result`` if its solve converged; else a :class:`CalibrationError` naming the scene, the parameters and the
+    status (a calibrator never fits to an answer its solver does not vouch for)."""
+    if result.status == "converged":
+        return result
+    shown = {k: np.asarray(v).tolist() for k, v in params.items()}
+    raise CalibrationError(f"the {result.method.upper()} solve of scene {key!r} at {shown} ended with status "
+                           f"{result.status!r}: {result.stats.get('failure', 'no answer')}")
+
+
 def _observations(result) -> dict:
     obs = {"stiffness": float(result.stiffness), "youngs_modulus": float(result.youngs_modulus),
            "strain": np.asarray(result.strain), "stress": np.asarray(result.stress)}
@@ -483,9 +493,11 @@ def _forward_model(sample_map, scene_map, model, solve_mod, solve_options) -> Fo
 
     own = {k: default_params(s) for k, s in sample_map.items()}
 
+    options = {"throw": False, **solve_options}  # the calibrator reads the status itself
+
     def evaluate(params):
-        return {key: _observations(solve_mod.solve(sample_map[key], sc, method=model,
-                                                   params={**own[key], **params}, **solve_options))
+        return {key: _observations(_checked(solve_mod.solve(sample_map[key], sc, method=model,
+                                                            params={**own[key], **params}, **options), key, params))
                 for key, sc in scene_map.items()}
 
     linear = all(_linear_scene(sc) for sc in scene_map.values())

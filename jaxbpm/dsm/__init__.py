@@ -22,8 +22,8 @@ only by the approximations the method names: no inertia, small motion (linear DS
   strain, +112 % on a bi-component agglomerate at 2 %; with slip -0.1 % to +0.0 % and +1.1 %).
 
 Convergence is measured by the residual norm relative to the norm of the reaction forces. A solve that misses its
-tolerance is reported (``converged=False`` in the stats and a warning), or raises :class:`ConvergenceError` with
-``throw=True``. A sample whose free part is not held (a cluster that touches no clamped particle and no wall) raises
+tolerance raises :class:`ConvergenceError` (``throw=True``, the default) or, with ``throw=False``, returns its
+result with ``status="max_iterations"`` (``converged=False`` and ``failure`` in the stats). A sample whose free part is not held (a cluster that touches no clamped particle and no wall) raises
 :class:`SceneError` naming the particles.
 
 The package, one module per part (each can be read and tested alone):

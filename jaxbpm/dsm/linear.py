@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import warnings
 from typing import Any, NamedTuple
 
 import jax
@@ -19,7 +18,6 @@ from jaxbpm.dsm.boundary import _check_held, affine_field, free_mask
 from jaxbpm.dsm.krylov import cg, tangent_operator
 from jaxbpm.dsm.operator import _linearised_contact_jacobians, _packed_operator, internal_forces
 from jaxbpm.dsm.preconditioner import _coarse_for, bond_geometry, build_preconditioner, CoarseSpace
-from jaxbpm.errors import ConvergenceError
 from jaxbpm.physics.padding import pad_model, pad_rows
 
 
@@ -101,7 +99,7 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
     """The linear DSM on a bonds-only scene with clamped layers (see :func:`solve_scene`): setup (kept per sample),
     one compiled program (per size class), one run."""
     from jaxbpm.physics.model import default_params
-    from jaxbpm.result import Result
+    from jaxbpm.result import Result, settle
 
     params = default_params(sample) if params is None else params
     n_materials = int(jnp.shape(params["bond_E"])[0])
@@ -129,24 +127,23 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
              "stiffness_boundary": float(force_boundary) / delta,
              "size_class": [setup.model.n, int(setup.model.bonds.shape[0])],
              "bond_forces": jax.tree_util.tree_map(lambda a: np.asarray(a)[:nb], bond_forces)}
-    _report_convergence(converged, res, linear_tol, throw, stacklevel=5)
+    _report_convergence(stats, converged, res, linear_tol)
     length, area = scene.geometry(sample)
     stiffness = reaction / delta
     wall = time.perf_counter() - t0
     # what is neither setup nor compilation (the run, moving its outputs to the host) is the run time
-    return Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
-                  area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, reaction]), wall_time=wall,
-                  setup_time=setup_time, compile_time=compile_time, run_time=wall - setup_time - compile_time,
-                  stats=stats, state=u)
+    return settle(Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area,
+                         gauge_length=length, area=area, displacement=np.array([0.0, delta]),
+                         force=np.array([0.0, reaction]), wall_time=wall, setup_time=setup_time,
+                         compile_time=compile_time, run_time=wall - setup_time - compile_time, stats=stats, state=u),
+                  throw)
 
 
-def _report_convergence(converged, residual, tol, throw, stacklevel):
-    if converged:
-        return
-    msg = f"DSM did not converge: relative residual {residual:.3g} above tolerance {tol:.3g}"
-    if throw:
-        raise ConvergenceError(msg)
-    warnings.warn(msg, stacklevel=stacklevel)
+def _report_convergence(stats, converged, residual, tol):
+    """What a solve that missed its tolerance says (``stats["failure"]``; :func:`jaxbpm.result.settle` gives the
+    result its status and raises with ``throw=True``)."""
+    if not converged:
+        stats["failure"] = f"DSM did not converge: relative residual {residual:.3g} above tolerance {tol:.3g}"
 
 
 @jax.jit

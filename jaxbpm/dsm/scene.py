@@ -24,7 +24,7 @@ from jaxbpm.errors import SceneError
 
 
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
-                newton_maxiter=30, stiffness_tol="auto", contact_skin=None, load_steps=4, throw=False,
+                newton_maxiter=30, stiffness_tol="auto", contact_skin=None, load_steps=4, throw=True,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
                 contact_passes=2, pad=True, _auto_skin=None):
     """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`.
@@ -36,7 +36,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
     """
     arguments = dict(locals())  # for a second try with a wider contact reach
     from jaxbpm.physics.model import default_params
-    from jaxbpm.result import Result
+    from jaxbpm.result import Result, settle
 
     t0 = time.perf_counter()
     rotations = None if dofs is None else {3: False, 6: True}.get(int(dofs))
@@ -163,7 +163,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
             driven, delta, load_steps, preconditioner, aggregate_size, slip)
         converged = info["converged"]
         stats.update(info)
-    _report_convergence(converged, stats["residual"], tol if nonlinear else linear_tol, throw, stacklevel=4)
+    _report_convergence(stats, converged, stats["residual"], tol if nonlinear else linear_tol)
     if nonlinear:
         # the same measure as the DEM: least-squares slope of the load steps within the scene's fit range
         stiffness = scene.fit_stiffness(disps, forces, delta) if load_steps > 1 else float(forces[-1] / delta)
@@ -174,7 +174,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
     stats.update(bond_forces=_bond_forces_at(dataclasses.replace(model, walls=None), params, u))
     wall = time.perf_counter() - t0
     # everything but the solver's compilation and run (model, candidates, geometry, Newton's host loop) is setup
-    return Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area, gauge_length=length,
-                  area=area, displacement=disps, force=forces, wall_time=wall,
-                  setup_time=max(wall - compile_time - run_time, 0.0), compile_time=compile_time,
-                  run_time=run_time, stats=stats, state=u)
+    return settle(Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area,
+                         gauge_length=length, area=area, displacement=disps, force=forces, wall_time=wall,
+                         setup_time=max(wall - compile_time - run_time, 0.0), compile_time=compile_time,
+                         run_time=run_time, stats=stats, state=u), throw)
