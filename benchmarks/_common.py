@@ -64,12 +64,12 @@ def save_png(fig, path, note: str | None = None, dpi: int = 130):
     atomically (never a half-written image) and close it. Returns the path."""
     import matplotlib.pyplot as plt
 
-    from jaxbpm.io import _atomic_write
+    from jaxbpm.io import atomic_write
 
     if note:
         fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
     fig.tight_layout(rect=(0, 0.03, 1, 1) if note else None)
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
     plt.close(fig)
     return path
 

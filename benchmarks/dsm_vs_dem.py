@@ -419,9 +419,9 @@ def plot(results, path, note):
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.text(0.01, 0.005, note, fontsize=6.5, alpha=0.8)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    from jaxbpm.io import _atomic_write
+    from jaxbpm.io import atomic_write
 
-    return _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
 
 
 # ---------------------------------------------------------------------------------------------------- main

@@ -217,7 +217,7 @@ def plot(case, data, path, note):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jaxbpm.io import _atomic_write
+    from jaxbpm.io import atomic_write
 
     colours = {"DEM": "C3", "DSM linear": "C0", "DSM nonlinear": "C4", "STE": "C2", "reference": "k"}
     fig, ax = plt.subplots(figsize=(10, 7))
@@ -251,7 +251,7 @@ def plot(case, data, path, note):
         note = note + "\nfailed: " + "; ".join(f"{p['label']}: {p['error_message'][:80]}" for p in failed)
     fig.text(0.01, 0.005, note, fontsize=6, alpha=0.8)
     fig.tight_layout(rect=(0, 0.04 + 0.015 * len(failed), 1, 1))
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, format="png"))
     plt.close(fig)
     return path
 

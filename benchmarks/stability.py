@@ -532,10 +532,10 @@ def study_dem_time_step(sample, args):
 def _save(fig, path):
     import matplotlib.pyplot as plt
 
-    from jaxbpm.io import _atomic_write
+    from jaxbpm.io import atomic_write
 
     fig.tight_layout(rect=(0, 0.03, 1, 1))
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
     plt.close(fig)
     return path
 

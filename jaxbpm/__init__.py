@@ -11,9 +11,9 @@ from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotF
                            SampleFileError, SceneError, SimulationInterrupted, SolveError)
 from jaxbpm.result import Result
 from jaxbpm.sample import BondMaterials, Domain, ParticleMaterial, Sample, SampleSummary
-from jaxbpm.solve import solve
+from jaxbpm.solving import solve
 
-__version__ = "0.1.0"
+from jaxbpm._version import __version__
 
 __all__ = [
     "Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary",

@@ -197,7 +197,7 @@ def _demo_chart(path, table, sample):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jaxbpm.io import _atomic_write
+    from jaxbpm.io import atomic_write
 
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     for row in table:
@@ -212,7 +212,7 @@ def _demo_chart(path, table, sample):
     ax.set_title(f"speed against accuracy: {sample.n_particles} particles, {sample.n_bonds} bonds")
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    _atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
     plt.close(fig)
     return path
 
@@ -246,7 +246,7 @@ def _positive_float(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``jaxbpm`` argument parser (one sub-parser per command)."""
-    from jaxbpm import __version__
+    from jaxbpm._version import __version__
 
     parser = argparse.ArgumentParser(
         prog="jaxbpm",

@@ -43,30 +43,11 @@ from jaxbpm._compile import compile_clock
 from jaxbpm.errors import InstabilityError, SimulationInterrupted
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
+from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
            "potential_energy", "NeighborSettings", "progress_printer", "pad_loading", "unpad_state"]
-
-
-@dataclasses.dataclass(frozen=True)
-class Loading:
-    """Boundary conditions of a DEM run (a pytree).
-
-    clamped: ``[n]`` bool, particles whose every DOF is prescribed (translation ``x0 + velocity t``, no rotation).
-    velocity: ``[n, 3]`` prescribed velocity of clamped particles (zero for fixed ones).
-    wall_points0, wall_normals, wall_velocity: ``[W, 3]`` plane walls (W may be 0).
-    """
-
-    clamped: Any
-    velocity: Any
-    wall_points0: Any
-    wall_normals: Any
-    wall_velocity: Any
-
-
-jax.tree_util.register_dataclass(Loading, data_fields=["clamped", "velocity", "wall_points0", "wall_normals",
-                                                       "wall_velocity"], meta_fields=[])
 
 
 @dataclasses.dataclass(frozen=True)

@@ -39,7 +39,7 @@ import numpy as np
 
 from jaxbpm import conventions
 from jaxbpm.errors import SampleError, SampleFileError
-from jaxbpm.io import _atomic_write, _user_data, load_sample, save_sample, export_vtk
+from jaxbpm.io import atomic_write, _user_data, load_sample, save_sample, export_vtk
 from jaxbpm.sample import Domain, ParticleMaterial, Sample
 
 __all__ = ["write_lammps_data", "read_lammps_data", "write_lammps_coeffs", "read_lammps_coeffs", "lammps_coefficients",
@@ -57,7 +57,7 @@ def _r(x) -> str:
 
 
 def _meta(sample: Sample, **extra) -> dict:
-    from jaxbpm import __version__
+    from jaxbpm._version import __version__
 
     pm = sample.particle_material
     m = sample.materials
@@ -137,7 +137,7 @@ def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational
     def write(tmp):
         pathlib.Path(tmp).write_text("\n".join(lines) + "\n")
 
-    return _atomic_write(path, write)
+    return atomic_write(path, write)
 
 
 def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
@@ -228,7 +228,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     density = float(sample.particle_material.density)
     pad = 10.0 * rad.max()
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
-    from jaxbpm import __version__
+    from jaxbpm._version import __version__
 
     lines = [title or f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
                       f"jaxbpm {__version__}",
@@ -249,7 +249,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     def write(tmp):
         pathlib.Path(tmp).write_text("\n".join(lines) + "\n")
 
-    return _atomic_write(path, write)
+    return atomic_write(path, write)
 
 
 def _read_text(path: pathlib.Path) -> str:
@@ -664,8 +664,8 @@ def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     blines = ["i,j,bond_radius,material,E,nu,tensile_strength,shear_strength"]
     blines += [f"{b[k, 0]},{b[k, 1]},{_r(rb[k])},{bm[k]},{_r(m.E[bm[k]])},{_r(m.nu[bm[k]])},"
                f"{_r(m.tensile_strength[bm[k]])},{_r(m.shear_strength[bm[k]])}" for k in range(sample.n_bonds)]
-    out_b = _atomic_write(bpath, lambda tmp: pathlib.Path(tmp).write_text("\n".join(blines) + "\n"))
-    out_p = _atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text("\n".join(plines) + "\n"))
+    out_b = atomic_write(bpath, lambda tmp: pathlib.Path(tmp).write_text("\n".join(blines) + "\n"))
+    out_p = atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text("\n".join(plines) + "\n"))
     return out_p, out_b
 
 
@@ -850,7 +850,7 @@ class VTUSeries:
             cell_data[name] = [filler, arr] if nb else [filler]
         mesh = meshio.Mesh(pos, cells, point_data=pdata, cell_data=cell_data)
         vtu = self.path.with_name(f"{self.path.stem}_{len(self.steps):06d}.vtu")
-        _atomic_write(vtu, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
+        atomic_write(vtu, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
         self.steps.append((float(time), vtu.name))
         self._write_pvd()
         return vtu
@@ -864,7 +864,7 @@ class VTUSeries:
             ET.SubElement(coll, "DataSet", timestep=_r(t), group="", part="0", file=name)
         tree = ET.ElementTree(root)
         ET.indent(tree)
-        _atomic_write(self.path, lambda tmp: tree.write(tmp, encoding="utf-8", xml_declaration=True))
+        atomic_write(self.path, lambda tmp: tree.write(tmp, encoding="utf-8", xml_declaration=True))
 
 
 def write_vtu_series(pvd_path, sample: Sample, frames: Iterable[Mapping[str, Any]]) -> pathlib.Path:

@@ -47,7 +47,8 @@ import numpy as np
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk", "write_json"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk", "write_json", "atomic_write",
+           "save_local_map", "export_local_map_vtk", "plot_local_map"]
 
 FORMAT = "jaxbpm-sample"
 """Value of the ``format`` root attribute of a sample file."""
@@ -75,7 +76,7 @@ def _current_umask() -> int:
     return mask
 
 
-def _atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
+def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
     """Call ``write(tmp_name)`` on a fresh temporary file next to ``path``, then rename it onto ``path``.
 
     On any exception (including KeyboardInterrupt) the temporary file is deleted and the exception re-raised;
@@ -121,7 +122,7 @@ def write_json(path, data) -> pathlib.Path:
             json.dump(data, fh, indent=2, default=convert)
             fh.write("\n")
 
-    return _atomic_write(target, write)
+    return atomic_write(target, write)
 
 
 # ---------------------------------------------------------------------------------------------- HDF5 sample files
@@ -131,7 +132,7 @@ def _dataset(group, name: str, data, units: str) -> None:
 
 def _write_inputs(f, sample: Sample) -> None:
     """The fields :meth:`Sample.from_arrays` needs, plus the file's metadata."""
-    from jaxbpm import __version__
+    from jaxbpm._version import __version__
 
     f.attrs["format"] = FORMAT
     f.attrs["format_version"] = np.int64(FORMAT_VERSION)
@@ -187,7 +188,7 @@ def save_sample(path, sample: Sample) -> pathlib.Path:
             _write_inputs(f, sample)
             _write_derived(f, sample)
 
-    return _atomic_write(path, write)
+    return atomic_write(path, write)
 
 
 def _attr_str(value) -> str:
@@ -212,7 +213,7 @@ def _check_header(f, path: pathlib.Path) -> None:
     except (TypeError, ValueError):
         ok = False
     if not ok or int(version) != FORMAT_VERSION:
-        from jaxbpm import __version__
+        from jaxbpm._version import __version__
 
         raise SampleFileError(
             f"{path}: unsupported sample file format_version {_attr_str(version)} "
@@ -366,4 +367,57 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
         cell_data[name] = [filler, arr] if nb else [filler]
     mesh = meshio.Mesh(np.asarray(sample.positions, dtype=np.float64), cells, point_data=pdata,
                        cell_data=cell_data)
-    return _atomic_write(target, lambda tmp: meshio.write(tmp, mesh, file_format=file_format))
+    return atomic_write(target, lambda tmp: meshio.write(tmp, mesh, file_format=file_format))
+
+
+# ---------------------------------------------------------------------------------------------------- STE map
+def save_local_map(path, lmap) -> pathlib.Path:
+    """Write a :class:`~jaxbpm.ste.LocalMap` to HDF5 (atomically): datasets ``positions`` [m], ``E`` [Pa], ``deviation`` [1],
+    ``valid``; attributes ``format = "jaxbpm-ste-map"``, ``radius`` [m]."""
+    import h5py
+
+    def write(tmp):
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = "jaxbpm-ste-map"
+            f.attrs["radius"] = lmap.radius
+            for name, units in (("positions", "m"), ("E", "Pa"), ("deviation", "1"), ("valid", "1")):
+                arr = np.asarray(getattr(lmap, name))
+                ds = f.create_dataset(name, data=arr.astype(np.uint8) if arr.dtype == bool else arr)
+                ds.attrs["units"] = units
+
+    return atomic_write(path, write)
+
+
+def export_local_map_vtk(path, sample, lmap) -> pathlib.Path:
+    """Write the sample with the map as point data (``E_local`` [n, 3], ``deviation`` [n, 3], ``ste_valid``) to
+    ``.vtu``/``.vtk`` through :func:`export_vtk`."""
+    return export_vtk(path, sample, point_data={"E_local": lmap.E, "deviation": lmap.deviation,
+                                                "ste_valid": lmap.valid})
+
+
+def plot_local_map(path, lmap, *, direction: int = 2, slice_axis: int = 1, thickness: float | None = None):
+    """Save a picture (PNG, ...) of the deviation (Eq. 36, percent) along ``direction`` in a slice through the
+    middle of the sample normal to ``slice_axis`` (``thickness`` default two neighbourhood radii)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    pos = lmap.positions
+    mid = 0.5 * (pos[:, slice_axis].min() + pos[:, slice_axis].max())
+    t = 2.0 * lmap.radius if thickness is None else float(thickness)
+    sel = (np.abs(pos[:, slice_axis] - mid) <= 0.5 * t) & np.isfinite(lmap.deviation[:, direction])
+    axes = [k for k in range(3) if k != slice_axis]
+    fig, ax = plt.subplots(figsize=(5, 4.5))
+    val = 100.0 * lmap.deviation[sel, direction]
+    lim = float(np.nanmax(np.abs(val))) if val.size else 1.0
+    sc = ax.scatter(pos[sel, axes[0]], pos[sel, axes[1]], c=val, cmap="coolwarm", vmin=-lim, vmax=lim, s=12)
+    fig.colorbar(sc, ax=ax, label=f"deviation of E_{'xyz'[direction]} from the mean [%] (Eq. 36)")
+    ax.set_xlabel(f"{'xyz'[axes[0]]} [m]")
+    ax.set_ylabel(f"{'xyz'[axes[1]]} [m]")
+    ax.set_aspect("equal")
+    ax.set_title(f"STE local stiffness, slice normal to {'xyz'[slice_axis]}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return pathlib.Path(path)

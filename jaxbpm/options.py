@@ -95,7 +95,7 @@ _CHECKS = {
 def accepted(method: str) -> tuple[str, ...]:
     """The option names ``method`` takes (from the solver's own signature: one list, no copy to keep in step)."""
     if method == "dem":
-        from jaxbpm.solve import _solve_dem as fn
+        from jaxbpm.solving import _solve_dem as fn
     elif method == "dsm":
         from jaxbpm.dsm import solve_scene as fn
     elif method == "ste":

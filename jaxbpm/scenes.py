@@ -29,8 +29,9 @@ def sample_breaks(sample: Sample, breakage) -> bool:
 
 
 def _loading(clamped, velocity, wall_points=None, wall_normals=None, wall_velocity=None):
-    """A :class:`~jaxbpm.dem.Loading` from NumPy arrays (moved to the device as they are: no program is compiled)."""
-    from jaxbpm.dem import Loading
+    """A :class:`~jaxbpm.physics.loading.Loading` from NumPy arrays (moved to the device as they are: no program is
+    compiled)."""
+    from jaxbpm.physics.loading import Loading
 
     dtype = np.dtype(jax.dtypes.canonicalize_dtype(np.float64))
     empty = np.zeros((0, 3))

@@ -68,7 +68,6 @@ linear in the number of bonds.
 from __future__ import annotations
 
 import dataclasses
-import pathlib
 import time
 from typing import Any, NamedTuple
 
@@ -88,8 +87,8 @@ from jaxbpm.sample import Sample
 __all__ = [
     "Estimator", "estimator", "pair_stiffness", "local_tensors", "body_tensor", "raw_body_tensor", "voigt",
     "tensor_from_voigt", "moduli", "directional_modulus", "isotropic_fit", "layer_stiffness", "wall_series",
-    "SceneGeometry", "scene_geometry", "scene_stiffness", "stiffness_function", "solve_scene", "LocalMap", "local_map", "save_local_map",
-    "export_local_map_vtk", "plot_local_map", "VOIGT",
+    "SceneGeometry", "scene_geometry", "scene_stiffness", "stiffness_function", "solve_scene", "LocalMap", "local_map",
+    "VOIGT",
 ]
 
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
@@ -1021,57 +1020,17 @@ def local_map(sample: Sample, params=None, *, scene=None, radius: float | None =
     return LocalMap(positions=pos, E=e, deviation=deviation, valid=valid, radius=radius)
 
 
-def save_local_map(path, lmap: LocalMap) -> pathlib.Path:
-    """Write a :class:`LocalMap` to HDF5 (atomically): datasets ``positions`` [m], ``E`` [Pa], ``deviation`` [1],
-    ``valid``; attributes ``format = "jaxbpm-ste-map"``, ``radius`` [m]."""
-    import h5py
-
-    from jaxbpm.io import _atomic_write
-
-    def write(tmp):
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = "jaxbpm-ste-map"
-            f.attrs["radius"] = lmap.radius
-            for name, units in (("positions", "m"), ("E", "Pa"), ("deviation", "1"), ("valid", "1")):
-                arr = np.asarray(getattr(lmap, name))
-                ds = f.create_dataset(name, data=arr.astype(np.uint8) if arr.dtype == bool else arr)
-                ds.attrs["units"] = units
-
-    return _atomic_write(path, write)
+_MOVED = {"save_local_map", "export_local_map_vtk", "plot_local_map"}
 
 
-def export_local_map_vtk(path, sample: Sample, lmap: LocalMap) -> pathlib.Path:
-    """Write the sample with the map as point data (``E_local`` [n, 3], ``deviation`` [n, 3], ``ste_valid``) to
-    ``.vtu``/``.vtk`` through :func:`jaxbpm.io.export_vtk`."""
-    from jaxbpm.io import export_vtk
+def __getattr__(name):
+    # the local map's writers live on the I/O side since 0.2 (jaxbpm.io); the old names work for one more release
+    if name in _MOVED:
+        import warnings
 
-    return export_vtk(path, sample, point_data={"E_local": lmap.E, "deviation": lmap.deviation,
-                                                "ste_valid": lmap.valid})
+        from jaxbpm import io
 
-
-def plot_local_map(path, lmap: LocalMap, *, direction: int = 2, slice_axis: int = 1, thickness: float | None = None):
-    """Save a picture (PNG, ...) of the deviation (Eq. 36, percent) along ``direction`` in a slice through the
-    middle of the sample normal to ``slice_axis`` (``thickness`` default two neighbourhood radii)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    pos = lmap.positions
-    mid = 0.5 * (pos[:, slice_axis].min() + pos[:, slice_axis].max())
-    t = 2.0 * lmap.radius if thickness is None else float(thickness)
-    sel = (np.abs(pos[:, slice_axis] - mid) <= 0.5 * t) & np.isfinite(lmap.deviation[:, direction])
-    axes = [k for k in range(3) if k != slice_axis]
-    fig, ax = plt.subplots(figsize=(5, 4.5))
-    val = 100.0 * lmap.deviation[sel, direction]
-    lim = float(np.nanmax(np.abs(val))) if val.size else 1.0
-    sc = ax.scatter(pos[sel, axes[0]], pos[sel, axes[1]], c=val, cmap="coolwarm", vmin=-lim, vmax=lim, s=12)
-    fig.colorbar(sc, ax=ax, label=f"deviation of E_{'xyz'[direction]} from the mean [%] (Eq. 36)")
-    ax.set_xlabel(f"{'xyz'[axes[0]]} [m]")
-    ax.set_ylabel(f"{'xyz'[axes[1]]} [m]")
-    ax.set_aspect("equal")
-    ax.set_title(f"STE local stiffness, slice normal to {'xyz'[slice_axis]}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return pathlib.Path(path)
+        warnings.warn(f"jaxbpm.ste.{name} moved to jaxbpm.io.{name}; the old name goes in the next release",
+                      DeprecationWarning, stacklevel=2)
+        return getattr(io, name)
+    raise AttributeError(f"module 'jaxbpm.ste' has no attribute {name!r}")

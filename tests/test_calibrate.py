@@ -14,7 +14,7 @@ from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
 SCENE = UniaxialCompression(strain=0.002)
-SOLVE = importlib.import_module("jaxbpm.solve")
+SOLVE = importlib.import_module("jaxbpm.solving")
 
 
 @pytest.fixture(scope="module")

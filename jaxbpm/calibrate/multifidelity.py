@@ -11,7 +11,6 @@ the evaluations and time per level.
 
 from __future__ import annotations
 
-import importlib
 import time
 from typing import Sequence
 
@@ -28,7 +27,7 @@ __all__ = ["default_levels", "calibrate_level", "multifidelity"]
 
 def default_levels() -> tuple[str, ...]:
     """``("ste", "dsm")`` when the STE solver is available, else ``("dsm",)``."""
-    solve_mod = importlib.import_module("jaxbpm.solve")
+    from jaxbpm import solving as solve_mod
 
     return ("ste", "dsm") if "ste" in solve_mod.METHODS else ("dsm",)
 

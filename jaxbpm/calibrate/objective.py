@@ -446,7 +446,7 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
     ``jaxbpm.<model>`` has a ``stiffness_function`` and every scene is linear (bonds only, clamped layers), elastic
     targets use that pure function (batched and differentiable). ``solve_options`` go to ``jaxbpm.solve`` only.
     """
-    solve_mod = importlib.import_module("jaxbpm.solve")
+    from jaxbpm import solving as solve_mod
     from jaxbpm.sample import Sample
 
     if not isinstance(model, str) or model not in solve_mod.METHODS:

@@ -48,7 +48,7 @@ class History:
         result summary as JSON attributes)."""
         import h5py
 
-        from jaxbpm.io import _atomic_write
+        from jaxbpm.io import atomic_write
 
         def write(tmp):
             with h5py.File(tmp, "w") as f:
@@ -68,7 +68,7 @@ class History:
                 f.create_dataset("kind", data=np.asarray([r["kind"] for r in self.rows], dtype="S"))
                 f.create_dataset("level", data=np.asarray([r["level"] for r in self.rows], dtype="S"))
 
-        return _atomic_write(path, write)
+        return atomic_write(path, write)
 
 
 def _jsonable(obj):

@@ -77,7 +77,7 @@ class RunSet:
         """Write the run set to an HDF5 file atomically."""
         import h5py
 
-        from jaxbpm.io import _atomic_write
+        from jaxbpm.io import atomic_write
 
         def write(tmp):
             with h5py.File(tmp, "w") as f:
@@ -90,7 +90,7 @@ class RunSet:
                 for name in ("X", "lower", "upper", "Y"):
                     f.create_dataset(name, data=np.asarray(getattr(self, name), dtype=np.float64))
 
-        return _atomic_write(path, write)
+        return atomic_write(path, write)
 
     @classmethod
     def load(cls, path) -> "RunSet":

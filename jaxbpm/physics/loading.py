@@ -1,0 +1,32 @@
+"""The boundary conditions of a run: clamped particles with prescribed velocities and moving plane walls. Scenes
+build them (:meth:`jaxbpm.scenes.UniaxialCompression.loading`); the DEM integrates under them (``jaxbpm.dem.Loading``
+is this class)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+
+__all__ = ["Loading"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Loading:
+    """Boundary conditions of a DEM run (a pytree).
+
+    clamped: ``[n]`` bool, particles whose every DOF is prescribed (translation ``x0 + velocity t``, no rotation).
+    velocity: ``[n, 3]`` prescribed velocity of clamped particles (zero for fixed ones).
+    wall_points0, wall_normals, wall_velocity: ``[W, 3]`` plane walls (W may be 0).
+    """
+
+    clamped: Any
+    velocity: Any
+    wall_points0: Any
+    wall_normals: Any
+    wall_velocity: Any
+
+
+jax.tree_util.register_dataclass(Loading, data_fields=["clamped", "velocity", "wall_points0", "wall_normals",
+                                                       "wall_velocity"], meta_fields=[])
