@@ -364,9 +364,9 @@ def find_lammps(explicit: str | None, tmp: pathlib.Path) -> tuple[str | None, di
 def write_lammps_data(path: pathlib.Path, positions, radii, bonds, density: float, atom_type, bond_type) -> None:
     """LAMMPS data file, atom_style bpm/sphere (``id mol type diameter density x y z``); atom ids = index + 1.
 
-    Written by :func:`jaxbpm.formats.write_lammps_data` without its ``Bond Coeffs`` section (the coefficients
+    Written by :func:`jaxbpm.interop.formats.write_lammps_data` without its ``Bond Coeffs`` section (the coefficients
     come from :func:`write_coeffs`, included after ``bond_style``)."""
-    from jaxbpm.formats import write_lammps_data as write
+    from jaxbpm.interop.formats import write_lammps_data as write
     from jaxbpm.sample import Sample
 
     rad = np.asarray(radii, dtype=np.float64)
@@ -392,7 +392,7 @@ def bond_types(k: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def write_coeffs(path: pathlib.Path, table: np.ndarray) -> None:
     """bond_coeff lines: Kr Ks Kt Kb, thresholds 1e3 x stiffness (irrelevant with ``break no``), no damping."""
-    from jaxbpm.formats import write_lammps_coeffs
+    from jaxbpm.interop.formats import write_lammps_coeffs
 
     table = np.asarray(table, dtype=np.float64)
     write_lammps_coeffs(path, np.concatenate([table, 1e3 * table], axis=1), bond_style=None)

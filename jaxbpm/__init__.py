@@ -26,8 +26,8 @@ __all__ = [
 ]
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
-_LAZY = ("dem", "dsm", "ste", "sweep", "calibrate", "formats", "conventions", "records", "options", "physics",
-         "sample", "result")
+_LAZY = ("dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options", "physics", "sample", "result",
+         "formats", "conventions")  # (the last two: old names of jaxbpm.interop's modules, deprecated)
 
 
 def __getattr__(name):

@@ -322,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the calibration step")
     p.set_defaults(func=_cmd_demo)
 
-    from jaxbpm._interop_cli import add_parsers as _add_interop  # convert, params
+    from jaxbpm.interop.cli import add_parsers as _add_interop  # convert, params
 
     _add_interop(sub)
 

@@ -280,7 +280,7 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
 def _snapshot_writer(sample, model, vtu, snapshots, n_chunks, chunk):
     """The VTU series and the chunk numbers after which a frame is written: ``snapshots`` frames evenly spaced in
     time, the first the sample at rest and the last the end of the run (one frame: the end only)."""
-    from jaxbpm.formats import VTUSeries
+    from jaxbpm.interop.formats import VTUSeries
 
     if snapshots - 1 > n_chunks:
         raise SceneError(f"snapshots={snapshots} needs at least {snapshots - 1} chunks, the run has {n_chunks} of "

@@ -14,8 +14,9 @@ import meshio
 import numpy as np
 import pytest
 
-from jaxbpm import cli, conventions, formats, io
-from jaxbpm.conventions import InexactTranslationWarning, JaxbpmBond
+from jaxbpm import cli, io
+from jaxbpm.interop import conventions, formats
+from jaxbpm.interop.conventions import InexactTranslationWarning, JaxbpmBond
 from jaxbpm.errors import ConventionError, SampleFileError
 from jaxbpm.physics.bond import bond_law
 from jaxbpm.sample import Domain, Sample
@@ -415,3 +416,17 @@ def test_lammps_reads_our_files_and_we_read_its(tmp_path):
     atoms = formats.read_lammps_dump(tmp_path / "atoms.dump")[0]
     local = formats.read_lammps_dump(tmp_path / "bonds.dump")[0]
     np.testing.assert_array_equal(np.sort(np.sort(local.bonds(atoms.ids), axis=1), axis=0), sample.bonds)
+
+
+def test_old_module_names_still_import_with_a_warning():
+    import importlib
+    import sys
+
+    for old, moved in (("jaxbpm.formats", formats), ("jaxbpm.conventions", conventions)):
+        saved = sys.modules.pop(old, None)
+        try:
+            with pytest.warns(DeprecationWarning, match=f"moved to jaxbpm.interop.{old.split('.')[1]}"):
+                assert importlib.import_module(old) is moved
+        finally:
+            if saved is not None:
+                sys.modules[old] = saved

@@ -17,7 +17,7 @@ __all__ = ["add_parsers"]
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
-    from jaxbpm import formats
+    from jaxbpm.interop import formats
 
     kw = {}
     if args.normalize:
@@ -53,7 +53,7 @@ def _fmt(value) -> str:
 
 
 def _cmd_params(args: argparse.Namespace) -> int:
-    from jaxbpm import conventions
+    from jaxbpm.interop import conventions
 
     values = _parse_values(args.values)
     r1 = args.radius1
@@ -86,7 +86,7 @@ def _cmd_params(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     """Add ``convert`` and ``params`` to the sub-parsers ``sub`` of the ``jaxbpm`` parser."""
-    from jaxbpm import conventions, formats
+    from jaxbpm.interop import conventions, formats
 
     known = ", ".join(f"{ext} ({what})" for ext, what in formats.FORMATS.items())
     p = sub.add_parser(
