@@ -123,7 +123,7 @@ def program_counts() -> dict[str, int]:
         for attr, obj in list(vars(mod).items()):
             key = f"{mod_name}.{attr}"
             try:
-                if isinstance(obj, Program):
+                if isinstance(obj, Program) and getattr(obj.fn, "__module__", None) == mod_name:  # (not imports)
                     counts[key] = obj.compilations
                 elif callable(getattr(obj, "_cache_size", None)) and getattr(obj, "__module__", None) == mod_name:
                     counts[key] = int(obj._cache_size())
