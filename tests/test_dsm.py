@@ -76,6 +76,7 @@ def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
     np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-5)
 
 
+@pytest.mark.xdist_group("dsm-linearised-contacts")  # one worker: the second reuses the first's programs
 def test_linear_dsm_linearises_the_contacts(packing):
     # stiffer particles: the contacts carry ~20 % of the stiffness (the nonlinear DSM is the reference here: it
     # matches the DEM with contacts, test_nonlinear_dsm_matches_dem)
@@ -107,6 +108,7 @@ def test_linear_dsm_linearises_the_contacts(packing):
         jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.9 * lin.stats["contact_gap_max"])
 
 
+@pytest.mark.xdist_group("dsm-linearised-contacts")  # one worker: the second reuses the first's programs
 def test_linearised_contacts_widen_a_short_default_reach(packing, monkeypatch):
     s = packing.replace(particle_material=dataclasses.replace(packing.particle_material, E=5e9))
     scene = UniaxialCompression(strain=0.002, contacts=True)
