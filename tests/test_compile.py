@@ -173,7 +173,7 @@ def test_one_size_class_shares_its_program(method):
     a, b = _lattice((4, 4, 8)), _lattice((4, 5, 7))
     assert a.n_particles != b.n_particles and a.n_bonds != b.n_bonds
     assert size_class(a.n_particles, a.n_bonds) == size_class(b.n_particles, b.n_bonds)
-    program = {"ste": ste._solve_program, "dsm": dsm.linear.linear_program}[method]
+    program = {"ste": ste.scene.solve_program, "dsm": dsm.linear.linear_program}[method]
     ra = jaxbpm.solve(a, SCENE, method=method)
     before = program.compilations
     rb = jaxbpm.solve(b, SCENE, method=method)

@@ -163,8 +163,8 @@ def test_pair_form_matches_edge_form(packing):
     p = default_params(packing)
 
     def full(est, p):
-        return (ste.raw_body_tensor(est, p), ste._raw_body_tensor_edges(est, p), ste.local_tensors(est, p),
-                ste._local_tensors_edges(est, p), ste._coupling(est, p), ste.pair_stiffness(est, p))
+        return (ste.raw_body_tensor(est, p), ste.tensor.raw_body_tensor_edges(est, p), ste.local_tensors(est, p),
+                ste.tensor.local_tensors_edges(est, p), ste.tensor.coupling(est, p), ste.pair_stiffness(est, p))
 
     est = ste.estimator(packing, scene)
     assert est.n_contacts > 0 and est.terms == (0, 1)
@@ -175,7 +175,7 @@ def test_pair_form_matches_edge_form(packing):
     # K^nm = sum_s k_s G_s is the Jacobian of the bond law with the actual stiffnesses (and of the contact law)
     np.testing.assert_allclose(k, -jac[:, :3, 3:], rtol=0, atol=1e-12 * float(jnp.abs(k).max()))
     first = ste.estimator(packing, scene, first_neighbour=True)
-    fast, ref = jax.jit(lambda e, p: (ste.raw_body_tensor(e, p), ste._raw_body_tensor_edges(e, p)))(first, p)
+    fast, ref = jax.jit(lambda e, p: (ste.raw_body_tensor(e, p), ste.tensor.raw_body_tensor_edges(e, p)))(first, p)
     np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * float(jnp.abs(ref).max()))
 
 
