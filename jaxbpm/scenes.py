@@ -28,6 +28,11 @@ def sample_breaks(sample: Sample, breakage) -> bool:
     return bool(np.isfinite(m.tensile_strength).any() or np.isfinite(m.shear_strength).any())
 
 
+def _is_axis(axis) -> bool:
+    """Whether ``axis`` is 0, 1 or 2 as a whole number (not ``2.0``, ``True`` or ``"2"``: they would index wrongly)."""
+    return isinstance(axis, (int, np.integer)) and not isinstance(axis, bool) and int(axis) in (0, 1, 2)
+
+
 def _loading(clamped, velocity, wall_points=None, wall_normals=None, wall_velocity=None):
     """A :class:`~jaxbpm.physics.loading.Loading` from NumPy arrays (moved to the device as they are: no program is
     compiled)."""
@@ -92,8 +97,8 @@ class UniaxialCompression:
         return cls(strain=strain, breakage=True, **kw)
 
     def __post_init__(self):
-        if self.axis not in (0, 1, 2):
-            raise SceneError(f"axis must be 0, 1 or 2, got {self.axis!r}")
+        if not _is_axis(self.axis):
+            raise SceneError(f"axis must be the whole number 0, 1 or 2, got {self.axis!r}")
         if not (0 < self.strain < 0.5):
             raise SceneError(f"strain must lie in (0, 0.5), got {self.strain!r}")
         if self.boundary not in ("layers", "walls"):
@@ -250,7 +255,7 @@ class ThreePointBending:
     wall_stiffness = None
 
     def __post_init__(self):
-        if self.axis not in (0, 1, 2) or self.span_axis not in (0, 1, 2) or self.axis == self.span_axis:
+        if not _is_axis(self.axis) or not _is_axis(self.span_axis) or self.axis == self.span_axis:
             raise SceneError(f"axis and span_axis must be two different axes of 0, 1, 2, got {self.axis!r} and "
                              f"{self.span_axis!r}")
         if not (0 < self.strain < 1):

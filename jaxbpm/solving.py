@@ -91,6 +91,10 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     if method != "dem" and getattr(scene, "contacts", False) and getattr(scene, "cohesive_law", None) is not None:
         raise SceneError(f"the cohesive contact law depends on the loading history: it needs method='dem', not "
                          f"{method!r}")
+    if params is not None:  # one validation path for every method
+        from jaxbpm.physics.model import check_params
+
+        params = check_params(params, sample)
     if method == "dsm":
         from jaxbpm import dsm
 

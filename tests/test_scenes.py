@@ -58,7 +58,9 @@ def test_compression_along_x_matches_z():
 
 
 @pytest.mark.parametrize("kw, message", [
-    (dict(axis=3), "axis must be 0, 1 or 2"),
+    (dict(axis=3), "axis must be the whole number 0, 1 or 2"),
+    (dict(axis=2.0), r"axis must be the whole number 0, 1 or 2, got 2\.0"),
+    (dict(axis=True), "axis must be the whole number 0, 1 or 2, got True"),
     (dict(strain=0.0), "strain must lie in"),
     (dict(boundary="plates"), "boundary must be"),
     (dict(fixed=np.ones(3, bool)), "give both fixed and driven"),

@@ -32,13 +32,58 @@ from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import wall as wall_mod
 from jaxbpm.sample import Sample
 
-__all__ = ["Model", "build_model", "default_params"]
+__all__ = ["Model", "build_model", "default_params", "check_params"]
 
 
 def default_params(sample: Sample) -> dict:
     """The calibratable parameters of ``sample`` at their current values: ``{"bond_E", "bond_nu"}``."""
     dtype = _float_dtype()
     return {"bond_E": _put(sample.materials.E, dtype), "bond_nu": _put(sample.materials.nu, dtype)}
+
+
+def check_params(params, sample: Sample) -> dict:
+    """``params`` checked against ``sample`` -- the one validation path every solver's ``params`` goes through --
+    and returned with ``bond_E``/``bond_nu`` as device arrays (lists, tuples and NumPy arrays are moved as they are).
+
+    Both keys are required, one entry per bond material (``[sample.n_materials]``); ``bond_E`` finite and > 0 [Pa],
+    ``bond_nu`` finite and in (-1, 0.5), the range :class:`~jaxbpm.sample.BondMaterials` accepts (at -1 the shear
+    stiffness is infinite; at 0.5 and above the bond is not an elastic solid); ``bond_tensile_strength`` and
+    ``bond_shear_strength``, where given, >= 0 (``inf``: never breaks). Other keys (contact parameters) are passed
+    on. Traced values (inside ``jit``/``grad``/``vmap``) are not checked. Raises
+    :class:`~jaxbpm.errors.SceneError` naming the key, the offending entries and what was expected.
+    """
+    from collections.abc import Mapping
+
+    from jaxbpm.errors import SceneError
+
+    if not isinstance(params, Mapping) or not {"bond_E", "bond_nu"} <= set(params):
+        got = sorted(params) if isinstance(params, Mapping) else type(params).__name__
+        raise SceneError("params must be a dict with 'bond_E' and 'bond_nu', one entry per bond material (see "
+                         f"jaxbpm.physics.model.default_params), got {got}")
+    m = sample.n_materials
+    out = dict(params)
+    checks = [("bond_E", lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
+              ("bond_nu", lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)")]
+    checks += [(name, lambda v: v >= 0, ">= 0 [Pa] (inf: never breaks)")  # NaN fails it too
+               for name in ("bond_tensile_strength", "bond_shear_strength") if name in params]
+    for name, ok, what in checks:
+        value = params[name]
+        if isinstance(value, jax.core.Tracer):
+            continue
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SceneError(f"params[{name!r}] must be numbers, one per bond material, got {value!r}") from None
+        if arr.shape != (m,):
+            raise SceneError(f"params[{name!r}] must have shape [{m}] (one per bond material), got shape "
+                             f"{arr.shape}: {arr.tolist()}")
+        bad = np.flatnonzero(~ok(arr))
+        if bad.size:
+            raise SceneError(f"params[{name!r}] must be {what}; bad entries (material: value) "
+                             + ", ".join(f"{int(k)}: {arr[k]:g}" for k in bad[:8]))
+        if not isinstance(value, jax.Array):
+            out[name] = _put(arr, _float_dtype())
+    return out
 
 
 def _float_dtype():

@@ -9,10 +9,9 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxbpm.errors import SceneError
-from jaxbpm.physics.model import default_params
+from jaxbpm.physics.model import check_params, default_params
 from jaxbpm.sample import Sample
 from jaxbpm.ste.estimator import estimator
-from jaxbpm.ste.scene import _check_params
 from jaxbpm.ste.tensor import _local_tensors_jit
 
 __all__ = ["LocalMap", "local_map"]
@@ -40,7 +39,7 @@ def local_map(sample: Sample, params=None, *, scene=None, radius: float | None =
     from scipy.spatial import cKDTree
 
     params = default_params(sample) if params is None else params
-    _check_params(params, sample)
+    params = check_params(params, sample)
     est = estimator(sample, scene, pad=True, **options)
     c = np.asarray(_local_tensors_jit(est, params))[:sample.n_particles]
     rad = np.asarray(sample.radii)

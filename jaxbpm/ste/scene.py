@@ -14,7 +14,7 @@ import numpy as np
 
 from jaxbpm._compile import compile_clock, Program, put, SetupCache, traced
 from jaxbpm.errors import SceneError
-from jaxbpm.physics.model import default_params
+from jaxbpm.physics.model import check_params, default_params
 from jaxbpm.sample import Sample
 from jaxbpm.ste.estimator import Estimator, estimator
 from jaxbpm.ste.tensor import body_tensor, isotropic_fit, local_tensors, moduli
@@ -216,7 +216,7 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
     t0 = time.perf_counter()
     _check_scene(scene)
     params = default_params(sample) if params is None else params
-    _check_params(params, sample)
+    params = check_params(params, sample)
     with compile_clock() as setup_compile:  # programs the setup compiles count as compilation
         est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
                                     lambda: _setup(sample, scene, pad, options))
@@ -242,17 +242,3 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
                          area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
                          wall_time=wall, setup_time=setup_time, compile_time=compile_time,
                          run_time=wall - setup_time - compile_time, stats=stats, state=None), throw)
-
-
-def _check_params(params, sample: Sample):
-    if not isinstance(params, dict) or not {"bond_E", "bond_nu"} <= set(params):
-        raise SceneError("params must be a dict with 'bond_E' and 'bond_nu' (see jaxbpm.physics.model."
-                         f"default_params), got {type(params).__name__}")
-    m = sample.n_materials
-    for name in ("bond_E", "bond_nu"):
-        shape = np.shape(params[name])
-        if shape != (m,):
-            raise SceneError(f"params[{name!r}] must have shape [{m}] (one per bond material), got {shape}")
-    E = np.asarray(params["bond_E"])
-    if not np.all(np.isfinite(E) & (E > 0)):
-        raise SceneError(f"params['bond_E'] must be finite and > 0, got {E.tolist()}")
