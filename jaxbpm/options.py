@@ -75,7 +75,8 @@ def _any(name, v):
 _CHECKS = {
     "dem": {"dt": _optional_positive, "safety": _fraction, "damping": lambda n, v: _fraction(n, v, False, False),
             "loading_time": _optional_positive, "transits": _positive, "chunk": _optional_whole,
-            "max_records": _whole, "snapshots": _optional_whole, "pad": _flag, "throw": _flag},
+            "max_records": _whole, "snapshots": _optional_whole, "pad": _flag, "throw": _flag,
+            "overwrite": _flag},
     "dsm": {"dofs": _choice(None, 3, 6), "nonlinear": _optional_flag, "tol": _optional_positive,
             "linear_tol": _positive, "maxiter": _optional_whole, "newton_maxiter": _whole,
             "stiffness_tol": lambda n, v: None if isinstance(v, str) and v == "auto" else _optional_positive(n, v), "contact_skin": _optional_positive, "load_steps": _whole,

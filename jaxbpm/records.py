@@ -62,10 +62,30 @@ def _scalar(v):
     return None
 
 
-class RecordFile:
-    """An HDF5 record file, created (replacing an old one) with the run's scalar ``attrs``."""
+# the attributes that say two runs are the same run (a record of it may be replaced by running it again)
+SAME_RUN = ("method", "scene", "dt", "speed", "gauge_length", "area", "target_displacement", "damping")
 
-    def __init__(self, path, attrs: Mapping[str, Any] | None = None, *, steps_planned: int | None = None):
+
+def _same_run(path: pathlib.Path, attrs: Mapping[str, Any]) -> bool:
+    """Whether ``path`` is a jaxbpm record file of the run ``attrs`` describes."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != FORMAT:
+                return False
+            return all(k in f.attrs and _scalar(attrs[k]) == f.attrs[k] for k in SAME_RUN if k in attrs)
+    except (OSError, KeyError, ValueError):
+        return False
+
+
+class RecordFile:
+    """An HDF5 record file, created with the run's scalar ``attrs``. An existing file at ``path`` is replaced only
+    when it is a record of the same run (the attributes in :data:`SAME_RUN` agree: running it again) or with
+    ``overwrite=True``; any other file is an error, left as it was."""
+
+    def __init__(self, path, attrs: Mapping[str, Any] | None = None, *, steps_planned: int | None = None,
+                 overwrite: bool = False):
         import h5py
 
         self.path = pathlib.Path(path)
@@ -73,6 +93,9 @@ class RecordFile:
             raise SampleFileError(f"{self.path}: a record file must end in .h5 or .hdf5")
         if not self.path.parent.is_dir():
             raise SampleFileError(f"{self.path}: no such directory {self.path.parent}")
+        if self.path.exists() and not overwrite and not _same_run(self.path, attrs or {}):
+            raise SampleFileError(f"{self.path} exists and is not a record of this run: not replaced (choose another "
+                                  "path, or pass overwrite=True to replace it)")
         self.steps = 0
         with _hold_interrupts(), h5py.File(self.path, "w") as f:
             f.attrs.update(format=FORMAT, version=VERSION, status="running", steps=0,

@@ -39,7 +39,8 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     ``progress`` (print progress, or a callable ``progress(steps_done, steps_total, elapsed_s)``), ``neighbors``
     (:class:`~jaxbpm.dem.NeighborSettings`), ``max_records`` (points kept in the returned curve, 2000),
     ``record_to`` (an ``.h5`` path: every step's time, displacement, force, reactions and broken-bond counts are
-    appended chunk by chunk as they arrive, see :mod:`jaxbpm.records`), ``snapshots`` and ``vtu`` (``snapshots=K``
+    appended chunk by chunk as they arrive, see :mod:`jaxbpm.records`; an existing file is replaced only when it
+    is a record of the same run or with ``overwrite=True``), ``snapshots`` and ``vtu`` (``snapshots=K``
     frames evenly spaced in time, the first at rest, written to the ParaView series ``vtu="dir/run.pvd"`` as the run
     goes: displacement, velocity, force and broken bonds (tensile, shear) per particle; per bond ``intact``,
     ``break_mode`` and ``broken_time``). A ``KeyboardInterrupt`` during the run (Ctrl-C, or raised by the
@@ -108,7 +109,7 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 
 def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
                chunk=None, progress=False, neighbors=None, max_records=2000, record_to=None, snapshots=None,
-               vtu=None, pad=True, throw=True) -> Result:
+               vtu=None, pad=True, throw=True, overwrite=False) -> Result:
     t0 = time.perf_counter()
     from jaxbpm._compile import compile_clock
     from jaxbpm.result import settle
@@ -118,7 +119,7 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
             result = _run_dem(t0, compiling, sample, scene, params, dt=dt, safety=safety, damping=damping,
                               loading_time=loading_time, transits=transits, chunk=chunk, progress=progress,
                               neighbors=neighbors, max_records=max_records, record_to=record_to,
-                              snapshots=snapshots, vtu=vtu, pad=pad)
+                              snapshots=snapshots, vtu=vtu, pad=pad, overwrite=overwrite)
     except InstabilityError as err:
         if throw or err.result is None:
             raise
@@ -127,7 +128,7 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
 
 
 def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loading_time, transits, chunk, progress,
-             neighbors, max_records, record_to, snapshots, vtu, pad) -> Result:
+             neighbors, max_records, record_to, snapshots, vtu, pad, overwrite) -> Result:
     from jaxbpm import dem
     from jaxbpm._compile import size_class
     from jaxbpm.errors import SimulationInterrupted
@@ -190,7 +191,7 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
     if record_to is not None:
         from jaxbpm.records import RecordFile
 
-        recorder = RecordFile(record_to, run_attrs, steps_planned=n_steps)
+        recorder = RecordFile(record_to, run_attrs, steps_planned=n_steps, overwrite=overwrite)
 
         def write_records(done, state, rec):
             rows = {"time": rec["time"], "displacement": speed * rec["time"],

@@ -117,3 +117,21 @@ def test_output_options_are_checked(weak, tmp_path):
         jaxbpm.solve(weak, SCENE, "dem", record_to=tmp_path / "run.txt")
     with pytest.raises(SampleFileError, match="no such record file"):
         read_records(tmp_path / "missing.h5")
+
+
+def test_a_record_never_replaces_another_file(weak, tmp_path):
+    h5 = tmp_path / "sample.h5"
+    jaxbpm.io.save_sample(h5, weak)
+    before = h5.read_bytes()
+    with pytest.raises(SampleFileError, match=r"sample\.h5 exists and is not a record of this run.*overwrite=True"):
+        jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=h5)
+    assert h5.read_bytes() == before and jaxbpm.io.load_sample(h5).n_particles == weak.n_particles
+    # running the same run again replaces its own record; another run does not; overwrite=True does
+    run = tmp_path / "run.h5"
+    first = jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=run)
+    again = jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=run)
+    assert again.stiffness == first.stiffness and read_records(run)[1]["status"] == "complete"
+    with pytest.raises(SampleFileError, match="not a record of this run"):
+        jaxbpm.solve(weak, SCENE, "dem", transits=5, damping=0.5, record_to=run)
+    jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=h5, overwrite=True)
+    assert read_records(h5)[1]["format"] == "jaxbpm-records"
