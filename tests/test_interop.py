@@ -280,6 +280,19 @@ def test_csv_round_trip_exact(tmp_path, make):
     _assert_same(sample, formats.read_csv(p))
 
 
+def test_csv_copied_pair_reads_its_own_bonds(tmp_path):
+    import shutil
+
+    sample = _sample()
+    p, b = formats.write_csv(tmp_path / "a.csv", sample)
+    shutil.copy(p, tmp_path / "b.csv")
+    rows = b.read_text().splitlines()
+    (tmp_path / "b_bonds.csv").write_text("\n".join(rows[:-1]) + "\n")  # the copy's bonds: one fewer
+    assert formats.read_csv(tmp_path / "b.csv").n_bonds == sample.n_bonds - 1  # b_bonds.csv, not a_bonds.csv
+    (tmp_path / "b_bonds.csv").unlink()  # without a file of its own name, the one the metadata names
+    assert formats.read_csv(tmp_path / "b.csv").n_bonds == sample.n_bonds
+
+
 def test_csv_foreign_and_errors(tmp_path):
     (tmp_path / "p.csv").write_text("id,x,y,z,diameter\n10,0,0,0,1.0\n11,1,0,0,1.0\n12,2,0,0,1.0\n")
     (tmp_path / "p_bonds.csv").write_text("id1,id2,bond_diameter,E,nu\n10,11,0.5,1e9,0.2\n11,12,0.4,2e9,0.2\n")

@@ -709,7 +709,8 @@ def _column(path, header, rows, names, cast=float, required=True):
 
 
 def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, **sample_kw) -> Sample:
-    """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv``) CSV files.
+    """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
+    file named in the particles file's metadata) CSV files.
 
     See the module docstring for the columns. ``bond_radius_ratio`` is needed when the bonds file has no
     ``bond_radius``/``bond_diameter`` column; ``sample_kw`` go to :meth:`Sample.from_arrays`.
@@ -718,8 +719,11 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     meta, header, rows = _csv_rows(path)
     if not rows:
         raise SampleFileError(f"{path}: no particles")
-    bpath = pathlib.Path(bonds_path) if bonds_path is not None else (
-        path.with_name(meta["bonds_file"]) if meta and meta.get("bonds_file") else _bonds_path(path))
+    # the bonds file next to the particles file by its own name first (a copied or renamed pair of files reads its
+    # own bonds), then the name stored in the metadata
+    bpath = pathlib.Path(bonds_path) if bonds_path is not None else _bonds_path(path)
+    if bonds_path is None and not bpath.exists() and meta and meta.get("bonds_file"):
+        bpath = path.with_name(meta["bonds_file"])
     pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
     rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
     if rname in ("diameter", "d"):
