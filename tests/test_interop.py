@@ -231,6 +231,13 @@ def test_lammps_data_errors_name_the_line(tmp_path):
     lines = list(good)
     lines[3] = "six atoms"
     bad(lines, r"bad\.data:4: cannot read header line")
+    # cut before the Bonds section: the header's count is checked, not read as a sample without bonds
+    bad(good[:bonds - 2], r"header declares 7 bonds but the file has no Bonds section")
+    # cut in the middle of the last line (no final newline): a truncated file, not a bond to another atom
+    p = tmp_path / "cut.data"
+    p.write_text("\n".join(good).rstrip()[:-1])
+    with pytest.raises(SampleFileError, match=r"cut\.data:\d+: the file ends in the middle of a line"):
+        formats.read_lammps_data(p)
 
 
 # ============================================================================================== LAMMPS dump
@@ -287,10 +294,21 @@ def test_csv_copied_pair_reads_its_own_bonds(tmp_path):
     p, b = formats.write_csv(tmp_path / "a.csv", sample)
     shutil.copy(p, tmp_path / "b.csv")
     rows = b.read_text().splitlines()
-    (tmp_path / "b_bonds.csv").write_text("\n".join(rows[:-1]) + "\n")  # the copy's bonds: one fewer
-    assert formats.read_csv(tmp_path / "b.csv").n_bonds == sample.n_bonds - 1  # b_bonds.csv, not a_bonds.csv
+    first = rows[1].split(",")
+    first[2] = repr(0.5 * float(first[2]))  # the copy's first bond is thinner
+    (tmp_path / "b_bonds.csv").write_text("\n".join([rows[0], ",".join(first)] + rows[2:]) + "\n")
+    got = formats.read_csv(tmp_path / "b.csv")  # b_bonds.csv, not a_bonds.csv (the name in the metadata)
+    np.testing.assert_allclose(got.bond_radius[0], 0.5 * sample.bond_radius[0], rtol=1e-15)
     (tmp_path / "b_bonds.csv").unlink()  # without a file of its own name, the one the metadata names
-    assert formats.read_csv(tmp_path / "b.csv").n_bonds == sample.n_bonds
+    np.testing.assert_allclose(formats.read_csv(tmp_path / "b.csv").bond_radius[0], sample.bond_radius[0])
+    # a bonds file cut at a row boundary, or down to its header, no longer reads as fewer bonds
+    (tmp_path / "b_bonds.csv").write_text("\n".join(rows[:-1]) + "\n")
+    with pytest.raises(SampleFileError, match=rf"{sample.n_bonds - 1} bonds read, but b\.csv's metadata declares "
+                                              rf"{sample.n_bonds}"):
+        formats.read_csv(tmp_path / "b.csv")
+    (tmp_path / "b_bonds.csv").write_text(rows[0] + "\n")
+    with pytest.raises(SampleFileError, match="0 bonds read"):
+        formats.read_csv(tmp_path / "b.csv")
 
 
 def test_csv_foreign_and_errors(tmp_path):

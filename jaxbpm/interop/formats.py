@@ -359,6 +359,15 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
                 rows.append(lines[i])
             i += 1
         sections[name] = (ln, rows)
+    # a count the header declares is a section the file must hold (a file cut before its Bonds section would
+    # otherwise read as a sample without bonds)
+    for name, key in (("Atoms", "atoms"), ("Bonds", "bonds")):
+        if counts.get(key, 0) > 0 and name not in sections:
+            raise SampleFileError(f"{path}: the header declares {counts[key]} {key} but the file has no {name} section "
+                                  "(truncated?)")
+    if text and not text.endswith(("\n", "\r")) and raw[-1].split("#")[0].strip():
+        raise SampleFileError(f"{path}:{len(raw)}: the file ends in the middle of a line (truncated?): "
+                              f"{raw[-1].strip()!r}")
     # atoms
     head, rows = sections.get("Atoms", (None, []))
     style = atom_style or (head.comment.strip() if head is not None and head.comment.strip() else None)
@@ -655,7 +664,7 @@ def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
         raise TypeError(f"write_csv expects a jaxbpm Sample, got {type(sample).__name__}")
     path = pathlib.Path(path)
     bpath = _bonds_path(path)
-    meta = _meta(sample, bonds_file=bpath.name)
+    meta = _meta(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     plines = [_meta_line(meta), "id,x,y,z,radius"]
     plines += [f"{i},{_r(pos[i, 0])},{_r(pos[i, 1])},{_r(pos[i, 2])},{_r(rad[i])}" for i in range(sample.n_particles)]
@@ -747,6 +756,12 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
         return Sample.from_arrays(pos, rad, np.zeros((0, 2), int), np.zeros(0), **kw)
     _, bheader, brows = _csv_rows(bpath)
     nb = len(brows)
+    # the counts the metadata declares (files written by jaxbpm) must be what was read: a cut file is an error
+    for what, declared, read, where in (("particles", meta and meta.get("particles"), len(rows), path),
+                                        ("bonds", meta and meta.get("bonds"), nb, bpath)):
+        if declared is not None and int(declared) != read:
+            raise SampleFileError(f"{where}: {read} {what} read, but {path.name}'s metadata declares {declared} "
+                                  "(truncated or edited?)")
     ends = []
     for pair in (("i", "j"), ("id1", "id2"), ("particle1", "particle2")):
         if pair[0] in bheader:
