@@ -268,6 +268,12 @@ class Sample:
         bad = np.flatnonzero(rad <= 0)
         if bad.size:
             raise SampleError(f"radii must be > 0; non-positive radius at particles {_listed(bad)}")
+        # float64-safe: mass (r^3) and moment of inertia (r^5) must come out finite and > 0
+        with np.errstate(over="ignore", under="ignore"):
+            bad = np.flatnonzero(~(np.isfinite(rad ** 5) & (rad ** 5 > 0)))
+        if bad.size:
+            raise SampleError(f"radii must lie where mass and inertia are finite and > 0 in float64 (about 1e-60 to "
+                              f"1e60 m); bad radius {rad[bad[0]]:g} m at particles {_listed(bad)}")
 
         b = np.asarray(bonds)
         if b.size == 0:
@@ -299,10 +305,26 @@ class Sample:
                     f"duplicate bonds ((i, j) and (j, i) count as the same) at bonds {_listed(np.sort(dup))}; "
                     f"e.g. bond {dup[0]} repeats bond {first} = {b[dup[0]].tolist()}")
 
-        length = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1)
+        with np.errstate(over="ignore"):  # (a length that overflows is caught below as far too long)
+            length = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1)
         bad = np.flatnonzero(length <= 1e-9 * np.max(rad))
         if bad.size:
             raise SampleError(f"zero-length bonds (coincident particles) at bonds {_listed(bad)}")
+        gap = length / (rad[b[:, 0]] + rad[b[:, 1]])
+        bad = np.flatnonzero(gap > 1e3)
+        if bad.size:
+            raise SampleError(f"bonds must join neighbours: bonds {_listed(bad)} are more than 1000 times the sum of "
+                              f"their particles' radii long (e.g. bond {bad[0]}: {length[bad[0]]:.4g} m)")
+        # the bond vectors are differences of positions: their float64 round-off (eps |x|) must stay far below
+        # the bond lengths, or a sample far from the origin gets bonds of the wrong length
+        if nb:
+            scale = np.maximum(np.abs(pos[b[:, 0]]).max(axis=1), np.abs(pos[b[:, 1]]).max(axis=1))
+            rel = np.finfo(np.float64).eps * scale / length
+            bad = np.flatnonzero(rel > 1e-9)
+            if bad.size:
+                raise SampleError(f"positions lie too far from the origin for their bond lengths in float64 "
+                                  f"(round-off {rel.max():.2g} of a bond length, at bonds {_listed(bad)}): recentre "
+                                  "the sample (subtract its centre from the positions)")
 
         if (bond_radius is None) == (bond_radius_ratio is None):
             raise SampleError("give exactly one of bond_radius and bond_radius_ratio")

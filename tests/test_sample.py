@@ -99,6 +99,10 @@ GOOD = dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [4e-3, 0, 0]], float), 
     (dict(materials={"E": 1e9, "G": 1.0}), r"unknown fields \['G'\]"),
     (dict(density=-5.0), r"density=.* out of range"),
     (dict(bond_contact="sum"), r"bond_contact must be one of"),
+    (dict(radii=1e300), r"radii must lie where mass and inertia are finite"),
+    (dict(radii=[1e-3, 1e-300, 1e-3]), r"mass and inertia are finite and > 0 .* particles \[1\]"),
+    (dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [4e-3, 0, 0]]) + 1e12), r"too far from the origin.*recentre"),
+    (dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [1e306, 0, 0]])), r"bonds must join neighbours.*\[1\]"),
 ])
 def test_validation_errors(change, message):
     with pytest.raises(SampleError, match=message):
