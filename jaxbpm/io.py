@@ -85,7 +85,14 @@ def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
     target = pathlib.Path(path)
     if not target.parent.is_dir():
         raise FileNotFoundError(errno.ENOENT, f"cannot write {target}: no such directory", str(target.parent))
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    if target.is_dir():
+        raise IsADirectoryError(errno.EISDIR, f"cannot write {target}: it is a directory (give a file name)",
+                                str(target))
+    _remove_stale_temporaries(target)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    except OSError as err:
+        raise type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target)) from err
     os.close(fd)
     try:
         write(tmp)
@@ -93,11 +100,30 @@ def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp creates 0600; give the usual permissions
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(err, OSError) and err.errno is not None and tmp in str(err):
+            # the OS names the hidden temporary file; the user knows the target
+            raise type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target)) from err
         raise
     return target
+
+
+STALE_AFTER_S = 3600.0  # a temporary file of a save this old was left by a killed process
+
+
+def _remove_stale_temporaries(target: pathlib.Path) -> None:
+    """Remove the temporary files an interrupted (killed) save of ``target`` left beside it, once they are older
+    than :data:`STALE_AFTER_S` (younger ones may belong to a save still running in another process)."""
+    import glob
+    import time
+
+    now = time.time()
+    for old in target.parent.glob(f".{glob.escape(target.name)}.*.tmp"):
+        with contextlib.suppress(OSError):
+            if now - old.stat().st_mtime > STALE_AFTER_S:
+                old.unlink()
 
 
 def write_json(path, data) -> pathlib.Path:

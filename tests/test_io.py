@@ -120,6 +120,33 @@ def test_save_atomic_when_rename_fails(tmp_path, monkeypatch):
     assert _listing(tmp_path) == ["s.h5"] and target.read_bytes() == before
 
 
+def test_a_failed_save_names_its_target_and_stale_temporaries_go(tmp_path, monkeypatch):
+    import errno
+    import os
+    import time
+
+    target = tmp_path / "s.h5"
+    with pytest.raises(IsADirectoryError, match=r"cannot write .*: it is a directory"):
+        io.save_sample(tmp_path, _chain())
+
+    def busy(src, dst):  # what the OS says when the rename fails names the hidden temporary file
+        raise OSError(errno.EBUSY, "Device or resource busy", src)
+
+    monkeypatch.setattr(io.os, "replace", busy)
+    with pytest.raises(OSError, match=r"cannot write .*s\.h5: Device or resource busy") as err:
+        io.save_sample(target, _chain())
+    assert ".tmp" not in str(err.value) and _listing(tmp_path) == []
+    monkeypatch.undo()
+    # a killed save leaves its temporary file; the next save to that name removes it once it is stale
+    stale, fresh = tmp_path / ".s.h5.killed.tmp", tmp_path / ".s.h5.running.tmp"
+    stale.write_bytes(b"x" * 1000)
+    fresh.write_bytes(b"y")
+    old = time.time() - 2 * io.STALE_AFTER_S
+    os.utime(stale, (old, old))
+    io.save_sample(target, _chain())
+    assert not stale.exists() and fresh.exists()  # (a younger one may be another process's save in progress)
+
+
 def test_save_rejects_non_sample_and_missing_directory(tmp_path):
     with pytest.raises(TypeError, match="Sample"):
         io.save_sample(tmp_path / "s.h5", {"positions": np.zeros((1, 3))})
