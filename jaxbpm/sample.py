@@ -52,6 +52,14 @@ def _register(cls, data, meta=()):
     return jax.tree_util.register_dataclass(cls, data_fields=list(data), meta_fields=list(meta))
 
 
+def _numbers(name: str, value) -> np.ndarray:
+    """``value`` as float64, or a :class:`SampleError` naming the material field (not a bare ``ValueError``)."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SampleError(f"materials: {name} must be numbers, got {value!r}") from None
+
+
 @dataclasses.dataclass(frozen=True)
 class BondMaterials:
     """Material table, one entry per bond component (index = ``Sample.bond_material``).
@@ -73,13 +81,13 @@ class BondMaterials:
     @classmethod
     def create(cls, E, nu=0.25, tensile_strength=np.inf, shear_strength=np.inf) -> "BondMaterials":
         """Build and check a table; scalars broadcast to the number of components given by ``E``."""
-        E = np.atleast_1d(np.asarray(E, dtype=np.float64))
+        E = np.atleast_1d(_numbers("E", E))
         if E.ndim != 1 or E.size == 0:
             raise SampleError(f"materials: E must be a non-empty 1-D list of Young's moduli, got shape {E.shape}")
         out = {}
         for name, val in [("E", E), ("nu", nu), ("tensile_strength", tensile_strength),
                           ("shear_strength", shear_strength)]:
-            arr = np.asarray(val, dtype=np.float64)
+            arr = _numbers(name, val)
             try:
                 arr = np.broadcast_to(arr, E.shape).copy()
             except ValueError:
