@@ -315,3 +315,19 @@ def test_write_json_round_trip_and_atomic(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="crash mid-write"):
         io.write_json(target, {"a": 2})
     assert target.read_bytes() == before and sorted(p.name for p in target.parent.iterdir()) == ["r.json"]
+
+
+@pytest.mark.parametrize("field", ["positions", "radii", "bonds", "materials/E"])
+def test_a_flipped_byte_is_an_error_naming_the_field(tmp_path, field):
+    import h5py
+
+    target = io.save_sample(tmp_path / "s.h5", _multi())
+    with h5py.File(target, "r") as f:
+        ds = f[field]
+        assert ds.fletcher32
+        offset = ds.id.get_chunk_info(0).byte_offset
+    raw = bytearray(target.read_bytes())
+    raw[offset + 3] ^= 0x01  # one bit of the field's first chunk
+    target.write_bytes(bytes(raw))
+    with pytest.raises(SampleFileError, match=rf"field '/{field}' is corrupt"):
+        io.load_sample(target)
