@@ -229,6 +229,15 @@ def test_lammps_data_errors_name_the_line(tmp_path):
     bad(lines, rf":{bonds + 3}: bond 3 refers to atom 99")
     bad(good[:bonds + 3], r"section Bonds ended after 3 of 7 lines")
     lines = list(good)
+    words = lines[atoms].split()
+    words[-1] = "nan"  # (an image flag column would be last: the file has none)
+    lines[atoms] = " ".join(words)
+    bad(lines, rf":{atoms + 1}: atom 1 has a coordinate that is not finite")
+    lines = list(good)
+    b = lines[bonds].split()
+    lines[bonds] = " ".join(b[:2] + [b[2], b[2]] + b[4:])
+    bad(lines, rf":{bonds + 1}: bond {b[0]} joins atom {b[2]} to itself")
+    lines = list(good)
     lines[3] = "six atoms"
     bad(lines, r"bad\.data:4: cannot read header line")
     # cut before the Bonds section: the header's count is checked, not read as a sample without bonds

@@ -393,9 +393,12 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         except ValueError:
             raise SampleFileError(f"{path}:{ln.no}: Atoms line has a non-numeric value: "
                                   f"{raw[ln.no - 1].strip()!r}") from None
-        if not dia[k] > 0:
+        if not (dia[k] > 0 and np.isfinite(dia[k])):
             raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has diameter {dia[k]!r}; jaxbpm needs spheres "
-                                  f"with a diameter > 0")
+                                  f"with a finite diameter > 0")
+        if not np.all(np.isfinite(pos[k])):
+            raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has a coordinate that is not finite: "
+                                  f"{raw[ln.no - 1].strip()!r}")
     order = np.argsort(ids, kind="stable")
     dup = np.flatnonzero(np.diff(ids[order]) == 0)
     if dup.size:
@@ -424,6 +427,8 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         for a in (a1, a2):
             if a not in index:
                 raise SampleFileError(f"{path}:{ln.no}: bond {ln.words[0]} refers to atom {a}, which is not in Atoms")
+        if a1 == a2:
+            raise SampleFileError(f"{path}:{ln.no}: bond {ln.words[0]} joins atom {a1} to itself")
         bonds[k], btype[k] = (index[a1], index[a2]), t
         extra = ln.comment.split()
         if len(extra) == 2:
