@@ -193,3 +193,14 @@ def test_python_m_missing_file(tmp_path):
                          timeout=120, cwd=tmp_path, env=_env())
     assert res.returncode == 2
     assert "error:" in res.stderr and "missing.h5" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_generate_checks_its_output_before_packing(tmp_path, capsys, monkeypatch):
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the packing ran before the output path was checked")
+
+    monkeypatch.setattr(generate, "from_shape", must_not_run, raising=False)
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path / "missing" / "x.h5")
+    assert code == 2 and "no such directory" in err and "missing" in err
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path)
+    assert code == 2 and "it is a directory" in err and ".tmp" not in err
