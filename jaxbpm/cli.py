@@ -47,22 +47,11 @@ def _generate_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     return kw
 
 
-def _check_output(path) -> None:
-    """A file can be written at ``path``: its folder exists and it is not itself a folder."""
-    from jaxbpm.errors import SampleFileError
-
-    target = pathlib.Path(path)
-    if not target.parent.is_dir():
-        raise SampleFileError(f"cannot write {target}: no such directory {target.parent}")
-    if target.is_dir():
-        raise SampleFileError(f"cannot write {target}: it is a directory (give a file name, e.g. {target / 'sample.h5'})")
-
-
 def _cmd_generate(args: argparse.Namespace) -> int:
     from jaxbpm import generate
-    from jaxbpm.io import save_sample
+    from jaxbpm.io import check_writable, save_sample
 
-    _check_output(args.out)  # before the packing, which can take minutes
+    check_writable(args.out)  # before the packing, which can take minutes
     start = time.perf_counter()
     sample = generate.from_shape(args.shape, args.n, seed=args.seed, progress=not args.quiet,
                                  **_generate_kwargs(args))

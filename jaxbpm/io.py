@@ -48,7 +48,7 @@ from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "save_sample", "load_sample", "export_vtk", "write_json", "atomic_write",
-           "save_local_map", "export_local_map_vtk", "plot_local_map"]
+           "check_writable", "save_local_map", "export_local_map_vtk", "plot_local_map"]
 
 FORMAT = "jaxbpm-sample"
 """Value of the ``format`` root attribute of a sample file."""
@@ -76,23 +76,36 @@ def _current_umask() -> int:
     return mask
 
 
-def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
-    """Call ``write(tmp_name)`` on a fresh temporary file next to ``path``, then rename it onto ``path``.
-
-    On any exception (including KeyboardInterrupt) the temporary file is deleted and the exception re-raised;
-    ``path`` is then exactly as it was before.
-    """
+def check_writable(path) -> pathlib.Path:
+    """``path`` as a :class:`pathlib.Path` when a file can be written there: its folder exists and it is not itself
+    a folder. Otherwise the ``OSError`` that says so, naming ``path`` (callers check before long work, e.g. a
+    packing, and :func:`atomic_write` checks again before it writes)."""
     target = pathlib.Path(path)
     if not target.parent.is_dir():
         raise FileNotFoundError(errno.ENOENT, f"cannot write {target}: no such directory", str(target.parent))
     if target.is_dir():
         raise IsADirectoryError(errno.EISDIR, f"cannot write {target}: it is a directory (give a file name)",
                                 str(target))
+    return target
+
+
+def _naming_target(err: OSError, target: pathlib.Path) -> OSError:
+    """``err`` again, naming ``target`` (what the OS reports names the hidden temporary file)."""
+    return type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target))
+
+
+def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
+    """Call ``write(tmp_name)`` on a fresh temporary file next to ``path``, then rename it onto ``path``.
+
+    On any exception (including KeyboardInterrupt) the temporary file is deleted and the exception re-raised;
+    ``path`` is then exactly as it was before.
+    """
+    target = check_writable(path)
     _remove_stale_temporaries(target)
     try:
         fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
     except OSError as err:
-        raise type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target)) from err
+        raise _naming_target(err, target) from err
     os.close(fd)
     try:
         write(tmp)
@@ -104,8 +117,7 @@ def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         if isinstance(err, OSError) and err.errno is not None and tmp in str(err):
-            # the OS names the hidden temporary file; the user knows the target
-            raise type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target)) from err
+            raise _naming_target(err, target) from err
         raise
     return target
 
@@ -407,8 +419,8 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
 
 # ---------------------------------------------------------------------------------------------------- STE map
 def save_local_map(path, lmap) -> pathlib.Path:
-    """Write a :class:`~jaxbpm.ste.LocalMap` to HDF5 (atomically): datasets ``positions`` [m], ``E`` [Pa], ``deviation`` [1],
-    ``valid``; attributes ``format = "jaxbpm-ste-map"``, ``radius`` [m]."""
+    """Write a :class:`~jaxbpm.ste.LocalMap` to HDF5 (atomically): datasets ``positions`` [m], ``E`` [Pa],
+    ``deviation`` [1], ``valid``; attributes ``format = "jaxbpm-ste-map"``, ``radius`` [m]."""
     import h5py
 
     def write(tmp):

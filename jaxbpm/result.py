@@ -107,8 +107,8 @@ def settle(result: Result, throw: bool) -> Result:
             status = "max_iterations"
         elif not np.isfinite(result.stiffness):
             status = "not_finite"
-            result.stats.setdefault("failure", f"the {result.method.upper()} stiffness is {result.stiffness} (check the "
-                                               "parameters: bond E > 0, -1 < bond nu < 0.5)")
+            result.stats.setdefault("failure", f"the {result.method.upper()} stiffness is {result.stiffness} "
+                                               "(check the parameters: bond E > 0, -1 < bond nu < 0.5)")
     if status not in STATUSES:
         raise ValueError(f"unknown status {status!r}; one of {STATUSES}")
     result.status = status

@@ -293,8 +293,8 @@ def test_export_vtk_is_atomic(tmp_path, monkeypatch):
 
 
 def test_public_api_documented():
-    functions = {"save_sample", "load_sample", "export_vtk", "write_json", "atomic_write", "save_local_map",
-                 "export_local_map_vtk", "plot_local_map"}
+    functions = {"save_sample", "load_sample", "export_vtk", "write_json", "atomic_write", "check_writable",
+                 "save_local_map", "export_local_map_vtk", "plot_local_map"}
     assert set(io.__all__) == {"FORMAT", "FORMAT_VERSION"} | functions
     for name in functions:
         assert getattr(io, name).__doc__

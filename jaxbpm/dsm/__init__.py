@@ -23,8 +23,9 @@ only by the approximations the method names: no inertia, small motion (linear DS
 
 Convergence is measured by the residual norm relative to the norm of the reaction forces. A solve that misses its
 tolerance raises :class:`ConvergenceError` (``throw=True``, the default) or, with ``throw=False``, returns its
-result with ``status="max_iterations"`` (``converged=False`` and ``failure`` in the stats). A sample whose free part is not held (a cluster that touches no clamped particle and no wall) raises
-:class:`SceneError` naming the particles.
+result with ``status="max_iterations"`` (``converged=False`` and ``failure`` in the stats). A sample whose free
+part is not held (a cluster that touches no clamped particle and no wall) raises :class:`SceneError` naming the
+particles.
 
 The package, one module per part (each can be read and tested alone):
 
