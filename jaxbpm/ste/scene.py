@@ -189,7 +189,7 @@ def _outputs(est: Estimator, params, geo: SceneGeometry, layered: bool, walls: s
     return k, parts, m["E"], m["nu"], e_iso, nu_iso
 
 
-solve_program = Program(_outputs, static_argnames=("layered", "walls"))
+solve_program = Program(_outputs, static_argnames=("layered", "walls"), prime=2)  # ms-long: see Program
 _setups = SetupCache()
 
 

@@ -179,22 +179,42 @@ def _fluctuations3(est: Estimator, params, weighted: bool = False) -> _Fluct3:
 
 
 def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
-    """``sum_n w^n sum_m d_i f^nm[j; l, k]`` with ``f^nm = K^nm G d - K phi^n + K Gamma^m``: the affine term as one
+    """``sum_n w^n sum_m d_i f^nm[j; l, k]`` with ``f^nm = K^nm G d - K phi^n + K Gamma^m``: the affine term as a
     matrix product over the pairs (both ends), the self term ``-w^n M^n phi^n`` and the neighbour term
-    ``sum_m N^m Gamma^m`` (regrouped by the neighbour) over the particles."""
-    fl = _fluctuations3(est, params, weighted=True)
-    n, d = est.n, est.d
+    ``sum_m N^m Gamma^m`` (regrouped by the neighbour) over the particles.
+
+    The algebra of :func:`_fluctuations3` (which the local tensors use) with the per-particle sums D, B and N
+    gathered by one scatter per pair end into one ``[n, 63]`` array (30 % faster on CPU than a scatter per sum)."""
+    K = coupling(est, params).reshape(-1, 9)
+    n, d, dtype = est.n, est.d, est.d.dtype
     i, j = est.pairs[:, 0], est.pairs[:, 1]
-    w = est.include.astype(d.dtype)
-    dd = ((w[i] + w[j])[:, None, None] * d[:, :, None] * d[:, None, :]).reshape(-1, 9)  # (i, k)
-    t = jnp.dot(dd.T, fl.K.reshape(-1, 9)).reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
+    w = est.include.astype(dtype)
+    valid = est.valid[:, None, None]
+    neighbours = not est.first_neighbour
+    kd = (K[:, :, None] * d[:, None, :]).reshape(-1, 27)  # K[a, l] d_k
+    wi, wj = w[i][:, None], w[j][:, None]
+    # on i: (K, K d, N^i -= w^j K d); on j, where d^nm = -d: (K, -K d, N^j += w^i K d)
+    acc = jnp.zeros((n, 63 if neighbours else 36), dtype)
+    acc = acc.at[i].add(jnp.concatenate([K, kd] + ([-wj * kd] if neighbours else []), axis=1))
+    acc = acc.at[j].add(jnp.concatenate([K, -kd] + ([wi * kd] if neighbours else []), axis=1))
+    D = jnp.where(valid, acc[:, :9].reshape(n, 3, 3), jnp.eye(3, dtype=dtype))
+    B = acc[:, 9:36].reshape(n, 3, 9)
+    A = _inverse3(D)
+    gamma = jnp.where(valid, _mul(A, B), 0.0)  # Eq. 23
+    phi = gamma
+    if neighbours:
+        K3 = K.reshape(-1, 3, 3)
+        hat = jnp.zeros((n, 3, 9), dtype).at[i].add(_mul(K3, gamma[j])).at[j].add(_mul(K3, gamma[i]))
+        phi = gamma + jnp.where(valid, _mul(A, hat), 0.0)  # Eq. 24 + 29
+    dd = ((wi + wj)[:, :, None] * d[:, :, None] * d[:, None, :]).reshape(-1, 9)  # (i, k)
+    t = _gram(dd, K).reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
     # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: one matrix product each that
     # contracts (particle, a) -- rows [n * 3, 9] on both sides (4x faster on CPU than per-particle products summed)
-    bw = (w[:, None, None, None] * fl.B).transpose(0, 2, 3, 1).reshape(3 * n, 9)  # [(n, a), (i, j)]
-    t = t - _gram(bw, fl.phi.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
-    if fl.N is not None:
-        nb_ = fl.N.transpose(0, 3, 1, 2).reshape(3 * n, 9)  # [(n, b), (i, j)]
-        t = t + _gram(nb_, fl.gamma.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
+    bw = (w[:, None, None, None] * B.reshape(n, 3, 3, 3)).transpose(0, 2, 3, 1).reshape(3 * n, 9)
+    t = t - _gram(bw, phi.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
+    if neighbours:
+        nb_ = acc[:, 36:].reshape(n, 3, 3, 3).transpose(0, 2, 3, 1).reshape(3 * n, 9)  # [(n, b), (i, j)]
+        t = t + _gram(nb_, gamma.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
     return t / (2.0 * jnp.sum(jnp.where(est.include, est.volume, 0.0)))
 
 
