@@ -284,7 +284,7 @@ def _contact_motion(model: Model, state: DEMState, pairs, valid, dt):
     v_t, w_t, r_i, r_j = state.velocities.T, state.omegas.T, model.radii[i], model.radii[j]
     s = tuple(r_j * w_t[k][j] + r_i * w_t[k][i] for k in range(3))
     spin = (s[1] * d[2] - s[2] * d[1], s[2] * d[0] - s[0] * d[2], s[0] * d[1] - s[1] * d[0])
-    # one division per component, so that XLA computes each component once (see jaxbpm.physics.contact._law)
+    # one division per component, so that XLA computes each component once (see jaxbpm.physics.contact.law_components)
     v_rel = tuple(((v_t[k][j] - v_t[k][i]) * dist - spin[k]) / dist for k in range(3))
     return tuple(dt * c for c in v_rel), v_rel  # the contact law takes component tuples as well as [C, 3] rows
 

@@ -10,7 +10,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation
+from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation, tangent, vec
 from jaxbpm.physics.model import Model
 
 
@@ -32,8 +32,8 @@ def _contact_slip(model: Model, pairs, d, w):
     inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     n = tuple(c * inv for c in d)
     r_i, r_j = model.radii[pairs[:, 0]], model.radii[pairs[:, 1]]
-    a = bond_mod._cross(tuple(w[6 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
-    b = bond_mod._cross(tuple(w[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
+    a = vec.cross(tuple(w[6 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
+    b = vec.cross(tuple(w[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
     return tuple(dxi[c] + a[c] - b[c] for c in range(3))
 
 
@@ -65,54 +65,14 @@ def internal_forces(model: Model, params, u, contacts=None, walls=None):
 
 
 def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
-    """Per-bond force Jacobians at rest in the reduced form the solver stores, ``[ni, no, nb]`` (components first,
-    bonds last): ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` with 6 DOF per particle (9 x 9 per bond), ``d f_i /
-    d d`` with 3 (3 x 3), where ``d = r0 + u_j - u_i`` is the bond vector. The bond law sees the displacements only
-    through ``d`` and ``f_j = -f_i``, so these numbers give the whole 12 x 12 (6 x 6) tangent (:func:`bond_jacobians`)
-    in 56 % (25 %) of its memory.
-
-    Forward-mode derivatives (one ``jax.jvp`` per input component, batched with ``vmap``) of the same bond law the
-    DEM runs, on ``[nb]`` component arrays. A rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the
-    exact map to first order, which is all a Jacobian at rest sees. With a DOF state ``u`` ``[n, nd]`` the Jacobians
-    are taken there instead (the tangent of a deformed configuration; rotations through the exact map).
-    """
-    k = model.stiffness(params)
-    r0 = tuple(model.r0.T)
-    nb = model.r0.shape[0]
-    dtype = model.positions0.dtype
-    ni = 9 if model.rotations else 3
-    one, zero = jnp.ones(nb, dtype), jnp.zeros(nb, dtype)
-
-    def law(z):
-        d = tuple(r0[c] + z[c] for c in range(3))
-        if not model.rotations:
-            qi = qj = (one, zero, zero, zero)
-        elif u is None:
-            qi = (one,) + tuple(0.5 * z[3 + c] for c in range(3))
-            qj = (one,) + tuple(0.5 * z[6 + c] for c in range(3))
-        else:
-            qi = tuple(rotation.from_rotation_vector(z[3:6].T).T)
-            qj = tuple(rotation.from_rotation_vector(z[6:9].T).T)
-        out = bond_mod._law(d, r0, qi, qj, k.kn, k.kt, k.ktw, k.kb)
-        parts = (out.f_i + out.m_i + out.m_j) if model.rotations else out.f_i
-        return jnp.stack(parts)
-
-    z0 = jnp.zeros((ni, nb), dtype) if u is None else _pair_dofs(model, model.bonds, u)
-    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
-    return jax.vmap(lambda t: jax.jvp(law, (z0,), (t,))[1])(basis)
+    """Per-bond force Jacobians ``[ni, no, nb]`` in the reduced form the solver stores
+    (:func:`jaxbpm.physics.tangent.bond_reduced`, the tangent the STE uses too): at rest, or with a DOF state ``u``
+    ``[n, nd]`` at that state (the tangent of a deformed configuration)."""
+    z0 = None if u is None else _pair_dofs(model, model.bonds, u)
+    return tangent.bond_reduced(model.r0, model.stiffness(params), model.rotations, z0)
 
 
-def full_jacobians(jr) -> jnp.ndarray:
-    """``[nb, 2nd, 2nd]`` stiffness (minus the force Jacobian), DOF order (u_i, theta_i, u_j, theta_j), from the
-    reduced form of :func:`reduced_jacobians`."""
-    J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
-    jd = J[:, :, :3]
-    if J.shape[1] == 3:  # f_i from d; f_j = -f_i
-        row = jnp.concatenate([-jd, jd], axis=2)
-        return -jnp.concatenate([row, -row], axis=1)
-    rows = jnp.concatenate([-jd, J[:, :, 3:6], jd, J[:, :, 6:9]], axis=2)  # rows f_i, m_i, m_j
-    f_i, m_i, m_j = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
-    return -jnp.concatenate([f_i, m_i, -f_i, m_j], axis=1)
+full_jacobians = tangent.full
 
 
 def bond_jacobians(model: Model, params) -> jnp.ndarray:
@@ -393,10 +353,10 @@ def contact_jacobians(model: Model, pairs, u, d0=None, normal=False) -> jnp.ndar
     def law(z):
         d = tuple(base[c] + z[c] for c in range(3))
         dxi = _contact_slip(model, pairs, d, z)
-        out = contact_mod._law(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
+        out = contact_mod.law_components(d, r_i, r_j, m_i, m_j, (zero,) * 3, dxi, (zero,) * 3, model.contact)
         parts = (out.f_i + out.m_i + out.m_j) if rot else out.f_i
         if normal:  # -F_n n: the force on i without the tangential spring
-            dist = jnp.sqrt(contact_mod._dot(d, d))
+            dist = jnp.sqrt(vec.dot(d, d))
             parts = parts + tuple(-out.normal * c / dist for c in d)
         return jnp.stack(parts)
 
@@ -421,9 +381,9 @@ def _linearised_contact_jacobians(model: Model, pairs, state) -> jnp.ndarray:
     slip = _contact_slip(model, pairs, d, w)
     zero = (jnp.zeros(pairs.shape[0], w.dtype),) * 3
     args = (d, model.radii[i], model.radii[j], model.mass[i], model.mass[j], zero, slip, zero)
-    capped = contact_mod._law(*args, model.contact).spring
-    free = contact_mod._law(*args, model.contact._replace(friction=jnp.asarray(1e30, w.dtype))).spring
-    num, den = jnp.sqrt(bond_mod._dot(capped, capped)), jnp.sqrt(bond_mod._dot(free, free))
+    capped = contact_mod.law_components(*args, model.contact).spring
+    free = contact_mod.law_components(*args, model.contact._replace(friction=jnp.asarray(1e30, w.dtype))).spring
+    num, den = jnp.sqrt(vec.dot(capped, capped)), jnp.sqrt(vec.dot(free, free))
     secant = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 1.0)
     stick, normal = contact_jacobians(model, pairs, None, jnp.stack(d, axis=1), normal=True)
     return symmetrised(normal + secant[None, None] * (stick - normal))

@@ -34,8 +34,10 @@ import jax
 import jax.numpy as jnp
 
 from jaxbpm.physics import rotation
+from jaxbpm.physics.vec import cross, dot, stack
 
-__all__ = ["BondStiffness", "BondForces", "BondStrength", "stiffness", "bond_law", "bond_forces", "bond_energy",
+__all__ = ["law_components",
+           "BondStiffness", "BondForces", "BondStrength", "stiffness", "bond_law", "bond_forces", "bond_energy",
            "bond_stresses", "bond_failure", "TENSILE", "SHEAR"]
 
 TENSILE, SHEAR = 1, 2  # break modes (0: intact)
@@ -114,7 +116,7 @@ def stiffness(E, nu, area, inertia, polar, length) -> BondStiffness:
                          kb=E * inertia / length)
 
 
-def _law(d, r0, q_i, q_j, kn, kt, ktw, kb):
+def law_components(d, r0, q_i, q_j, kn, kt, ktw, kb):
     """The bond law on components: ``d, r0`` are ``(x, y, z)`` and ``q_i, q_j`` ``(w, x, y, z)`` tuples of scalars
     (one bond) or of ``[nb]`` arrays (all bonds at once); returns the fields of :class:`BondForces`, vectors as
     component tuples.
@@ -125,38 +127,28 @@ def _law(d, r0, q_i, q_j, kn, kt, ktw, kb):
     while it keeps a division as a separate loop, computing the rotations and projections once per bond.
     """
     h = tuple(0.5 * c for c in r0)
-    length0 = jnp.sqrt(_dot(r0, r0))
-    length = jnp.sqrt(_dot(d, d))
+    length0 = jnp.sqrt(dot(r0, r0))
+    length = jnp.sqrt(dot(d, d))
     inv = 1.0 / length
     n = tuple(c * inv for c in d)
     normal = kn * (length - length0)
     a_i, a_j = rotation.rotate(q_i, h), rotation.rotate(q_j, h)
     delta = tuple(d[k] - a_i[k] - a_j[k] for k in range(3))
-    delta_n = _dot(delta, d) / length  # = delta . n (see the docstring for the division)
+    delta_n = dot(delta, d) / length  # = delta . n (see the docstring for the division)
     shear = tuple(kt * (delta[k] - delta_n * n[k]) for k in range(3))
     phi = rotation.small_angle_vector(rotation.multiply(q_j, rotation.conjugate(q_i)))
-    phi_n = _dot(phi, d) / length  # = phi . n
+    phi_n = dot(phi, d) / length  # = phi . n
     bend = tuple(kb * (phi[k] - phi_n * n[k]) for k in range(3))
     twist = ktw * phi_n
     moment = tuple(twist * n[k] + bend[k] for k in range(3))
-    lever = _cross(tuple(0.5 * c for c in d), shear)
+    lever = cross(tuple(0.5 * c for c in d), shear)
     return BondForces(f_i=tuple(normal * n[k] + shear[k] for k in range(3)),
                       m_i=tuple(lever[k] + moment[k] for k in range(3)),
                       m_j=tuple(lever[k] - moment[k] for k in range(3)),
                       normal=normal, shear=shear, twist=twist, bend=bend)
 
 
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
-
-def _cross(a, b):
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
-def _stack(out: BondForces) -> BondForces:
-    """Component tuples to ``[..., 3]`` arrays."""
-    return BondForces(*(jnp.stack(o, axis=-1) if isinstance(o, tuple) else o for o in out))
 
 
 def bond_law(d, r0, q_i, q_j, kn, kt, ktw, kb) -> BondForces:
@@ -167,7 +159,7 @@ def bond_law(d, r0, q_i, q_j, kn, kt, ktw, kb) -> BondForces:
       q_i, q_j: ``[4]`` orientations of the particles relative to the reference state (unit quaternions).
       kn, kt, ktw, kb: scalar stiffnesses.
     """
-    return _stack(_law(tuple(d), tuple(r0), tuple(q_i), tuple(q_j), kn, kt, ktw, kb))
+    return stack(law_components(tuple(d), tuple(r0), tuple(q_i), tuple(q_j), kn, kt, ktw, kb))
 
 
 def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None):
@@ -193,7 +185,7 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
     else:
         q_t = orientations.T
         q_i, q_j = tuple(q_t[:, i]), tuple(q_t[:, j])
-    out = _law(tuple(d), tuple(r0.T), q_i, q_j, k.kn, k.kt, k.ktw, k.kb)
+    out = law_components(tuple(d), tuple(r0.T), q_i, q_j, k.kn, k.kt, k.ktw, k.kb)
     mode = None
     if strength is not None:
         mode, *_ = bond_failure(out.normal, out.shear, out.twist, out.bend, strength)
@@ -208,7 +200,7 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
     rows_i = jnp.stack(out.f_i + (zero,) + out.m_i + (zero,), axis=1)
     rows_j = jnp.stack(tuple(-f for f in out.f_i) + (zero,) + out.m_j + (zero,), axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), positions.shape[0])
-    return total[:, :3], total[:, 4:7], _stack(out), intact, mode
+    return total[:, :3], total[:, 4:7], stack(out), intact, mode
 
 
 def _mask(a, intact):

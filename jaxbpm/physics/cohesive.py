@@ -53,9 +53,9 @@ from typing import Any, Mapping, NamedTuple
 import jax.numpy as jnp
 
 from jaxbpm.errors import SceneError
-from jaxbpm.physics.contact import _cross, _dot, _once, _safe_sqrt
+from jaxbpm.physics.vec import cross, dot, once, safe_sqrt, stack
 
-__all__ = ["CohesiveLaw", "CohesiveParams", "CohesiveForces", "resolve_contact_law", "restitution_damping",
+__all__ = ["law_components", "CohesiveLaw", "CohesiveParams", "CohesiveForces", "resolve_contact_law", "restitution_damping",
            "cohesive_contact", "normal_stiffness", "contact_area", "pair_forces", "update_cohesion"]
 
 
@@ -188,67 +188,64 @@ def update_cohesion(history, active, stress, p: CohesiveParams):
     return jnp.where(active, grown, jnp.where(history < 0, history, 0.0))
 
 
-def _law(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, history, p: CohesiveParams, valid=True):
+def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, history, p: CohesiveParams, valid=True):
     """The law on components (``(x, y, z)`` tuples of scalars or of ``[C]`` arrays), like
     :func:`jaxbpm.physics.contact._law`; zero where the pair is not in contact."""
     one = p.E / p.E
     one = jnp.where(jnp.isfinite(one), one, 1.0)
     gamma = restitution_damping(p.restitution)
     kappa = 2.0 * (1.0 - p.nu) / (2.0 - p.nu)
-    dist = jnp.sqrt(_dot(d, d))
+    dist = jnp.sqrt(dot(d, d))
     n = tuple(c / dist for c in d)
     overlap = r_i + r_j - dist
     active = (overlap > 0) & valid
-    delta = _once(jnp.where(active, overlap, 0.0), one)
+    delta = once(jnp.where(active, overlap, 0.0), one)
     rsum = r_i + r_j
     length = rsum - delta
-    area = _once(jnp.pi * (0.5 * rsum) ** 2 * rsum / length, one)
-    kn = _once(0.5 * p.E * area / length, one)
+    area = once(jnp.pi * (0.5 * rsum) ** 2 * rsum / length, one)
+    kn = once(0.5 * p.E * area / length, one)
     m_hat = m_i * m_j / (m_i + m_j)
     dn = 2.0 * gamma * jnp.sqrt(m_hat * kn)
-    v_n = _dot(v_rel, n)  # > 0 separating: d(delta)/dt = -v_n
+    v_n = dot(v_rel, n)  # > 0 separating: d(delta)/dt = -v_n
     pressure = kn * delta - dn * v_n  # spring-dashpot part of F_N
     cohesion = jnp.abs(history)
-    fn = _once(jnp.where(active, pressure - cohesion * area, 0.0), one)
-    compressive = _once(jnp.where(active, jnp.maximum(pressure, 0.0), 0.0), one)
+    fn = once(jnp.where(active, pressure - cohesion * area, 0.0), one)
+    compressive = once(jnp.where(active, jnp.maximum(pressure, 0.0), 0.0), one)
     stress = compressive / area
     new_history = update_cohesion(history, active, stress, p)
 
     # elastic tangential force: turned into the current tangent plane (same length), plus this step's increment
-    s_n = _dot(spring, n)
+    s_n = dot(spring, n)
     old = tuple(spring[k] - s_n * n[k] for k in range(3))
-    old_len2, proj_len2 = _dot(spring, spring), _dot(old, old)
+    old_len2, proj_len2 = dot(spring, spring), dot(old, old)
     pos = proj_len2 > 0
-    stretch = jnp.where(pos, _safe_sqrt(old_len2 / jnp.where(pos, proj_len2, 1.0)), 0.0)
+    stretch = jnp.where(pos, safe_sqrt(old_len2 / jnp.where(pos, proj_len2, 1.0)), 0.0)
     kt = kappa * kn
-    dxi_n = _dot(dxi, n)
-    fs = tuple(_once(old[k] * stretch - kt * (dxi[k] - dxi_n * n[k]), one) for k in range(3))
+    dxi_n = dot(dxi, n)
+    fs = tuple(once(old[k] * stretch - kt * (dxi[k] - dxi_n * n[k]), one) for k in range(3))
     d_t = dn * jnp.sqrt(kappa)  # 2 gamma sqrt(m^ k_T)
     ft_j = tuple(fs[k] - d_t * (v_rel[k] - v_n * n[k]) for k in range(3))
-    ft_len = _safe_sqrt(_dot(ft_j, ft_j))
+    ft_len = safe_sqrt(dot(ft_j, ft_j))
     limit = p.friction * compressive
     sliding = (ft_len > limit) & active
     num = jnp.where(active, jnp.where(sliding, limit, 1.0), 0.0)
     den = jnp.where(sliding, ft_len, 1.0)
-    ft_j = tuple(_once(c * num / den, one) for c in ft_j)
+    ft_j = tuple(once(c * num / den, one) for c in ft_j)
     new_spring = tuple(jnp.where(sliding, ft_j[k], jnp.where(active, fs[k], 0.0)) for k in range(3))
 
     f_i = tuple(-fn * n[k] - ft_j[k] for k in range(3))
-    twist = _cross(n, ft_j)
+    twist = cross(n, ft_j)
     arm_i, arm_j = 0.5 * delta - r_i, 0.5 * delta - r_j
     return CohesiveForces(f_i=f_i, m_i=tuple(arm_i * c for c in twist), m_j=tuple(arm_j * c for c in twist),
                           normal=fn, spring=new_spring, sliding=sliding, active=active, cohesion=new_history,
                           stress=stress)
 
 
-def _stack(out: CohesiveForces) -> CohesiveForces:
-    return CohesiveForces(*(jnp.stack(o, axis=-1) if isinstance(o, tuple) else o for o in out))
-
 
 def cohesive_contact(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, history, p: CohesiveParams) -> CohesiveForces:
     """Forces of ONE contact (``d = x_j - x_i``, ``spring`` the stored tangential force, ``dxi`` the slip of this
     step, ``v_rel`` the relative velocity of the contact points, ``history`` the cohesion history), ``[3]`` vectors."""
-    return _stack(_law(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), history, p))
+    return stack(law_components(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), history, p))
 
 
 def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, history, p: CohesiveParams):
@@ -260,10 +257,10 @@ def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, histor
 
     n = positions.shape[0]
     i, j, d = pair_vectors(positions, pairs, valid)
-    cf = _law(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel),
+    cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel),
               history, p, valid)
     zero = jnp.zeros_like(cf.normal)
     rows_i = jnp.stack(cf.f_i + (zero,) + cf.m_i + (zero,), axis=1)
     rows_j = jnp.stack(tuple(-f for f in cf.f_i) + (zero,) + cf.m_j + (zero,), axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), n)
-    return total[:, :3], total[:, 4:7], _stack(cf)
+    return total[:, :3], total[:, 4:7], stack(cf)

@@ -23,7 +23,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-__all__ = ["ContactParams", "ContactForces", "contact_params", "hertz_mindlin", "hertz_normal_force",
+from jaxbpm.physics.vec import cross, dot, once, safe_sqrt, stack
+
+__all__ = ["law_components", "ContactParams", "ContactForces", "contact_params", "hertz_mindlin", "hertz_normal_force",
            "pair_forces", "pair_vectors"]
 
 
@@ -58,16 +60,11 @@ def contact_params(E, nu, friction, restitution, damping: bool = False) -> Conta
 def hertz_normal_force(overlap, r_star, E_star):
     """Hertz normal force ``4/3 E* sqrt(R*) delta^1.5`` (zero without overlap)."""
     delta = jnp.maximum(overlap, 0.0)
-    return 4.0 / 3.0 * E_star * jnp.sqrt(r_star) * delta * _safe_sqrt(delta)
+    return 4.0 / 3.0 * E_star * jnp.sqrt(r_star) * delta * safe_sqrt(delta)
 
 
-def _safe_sqrt(x):
-    """sqrt with a zero (not NaN) derivative at 0: 0 * inf in a jvp would poison Newton solves."""
-    pos = x > 0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
-
-def _law(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True):
+def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True):
     """The contact law on components: ``d, spring, dxi, v_rel`` are ``(x, y, z)`` tuples of scalars (one pair) or of
     ``[C]`` arrays (all pairs at once), the rest scalars or ``[C]`` arrays; ``valid`` masks padding. Returns the
     fields of :class:`ContactForces`, vectors as component tuples, zero where the pair is not in contact.
@@ -78,30 +75,30 @@ def _law(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True
     division by one where none is natural).
     """
     one = _one(p)
-    dist = jnp.sqrt(_dot(d, d))
+    dist = jnp.sqrt(dot(d, d))
     n = tuple(c / dist for c in d)
     overlap = r_i + r_j - dist
-    delta = _once(jnp.where((overlap > 0) & valid, overlap, 0.0), one)
+    delta = once(jnp.where((overlap > 0) & valid, overlap, 0.0), one)
     active = delta > 0
-    sqrt_rd = _safe_sqrt(r_i * r_j / (r_i + r_j) * delta)  # sqrt(R* delta)
+    sqrt_rd = safe_sqrt(r_i * r_j / (r_i + r_j) * delta)  # sqrt(R* delta)
     # Tsuji damping: c_n = damp sqrt(2 E* sqrt(R* delta) m*), c_t = damp sqrt(k_t m*), one square root for both
-    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta * _safe_sqrt(sqrt_rd * (m_i * m_j / (m_i + m_j)))
-    v_n = _dot(v_rel, n)
+    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta * safe_sqrt(sqrt_rd * (m_i * m_j / (m_i + m_j)))
+    v_n = dot(v_rel, n)
     fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * jnp.sqrt(2.0 * p.E_star) * v_n
-    fn = _once(jnp.where(active, jnp.maximum(fn, 0.0), 0.0), one)
+    fn = once(jnp.where(active, jnp.maximum(fn, 0.0), 0.0), one)
 
     # tangential spring: keep it in the current tangent plane (same length), then add this step's slip
-    s_n = _dot(spring, n)
+    s_n = dot(spring, n)
     old = tuple(spring[k] - s_n * n[k] for k in range(3))
-    old_len2, proj_len2 = _dot(spring, spring), _dot(old, old)
+    old_len2, proj_len2 = dot(spring, spring), dot(old, old)
     pos = proj_len2 > 0
-    stretch = jnp.where(pos, _safe_sqrt(old_len2 / jnp.where(pos, proj_len2, 1.0)), 0.0)
-    dxi_n = _dot(dxi, n)
-    xi = tuple(_once(old[k] * stretch + dxi[k] - dxi_n * n[k], one) for k in range(3))
+    stretch = jnp.where(pos, safe_sqrt(old_len2 / jnp.where(pos, proj_len2, 1.0)), 0.0)
+    dxi_n = dot(dxi, n)
+    xi = tuple(once(old[k] * stretch + dxi[k] - dxi_n * n[k], one) for k in range(3))
     kt = 8.0 * p.G_star * sqrt_rd
     c_t = damp * jnp.sqrt(8.0 * p.G_star)
     ft_j = tuple(-kt * xi[k] - c_t * (v_rel[k] - v_n * n[k]) for k in range(3))
-    ft_len = _safe_sqrt(_dot(ft_j, ft_j))
+    ft_len = safe_sqrt(dot(ft_j, ft_j))
     limit = p.friction * fn
     sliding = (ft_len > limit) & active
     # scale by limit / |ft| when sliding, by 1 when sticking, by 0 out of contact, in one division per component
@@ -114,7 +111,7 @@ def _law(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True
 
     f_i = tuple(-fn * n[k] - ft_j[k] for k in range(3))
     # moments (r_i - delta/2) n x (-ft_j) on i and -(r_j - delta/2) n x ft_j on j
-    twist = _cross(n, ft_j)
+    twist = cross(n, ft_j)
     arm_i, arm_j = 0.5 * delta - r_i, 0.5 * delta - r_j
     return ContactForces(f_i=f_i, m_i=tuple(arm_i * c for c in twist), m_j=tuple(arm_j * c for c in twist),
                          normal=fn, spring=xi, sliding=sliding, active=active)
@@ -126,22 +123,8 @@ def _one(p: ContactParams):
     return jnp.where(jnp.isfinite(ratio), ratio, 1.0)
 
 
-def _once(a, one):
-    """``a`` itself, divided by the run-time ``one``: XLA computes it once instead of in each consumer."""
-    return a / one
 
 
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _cross(a, b):
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
-def _stack(out: ContactForces) -> ContactForces:
-    """Component tuples to ``[..., 3]`` arrays."""
-    return ContactForces(*(jnp.stack(o, axis=-1) if isinstance(o, tuple) else o for o in out))
 
 
 def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -> ContactForces:
@@ -153,7 +136,7 @@ def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -
         point of j with respect to that of i since then. v_rel: ``[3]`` relative velocity of the contact points
         (zeros for a static solve).
     """
-    return _stack(_law(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), p))
+    return stack(law_components(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), p))
 
 
 def _components(a):
@@ -181,11 +164,11 @@ def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: Con
     """
     n = positions.shape[0]
     i, j, d = pair_vectors(positions, pairs, valid)
-    cf = _law(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel), p,
+    cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel), p,
               valid)
     # one scatter of (force, 0, moment, 0) rows for both ends (see jaxbpm.physics.bond.bond_forces)
     zero = jnp.zeros_like(cf.normal)
     rows_i = jnp.stack(cf.f_i + (zero,) + cf.m_i + (zero,), axis=1)
     rows_j = jnp.stack(tuple(-f for f in cf.f_i) + (zero,) + cf.m_j + (zero,), axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), n)
-    return total[:, :3], total[:, 4:7], _stack(cf)
+    return total[:, :3], total[:, 4:7], stack(cf)

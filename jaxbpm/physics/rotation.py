@@ -9,6 +9,8 @@ cross product becomes slices and a concatenation along the minor axis.
 import jax
 import jax.numpy as jnp
 
+from jaxbpm.physics.vec import cross, dot
+
 __all__ = ["identity", "multiply", "conjugate", "rotate", "from_rotation_vector", "small_angle_vector",
            "integrate"]
 
@@ -22,8 +24,8 @@ def multiply(p, q):
     """Hamilton product ``p * q`` of ``[..., 4]`` quaternions (rotate by q, then by p)."""
     if isinstance(p, tuple):
         pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
-        c = _cross(pv, qv)
-        return (pw * qw - _dot(pv, qv),) + tuple(pw * qv[k] + qw * pv[k] + c[k] for k in range(3))
+        c = cross(pv, qv)
+        return (pw * qw - dot(pv, qv),) + tuple(pw * qv[k] + qw * pv[k] + c[k] for k in range(3))
     pw, pv = p[..., :1], p[..., 1:]
     qw, qv = q[..., :1], q[..., 1:]
     w = pw * qw - jnp.sum(pv * qv, axis=-1, keepdims=True)
@@ -41,20 +43,14 @@ def rotate(q, v):
     """Rotate ``[..., 3]`` vectors ``v`` by unit quaternions ``q``."""
     if isinstance(q, tuple):
         w, u = q[0], q[1:]
-        t = tuple(2.0 * c for c in _cross(u, v))
-        c = _cross(u, t)
+        t = tuple(2.0 * c for c in cross(u, v))
+        c = cross(u, t)
         return tuple(v[k] + w * t[k] + c[k] for k in range(3))
     w, u = q[..., :1], q[..., 1:]
     t = 2.0 * jnp.cross(u, v)
     return v + w * t + jnp.cross(u, t)
 
 
-def _cross(a, b):
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def from_rotation_vector(theta):

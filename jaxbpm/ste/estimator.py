@@ -14,7 +14,7 @@ import numpy as np
 
 from jaxbpm._compile import capacity, put, size_class
 from jaxbpm.errors import SampleError, SceneError
-from jaxbpm.physics import bond as bond_mod, contact as contact_mod
+from jaxbpm.physics import tangent
 from jaxbpm.physics.model import _contact_params, Model
 from jaxbpm.physics.padding import pad_model
 from jaxbpm.sample import Sample
@@ -301,16 +301,7 @@ def _active_contacts(sample: Sample, model: Model, axis: int, strain: float):
     return pairs[keep], d_lin
 
 
-@jax.jit
-def _unit_jacobians(r0):
-    """``[4, nb, 9]``: ``d f_i / d d`` of every bond at rest with (k_n, k_t, k_tw, k_b) = each unit vector."""
-    q = jnp.array([1.0, 0.0, 0.0, 0.0], r0.dtype)
-
-    def one(r, s):
-        k = [jnp.where(s == t, 1.0, 0.0).astype(r.dtype) for t in range(4)]
-        return jax.jacfwd(lambda d: bond_mod.bond_law(d, r, q, q, *k).f_i)(r).reshape(9)
-
-    return jnp.stack([jax.vmap(one, (0, None))(r0, s) for s in range(4)])
+_unit_jacobians = jax.jit(tangent.bond_unit)
 
 
 def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
@@ -332,30 +323,8 @@ def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
 
 
 def _contact_jacobians(est: Estimator) -> jnp.ndarray:
-    """Per-contact stiffness ``[C, 2nd, 2nd]``: minus the Jacobian of the Hertz-Mindlin law (no slip, empty spring)
-    at the linearisation overlap."""
-    nd = est.dofs
-    p = est.contact_params
-    dtype = est.contact_d.dtype
-
-    def one(d0, radii):
-        ri, rj = radii[0], radii[1]
-
-        def f(z):
-            ui, uj = z[:3], z[nd:nd + 3]
-            d = d0 + uj - ui
-            dxi = uj - ui
-            if nd == 6:
-                nrm = d0 / jnp.linalg.norm(d0)
-                dxi = dxi + jnp.cross(z[9:12], -rj * nrm) - jnp.cross(z[3:6], ri * nrm)
-            zero = jnp.zeros(3, dtype)
-            out = contact_mod.hertz_mindlin(d, ri, rj, 1.0, 1.0, zero, dxi, zero, p)
-            parts = [out.f_i, out.m_i, -out.f_i, out.m_j] if nd == 6 else [out.f_i, -out.f_i]
-            return jnp.concatenate(parts)
-
-        return -jax.jacfwd(f)(jnp.zeros(2 * nd, dtype))
-
-    return jax.vmap(one)(est.contact_d, est.contact_radii)
+    """Per-contact stiffness ``[C, 2nd, 2nd]`` at the linearisation overlap (:func:`jaxbpm.physics.tangent.contact_full`)."""
+    return tangent.contact_full(est.contact_d, est.contact_radii, est.contact_params, est.dofs)
 
 
 _contact_jacobians_jit = jax.jit(_contact_jacobians)

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm.physics import bond as bond_mod, rotation
+from jaxbpm.physics import tangent
 from jaxbpm.ste.estimator import _contact_jacobians, Estimator
 
 __all__ = ["pair_stiffness", "local_tensors", "body_tensor", "raw_body_tensor", "voigt", "tensor_from_voigt",
@@ -24,25 +24,9 @@ VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 
 def _bond_jacobians(est: Estimator, params) -> jnp.ndarray:
     """Per-bond stiffness ``[nb, 2nd, 2nd]`` at rest, DOF order (u_i, theta_i, u_j, theta_j): minus the Jacobian of
-    the bond law (the same function the DEM and the DSM integrate)."""
+    the bond law (:func:`jaxbpm.physics.tangent.bond_full`, the tangent the DSM uses too)."""
     model = est.model
-    k = model.stiffness(params)
-    nd = est.dofs
-
-    def one(r0, kn, kt, ktw, kb):
-        def f(z):
-            ui, uj = z[:3], z[nd:nd + 3]
-            if nd == 6:
-                qi, qj = rotation.from_rotation_vector(z[3:6]), rotation.from_rotation_vector(z[9:12])
-            else:
-                qi = qj = jnp.array([1.0, 0.0, 0.0, 0.0], r0.dtype)
-            out = bond_mod.bond_law(r0 + uj - ui, r0, qi, qj, kn, kt, ktw, kb)
-            parts = [out.f_i, out.m_i, -out.f_i, out.m_j] if nd == 6 else [out.f_i, -out.f_i]
-            return jnp.concatenate(parts)
-
-        return -jax.jacfwd(f)(jnp.zeros(2 * nd, r0.dtype))
-
-    return jax.vmap(one)(model.r0, k.kn, k.kt, k.ktw, k.kb)
+    return tangent.bond_full(model.r0, model.stiffness(params), rotations=est.dofs == 6)
 
 
 def pair_stiffness(est: Estimator, params) -> jnp.ndarray:

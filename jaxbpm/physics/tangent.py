@@ -1,0 +1,112 @@
+"""The tangent of the force laws at rest: per-bond (and per-contact) Jacobians, from the laws themselves by
+forward-mode differentiation, in the forms the solvers store. The DSM's operator and preconditioner and the STE's
+tensors all start here, so the three solvers integrate, linearise and estimate one and the same bond law.
+
+Forms (``nd`` DOF per particle, 3 or 6; DOF order of a pair ``(u_i, theta_i, u_j, theta_j)``):
+
+* reduced ``[ni, no, nb]`` (:func:`bond_reduced`): ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` with rotations
+  (9 x 9), ``d f_i / d d`` without (3 x 3), ``d = r0 + u_j - u_i`` the bond vector. The bond law sees the
+  displacements only through ``d`` and ``f_j = -f_i``, so these numbers give the whole pair tangent.
+* full ``[nb, 2 nd, 2 nd]`` (:func:`full`): the pair's stiffness (minus the force Jacobian).
+* unit ``[4, nb, 9]`` (:func:`bond_unit`): ``d f_i / d d`` row-major with one of (k_n, k_t, k_tw, k_b) set to one and
+  the others to zero. The law is linear in its stiffnesses, so ``d f_i / d d = sum_s k_s unit[s]`` for any bond
+  parameters: the STE's ``K^nm``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation
+
+__all__ = ["bond_reduced", "full", "bond_full", "bond_unit", "contact_full"]
+
+
+def bond_reduced(r0, k: bond_mod.BondStiffness, rotations: bool, z0=None) -> jnp.ndarray:
+    """Reduced per-bond Jacobians ``[ni, no, nb]`` (components first, bonds last) of the bond law with rest vectors
+    ``r0 [nb, 3]`` and stiffnesses ``k`` (:class:`~jaxbpm.physics.bond.BondStiffness` of ``[nb]`` arrays).
+
+    One ``jax.jvp`` per input component, batched with ``vmap``, on ``[nb]`` component arrays. At rest (``z0``
+    ``None``) a rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the exact map to first order,
+    which is all a Jacobian at rest sees. ``z0 [ni, nb]`` (``u_j - u_i``, then ``theta_i``, ``theta_j``) takes the
+    Jacobians at that state instead (rotations through the exact map).
+    """
+    r0c = tuple(jnp.asarray(r0).T)
+    nb = r0.shape[0]
+    dtype = r0.dtype
+    ni = 9 if rotations else 3
+    one, zero = jnp.ones(nb, dtype), jnp.zeros(nb, dtype)
+
+    def law(z):
+        d = tuple(r0c[c] + z[c] for c in range(3))
+        if not rotations:
+            qi = qj = (one, zero, zero, zero)
+        elif z0 is None:
+            qi = (one,) + tuple(0.5 * z[3 + c] for c in range(3))
+            qj = (one,) + tuple(0.5 * z[6 + c] for c in range(3))
+        else:
+            qi = tuple(rotation.from_rotation_vector(z[3:6].T).T)
+            qj = tuple(rotation.from_rotation_vector(z[6:9].T).T)
+        out = bond_mod.law_components(d, r0c, qi, qj, k.kn, k.kt, k.ktw, k.kb)
+        parts = (out.f_i + out.m_i + out.m_j) if rotations else out.f_i
+        return jnp.stack(parts)
+
+    z = jnp.zeros((ni, nb), dtype) if z0 is None else z0
+    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
+    return jax.vmap(lambda t: jax.jvp(law, (z,), (t,))[1])(basis)
+
+
+def full(jr) -> jnp.ndarray:
+    """``[nb, 2 nd, 2 nd]`` stiffness (minus the force Jacobian), DOF order ``(u_i, theta_i, u_j, theta_j)``, from
+    the reduced form of :func:`bond_reduced`."""
+    J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
+    jd = J[:, :, :3]
+    if J.shape[1] == 3:  # f_i from d; f_j = -f_i
+        row = jnp.concatenate([-jd, jd], axis=2)
+        return -jnp.concatenate([row, -row], axis=1)
+    rows = jnp.concatenate([-jd, J[:, :, 3:6], jd, J[:, :, 6:9]], axis=2)  # rows f_i, m_i, m_j
+    f_i, m_i, m_j = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
+    return -jnp.concatenate([f_i, m_i, -f_i, m_j], axis=1)
+
+
+def bond_full(r0, k: bond_mod.BondStiffness, rotations: bool) -> jnp.ndarray:
+    """Per-bond stiffness ``[nb, 2 nd, 2 nd]`` at rest: :func:`full` of :func:`bond_reduced`."""
+    return full(bond_reduced(r0, k, rotations))
+
+
+def bond_unit(r0) -> jnp.ndarray:
+    """``[4, nb, 9]``: ``d f_i / d d`` (row-major) of every bond at rest, without rotations, with (k_n, k_t, k_tw,
+    k_b) set to each unit vector in turn."""
+    nb = r0.shape[0]
+    out = []
+    for s in range(4):
+        k = bond_mod.BondStiffness(*(jnp.full(nb, 1.0 if t == s else 0.0, r0.dtype) for t in range(4)))
+        out.append(jnp.moveaxis(bond_reduced(r0, k, rotations=False), 2, 0).transpose(0, 2, 1).reshape(nb, 9))
+    return jnp.stack(out)
+
+
+def contact_full(d0, radii, params: contact_mod.ContactParams, dofs: int) -> jnp.ndarray:
+    """Per-contact stiffness ``[C, 2 nd, 2 nd]``: minus the Jacobian of the Hertz-Mindlin law (no slip, empty
+    tangential spring) at the pair vectors ``d0 [C, 3]`` (their overlap is the linearisation point), radii
+    ``[C, 2]``. With 6 DOF the contact point moves with the particles' rotations (levers ``-r_j n``, ``r_i n``)."""
+    nd = int(dofs)
+    dtype = d0.dtype
+
+    def one(d, rad):
+        ri, rj = rad[0], rad[1]
+
+        def f(z):
+            ui, uj = z[:3], z[nd:nd + 3]
+            dxi = uj - ui
+            if nd == 6:
+                nrm = d / jnp.linalg.norm(d)
+                dxi = dxi + jnp.cross(z[9:12], -rj * nrm) - jnp.cross(z[3:6], ri * nrm)
+            zero = jnp.zeros(3, dtype)
+            out = contact_mod.hertz_mindlin(d + uj - ui, ri, rj, 1.0, 1.0, zero, dxi, zero, params)
+            parts = [out.f_i, out.m_i, -out.f_i, out.m_j] if nd == 6 else [out.f_i, -out.f_i]
+            return jnp.concatenate(parts)
+
+        return -jax.jacfwd(f)(jnp.zeros(2 * nd, dtype))
+
+    return jax.vmap(one)(d0, radii)
