@@ -363,3 +363,29 @@ def test_bad_solver_options_are_named(packing):
     model = UniaxialCompression(contacts=True).model(packing, contacts=True)
     with pytest.raises(SceneError, match="bonds only"):
         dsm.tangent_operator(model, default_params(packing), operator="jacobians")
+
+
+def test_nonlinear_dsm_is_a_pure_differentiable_function(packing):
+    """Contacts: the nonlinear solve as params -> K, jit/vmap-able, its gradient (implicit, at each load step's
+    equilibrium) equal to central finite differences with respect to the bond and the contact modulus; the same K
+    as jaxbpm.solve."""
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    # block-Jacobi: jax.vmap over the two-level preconditioner's batched coarse factorisation can deadlock XLA's CPU
+    # runtime (jax 0.10.2, sporadic; see docs/dsm.md)
+    f = dsm.stiffness_function(packing, scene, dofs=3, nonlinear_tol=1e-10, load_steps=2, preconditioner="jacobi")
+    p = dict(default_params(packing), contact_E=jnp.asarray(float(packing.particle_material.E)))
+    k = float(f(p))
+    ref = jaxbpm.solve(packing, scene, "dsm", dofs=3, tol=1e-10, load_steps=2, params=p)
+    np.testing.assert_allclose(k, ref.stiffness, rtol=1e-9)
+    grad = jax.jit(jax.grad(f))(p)
+    for key in ("bond_E", "contact_E"):
+        x = np.asarray(p[key], float)
+        h = 1e-4 * x
+        fd = (f({**p, key: jnp.asarray(x + h)}) - f({**p, key: jnp.asarray(x - h)})) / (2 * h)
+        np.testing.assert_allclose(np.asarray(grad[key]), fd, rtol=1e-5)
+        assert np.all(np.asarray(grad[key]) > 0)  # stiffer bonds or particles, stiffer sample
+    batch = {**p, "bond_E": jnp.asarray([[1e9], [2e9]]), "bond_nu": jnp.asarray([[0.25], [0.25]]),
+             "contact_E": jnp.asarray([p["contact_E"]] * 2)}
+    ks = np.asarray(jax.jit(jax.vmap(f))(batch))
+    np.testing.assert_allclose(ks[0], f({**p, "bond_E": jnp.asarray([1e9])}), rtol=1e-9)
+    assert ks[1] > ks[0]

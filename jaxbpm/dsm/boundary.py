@@ -13,6 +13,9 @@ from jaxbpm.physics.model import Model
 
 
 def free_mask(model: Model, scene, sample):
+    """``(free [n, nd], fixed [n], driven [n])``: the DOFs the solve moves and the scene's clamped and driven
+    particles. Between walls, only the lateral rigid-body motions are pinned (three DOFs of two bottom particles,
+    which carry no load); with clamped layers, every DOF of the fixed and driven particles is prescribed."""
     nd = 6 if model.rotations else 3
     n = model.n
     free = np.ones((n, nd), bool)
@@ -60,6 +63,8 @@ def _check_held(sample, model, free, clamped, contact_pairs=None, wall_touching=
 
 
 def contact_candidates(sample, model, skin):
+    """``[C, 2]`` particle pairs whose gap at rest is below ``skin`` [m] (the contacts the solve may close), bonded
+    pairs left out when the sample's bonds replace their contacts (``bond_contact="replace"``)."""
     from scipy.spatial import cKDTree
 
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)

@@ -18,19 +18,29 @@ from jaxbpm.errors import SceneError
 
 
 def stiffness_function(sample, scene, *, dofs=None, tol=1e-6, maxiter=None, operator="auto", stiffness_tol="auto",
-                       preconditioner="auto", aggregate_size=None, n_materials=None, pad=True):
-    """A pure function ``params -> K`` [N/m] of the linear DSM on ``scene`` (clamped layers, bonds only).
+                       preconditioner="auto", aggregate_size=None, n_materials=None, pad=True, nonlinear_tol=None,
+                       newton_maxiter=30, load_steps=4, contact_skin=None, slip=True):
+    """A pure function ``params -> K`` [N/m] of the DSM on ``scene``: the linear solve (clamped layers, bonds
+    only), or with contacts or walls the nonlinear one (:func:`jaxbpm.dsm.newton.newton_outputs`: Newton over
+    ``load_steps`` load steps to ``nonlinear_tol``, default 1e-3, K the least-squares slope over the scene's fit
+    range, as :func:`jaxbpm.solve` reports it). ``params`` may then also hold ``contact_E`` and ``contact_nu``.
 
     It can be ``jit``-ed, differentiated (``jax.grad``: implicit differentiation through the CG solve) and
     ``vmap``-ped over parameter sets, e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``.
     n_materials: the length of ``params["bond_E"]`` (default: the sample's material count); pad: pad the sample to
     its size class (same values to round-off; samples of one class then share compilations). A call with concrete
     parameters runs the program :func:`solve_scene` compiles (none is compiled when the process solved a sample of
-    that class with these options before); a traced call (``jit``, ``grad``, ``vmap``) traces the solve.
+    that class with these options before); a traced call (``jit``, ``grad``, ``vmap``) traces the solve. The
+    nonlinear solve's gradient is implicit (the implicit function theorem at each load step's equilibrium), so it
+    holds to the tolerance the equilibrium is solved to: pass a tight ``nonlinear_tol`` (e.g. 1e-10) for gradients.
     """
-    if scene.uses_walls or scene.contacts:
-        raise SceneError("stiffness_function covers the linear DSM (clamped layers, bonds only)")
     rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]
+    if scene.uses_walls or scene.contacts:
+        return _nonlinear_stiffness_function(sample, scene, rotations, tol=1e-3 if nonlinear_tol is None else
+                                             nonlinear_tol, linear_tol=tol, maxiter=maxiter,
+                                             newton_maxiter=newton_maxiter, load_steps=load_steps,
+                                             contact_skin=contact_skin, slip=slip, preconditioner=preconditioner,
+                                             aggregate_size=aggregate_size)
     stiffness_tol = _linear_stiffness_tol(stiffness_tol)
     m = sample.n_materials if n_materials is None else int(n_materials)
     key = (scene, rotations, operator, preconditioner, aggregate_size, m, bool(pad))
@@ -87,3 +97,43 @@ def _load_case_reactions(model, params, free, coarse, geometry, driven, u_p, tol
         return -jnp.sum(jnp.where(driven[:, None], gen[:, :3], 0.0), axis=0)
 
     return jax.vmap(one)(u_p)
+
+
+def _nonlinear_stiffness_function(sample, scene, rotations, *, tol, linear_tol, maxiter, newton_maxiter, load_steps,
+                                  contact_skin, slip, preconditioner, aggregate_size):
+    from jaxbpm.dsm.boundary import contact_candidates
+    from jaxbpm.dsm.newton import newton_outputs, newton_problem, newton_program
+    from jaxbpm.dsm.scene import boundary_inputs
+
+    model, free_np, fixed, driven, u_p, walls, (_, _, delta) = boundary_inputs(sample, scene, rotations)
+    pairs = None
+    if scene.contacts:
+        skin = 0.5 * float(np.mean(sample.radii)) if contact_skin is None else float(contact_skin)
+        pairs = contact_candidates(sample, model, skin)
+    _check_held(sample, model, free_np, fixed | driven, pairs, None if walls is None else np.ones(model.n, bool))
+    dtype = model.positions0.dtype
+    prob = newton_problem(model, jnp.asarray(free_np), jnp.asarray(u_p, dtype), pairs, walls, scene, maxiter,
+                          newton_maxiter, driven, delta, preconditioner, aggregate_size, slip)
+    fractions = tuple(float(f) for f in np.arange(1, load_steps + 1) / load_steps)
+    disp = np.asarray(fractions) * delta
+    lo, hi = scene.fit_range
+    sel = np.flatnonzero((disp >= lo * delta) & (disp <= hi * delta * (1 + 1e-9)))
+    if len(sel) < 2 and load_steps > 1:
+        raise SceneError("too few load steps in the scene's fit_range to fit a stiffness; raise load_steps")
+    tols = (jnp.asarray(tol, dtype), jnp.asarray(linear_tol, dtype))
+
+    def slope(reactions):
+        if load_steps == 1:
+            return reactions[-1] / delta
+        x, y = jnp.asarray(disp[sel], dtype), reactions[sel]
+        xc = x - jnp.mean(x)
+        return jnp.sum(xc * (y - jnp.mean(y))) / jnp.sum(xc * xc)
+
+    def stiffness(params):
+        if not traced(params):
+            out = newton_program(prob, params, *tols, fractions=fractions)[0]
+        else:
+            out = newton_outputs(prob, params, *tols, fractions=fractions)
+        return slope(out[1])
+
+    return stiffness

@@ -23,6 +23,25 @@ from jaxbpm.dsm.preconditioner import _coarse_for, bond_geometry
 from jaxbpm.errors import SceneError
 
 
+def boundary_inputs(sample, scene, rotations=None):
+    """What a static solve of ``scene`` needs of the boundary: ``(model, free [n, nd], fixed [n], driven [n],
+    u_p [n, nd], walls, (length, area, delta))`` -- the bonds' model, the free DOFs and the clamped layers, the
+    prescribed DOFs at full load (the driven layer moved by ``delta = strain * length`` against the axis), the
+    walls at full load ``(points [W, 3], normals [W, 3])`` or ``None``, and the gauge length, area and
+    displacement."""
+    model = scene.model(sample, rotations=rotations, contacts=False)
+    length, area = scene.geometry(sample)
+    delta = scene.strain * length
+    free_np, fixed, driven = free_mask(model, scene, sample)
+    u_p = np.zeros(free_np.shape)
+    u_p[driven, scene.axis] = -delta
+    walls = None
+    if scene.uses_walls:
+        load = scene.loading(sample, speed=1.0)
+        walls = (load.wall_points0 + load.wall_velocity * delta, load.wall_normals)  # top wall moved by delta
+    return model, free_np, fixed, driven, u_p, walls, (length, area, delta)
+
+
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol="auto", contact_skin=None, load_steps=4, throw=True,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
@@ -51,22 +70,13 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
                              preconditioner=preconditioner, aggregate_size=aggregate_size, pad=pad, t0=t0)
     if isinstance(stiffness_tol, str) and stiffness_tol == "auto":  # the default of the linear bonds-only solve
         stiffness_tol = None
-    model = scene.model(sample, rotations=rotations, contacts=False)
     if scene.uses_walls and not nonlinear:
         raise SceneError("a scene with walls needs the nonlinear DSM (walls are contacts); use nonlinear=True")
     params = default_params(sample) if params is None else params
-    length, area = scene.geometry(sample)
-    delta = scene.strain * length
-    free_np, fixed, driven = free_mask(model, scene, sample)
+    model, free_np, fixed, driven, u_p, walls, (length, area, delta) = boundary_inputs(sample, scene, rotations)
     clamped = fixed | driven
     nd = free_np.shape[1]
     ax = scene.axis
-    u_p = np.zeros((model.n, nd))
-    u_p[driven, ax] = -delta
-    walls = None
-    if scene.uses_walls:
-        load = scene.loading(sample, speed=1.0)
-        walls = (load.wall_points0 + load.wall_velocity * delta, load.wall_normals)  # top wall moved by delta
     frac = None
     if scene.contacts and not nonlinear:
         # the linear solve takes the contact candidates as springs linearised at `contact_fraction` of the target

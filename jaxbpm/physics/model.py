@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import warnings
+import weakref
 from typing import Any
 
 import jax
@@ -36,9 +37,21 @@ __all__ = ["Model", "build_model", "default_params", "check_params"]
 
 
 def default_params(sample: Sample) -> dict:
-    """The calibratable parameters of ``sample`` at their current values: ``{"bond_E", "bond_nu"}``."""
+    """The calibratable parameters of ``sample`` at their current values: ``{"bond_E", "bond_nu"}`` (a new dict
+    of device arrays, moved once per sample and precision: a loop of solves with the defaults moves nothing)."""
     dtype = _float_dtype()
-    return {"bond_E": _put(sample.materials.E, dtype), "bond_nu": _put(sample.materials.nu, dtype)}
+    key = (id(sample), dtype.name)
+    hit = _DEFAULTS.get(key)
+    if hit is None or hit[0]() is not sample:
+        hit = (weakref.ref(sample), {"bond_E": _put(sample.materials.E, dtype),
+                                     "bond_nu": _put(sample.materials.nu, dtype)})
+        _DEFAULTS[key] = hit
+        while len(_DEFAULTS) > 8:
+            _DEFAULTS.pop(next(iter(_DEFAULTS)))
+    return dict(hit[1])
+
+
+_DEFAULTS: dict = {}  # (id(sample), dtype) -> (weak reference to the sample, its default parameters)
 
 
 def check_params(params, sample: Sample) -> dict:
@@ -66,6 +79,9 @@ def check_params(params, sample: Sample) -> dict:
               ("bond_nu", lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)")]
     checks += [(name, lambda v: v >= 0, ">= 0 [Pa] (inf: never breaks)")  # NaN fails it too
                for name in ("bond_tensile_strength", "bond_shear_strength") if name in params]
+    scalars = [(name, ok, what) for name, ok, what in (
+        ("contact_E", lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
+        ("contact_nu", lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)")) if name in params]
     for name, ok, what in checks:
         value = params[name]
         if isinstance(value, jax.core.Tracer):
@@ -83,6 +99,16 @@ def check_params(params, sample: Sample) -> dict:
                              + ", ".join(f"{int(k)}: {arr[k]:g}" for k in bad[:8]))
         if not isinstance(value, jax.Array):
             out[name] = _put(arr, _float_dtype())
+    for name, ok, what in scalars:  # the contacts' (Hertz-Mindlin, cohesive) modulus and Poisson ratio: scalars
+        value = params[name]
+        if isinstance(value, jax.core.Tracer):
+            continue
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise SceneError(f"params[{name!r}] must be a number, got {value!r}") from None
+        if arr.shape != () or not ok(arr):
+            raise SceneError(f"params[{name!r}] must be a scalar, {what}; got {arr.tolist()}")
     return out
 
 
@@ -180,10 +206,28 @@ class Model:
         over = {field: jnp.asarray(params[key]) for key, field in self.COHESIVE_KEYS.items() if key in params}
         return self.cohesive._replace(**over) if over else self.cohesive
 
+    def hertz_params(self, params) -> contact_mod.ContactParams:
+        """The Hertz-Mindlin parameters, with the particles' contact modulus and Poisson ratio taken from
+        ``params["contact_E"]`` / ``params["contact_nu"]`` (scalars) where given (differentiable), else the
+        sample's."""
+        c = self.contact
+        if isinstance(params, dict) and "_contact" in params:
+            return params["_contact"]
+        if not isinstance(params, dict) or not ({"contact_E", "contact_nu"} & set(params)):
+            return c
+        r = c.G_star / c.E_star  # = (1 - nu) / (2 (2 - nu)) for one material: recover the sample's E and nu
+        nu0 = (1.0 - 4.0 * r) / (1.0 - 2.0 * r)
+        e0 = 2.0 * c.E_star * (1.0 - nu0 ** 2)
+        e = jnp.asarray(params.get("contact_E", e0), c.E_star.dtype)
+        nu = jnp.asarray(params.get("contact_nu", nu0), c.E_star.dtype)
+        g = e / (2.0 * (1.0 + nu))
+        return c._replace(E_star=e / (2.0 * (1.0 - nu ** 2)), G_star=g / (2.0 * (2.0 - nu)))
+
     def precompute(self, params) -> dict:
         """Per-bond stiffnesses and strengths (and the cohesive law's scalars) computed once (a loop of force
         evaluations passes this instead of ``params``)."""
-        out = {"_stiffness": self.stiffness(params), "_strength": self.strength(params)}
+        out = {"_stiffness": self.stiffness(params), "_strength": self.strength(params),
+               "_contact": self.hertz_params(params)}
         if self.contact_law == "cohesive":
             out["_cohesive"] = self.cohesive_params(params)
         return out
@@ -227,7 +271,7 @@ class Model:
         elif self.contacts and contacts is not None:
             pairs, valid, spring, dxi, v_rel = contacts
             fc, mc, cf = contact_mod.pair_forces(positions, pairs, valid, self.radii, self.mass, spring, dxi, v_rel,
-                                                 self.contact)
+                                                 self.hertz_params(params))
             force, moment = force + fc, moment + mc
             parts["contacts"] = cf
         if self.walls is not None:
