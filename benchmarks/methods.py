@@ -56,7 +56,7 @@ def case_samples(case, n, seeds, variants):
     if case == "1-porous":
         for seed in seeds:
             # bond_gap 0.6 gives a bond coordination of ~8, as in Jarolin & Dosta's aerogel model (4e5 bonds on 1e5
-            # particles); at 0.3 (coordination ~6) the STE overestimates K by ~25 % (see README)
+            # particles); at 0.3 (coordination ~6) the STE overestimates K by ~25 % (see docs/methods.md)
             s = jaxbpm.generate.cylinder(n, seed=seed, packing_fraction=0.45, bond_gap=0.6,
                                          materials={"E": 1e9, "nu": 0.25},
                                          particle_material={"E": 1e9, "nu": 0.25, "density": 1000.0,

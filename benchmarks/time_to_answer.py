@@ -3,7 +3,7 @@
 
 Usage::
 
-    python benchmarks/time_to_answer.py --png results/time_to_answer.png      # the README figures (3k and 30k)
+    python benchmarks/time_to_answer.py --png results/time_to_answer.png      # the docs figures (3k and 30k)
     python benchmarks/time_to_answer.py --sizes 3000 --skip-demo              # a shorter run (~3 min)
 
 Every figure is measured inside a FRESH Python process (this script run again with a hidden ``--child`` mode, one
@@ -47,6 +47,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pathlib
 import re
 import shutil
 import statistics
@@ -145,7 +146,7 @@ def child_solve(spec):
     out["import_plus_first_s"] = out["import_s"] + out["first"]["call_s"]
     if spec["scenario"] == "cold":
         out["second"] = _timed_solve(jaxbpm, sample, scene, spec["method"])
-        # a third call: the second still pays the allocator's first touches of the program's buffers (see README)
+        # a third call: without priming, the second pays the allocator's first touches of the program's buffers
         out["third"] = _timed_solve(jaxbpm, sample, scene, spec["method"])
         other, out["load2_s"] = _load(spec["n2"], 1, spec["sample_cache"])
         out["other_sample"] = _timed_solve(jaxbpm, other, scene, spec["method"])
@@ -592,6 +593,49 @@ def measure(args, work, report, save):
             save()
 
 
+TABLE_BEGIN, TABLE_END = "<!-- time-to-answer table -->", "<!-- end time-to-answer table -->"
+
+
+def _fmt(x):
+    return f"{x * 1e3:.0f} ms" if x < 0.1 else (f"{x:.2f} s" if x < 10 else f"{x:.1f} s")
+
+
+def markdown_table(runs, sizes) -> str:
+    """The headline table (README, docs): per method and size, a new process on an empty and on a warm cache, the
+    second and third calls and the wall-time ratio to the DEM."""
+    rows = ["| method, particles | new process, empty cache: import + 1st call (compile) | warm disk cache: import + "
+            "1st call | 2nd call (kernel run) | 3rd call | DEM / method, 2nd calls (kernel ratio) |",
+            "|---|---|---|---|---|---|"]
+    for n in sizes:
+        dem = runs.get(f"dem/{n}", {}).get("cold")
+        for m in ("dem", "dsm", "ste"):
+            if f"{m}/{n}" not in runs:
+                continue
+            c, w = runs[f"{m}/{n}"]["cold"], runs[f"{m}/{n}"].get("warm", {})
+            f, s, t = c["first"], c["second"], c["third"]
+            ratio = "—" if m == "dem" or dem is None else (
+                f"{dem['second']['call_s'] / s['call_s']:.0f}x ({dem['second']['run_s'] / s['run_s']:.0f}x)")
+            warm = _fmt(w["import_plus_first_s"]) if "import_plus_first_s" in w else "-"
+            rows.append(f"| {m.upper()}, {f['particles']} | {_fmt(c['import_s'] + f['call_s'])} "
+                        f"({_fmt(f['compile_s'])}) | {warm} | {_fmt(s['call_s'])} ({_fmt(s['run_s'])}) | "
+                        f"{_fmt(t['call_s'])} | {ratio} |")
+    return "\n".join(rows)
+
+
+def update_tables(paths, table: str) -> None:
+    """Replace the text between the table markers in each of ``paths`` with ``table`` (atomic writes)."""
+    from jaxbpm.io import atomic_write
+
+    for path in paths:
+        text = pathlib.Path(path).read_text(encoding="utf-8")
+        a, b = text.find(TABLE_BEGIN), text.find(TABLE_END)
+        if a < 0 or b < a:
+            raise SystemExit(f"{path}: no '{TABLE_BEGIN}' ... '{TABLE_END}' markers")
+        new = text[:a + len(TABLE_BEGIN)] + "\n" + table + "\n" + text[b:]
+        atomic_write(path, lambda tmp, new=new: pathlib.Path(tmp).write_text(new, encoding="utf-8"))
+        print(f"updated the table in {path}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[3000, 30000], help="requested particles")
@@ -610,6 +654,10 @@ def main(argv=None):
     ap.add_argument("--child-timeout", type=float, default=3600.0, help="seconds before a child process is stopped")
     ap.add_argument("--out", default="results/time_to_answer.json")
     ap.add_argument("--png", default=None, help="bar chart: per method and size, where the time goes")
+    ap.add_argument("--tables", nargs="+", default=None, metavar="MD",
+                    help="rewrite the headline table between the time-to-answer markers of these Markdown files")
+    ap.add_argument("--tables-from", default=None, metavar="JSON",
+                    help="with --tables: take the figures from this earlier run's JSON instead of measuring")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--spec", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true",
@@ -623,6 +671,13 @@ def main(argv=None):
     if args.child:
         out = CHILDREN[args.child](json.loads(args.spec))
         print(MARK + json.dumps(_plain(out)), flush=True)
+        return 0
+    if args.tables_from:
+        if not args.tables:
+            ap.error("--tables-from needs --tables")
+        data = json.loads(pathlib.Path(args.tables_from).read_text(encoding="utf-8"))
+        sizes = sorted({int(k.split("/")[1]) for k in data["runs"]})
+        update_tables(args.tables, markdown_table(data["runs"], sizes))
         return 0
 
     load_before = machine_load(1.0)
@@ -660,6 +715,8 @@ def main(argv=None):
           f"pinned to core {cpu}")
     save()
     print(f"wrote {args.out}")
+    if args.tables:
+        update_tables(args.tables, markdown_table(report["runs"], sizes))
     if args.png:
         m = report["machine"]
         note = (f"core {cpu} of {os.cpu_count()}, XLA {args.threads} thread(s); load before {load_before['cpu_busy']} "

@@ -78,10 +78,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None) -> pathlib.P
       The cache directory, absolute.
 
     Raises:
-      NotADirectoryError: ``path`` (or one of its parents) is a file.
-      PermissionError: ``path`` cannot be created or written to.
-      OSError: ``path`` cannot be created for another reason.
-      The messages name the path.
+      NotADirectoryError: ``path`` (or one of its parents) is a file; the message names it.
+      PermissionError: ``path`` cannot be created or written to; the message names it.
+      OSError: ``path`` cannot be created for another reason; the message names it.
     """
     import jax
 

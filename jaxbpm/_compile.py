@@ -17,7 +17,6 @@ share a class when their particle counts do.
 from __future__ import annotations
 
 import collections
-import gc
 import contextlib
 import math
 import time
@@ -145,10 +144,8 @@ class Program:
             return exe, 0.0
         tc = time.perf_counter()
         exe = self._jit.lower(*args, **static).compile()
-        if self.prime:
-            gc.collect()  # what the compilation left is freed (and trimmed) before the scratch memory is faulted in
-            for _ in range(self.prime):
-                jax.block_until_ready(exe(*args))
+        for _ in range(self.prime):
+            jax.block_until_ready(exe(*args))
         compile_time = time.perf_counter() - tc
         self.compilations += 1
         self._compiled[key] = exe

@@ -34,6 +34,8 @@ def multiply(p, q):
 
 
 def conjugate(q):
+    """The conjugate ``(w, -x, -y, -z)`` of a quaternion (the inverse rotation of a unit quaternion); an array
+    ``[..., 4]`` or a component tuple."""
     if isinstance(q, tuple):
         return (q[0], -q[1], -q[2], -q[3])
     return q * jnp.array([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
