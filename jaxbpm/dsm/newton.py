@@ -344,6 +344,7 @@ def newton_problem(model, free, u_p, pairs, walls, scene, maxiter, newton_maxite
                          pairs=jnp.asarray(pairs) if model_c.contacts else None, normals=normals,
                          wall_base=wall_base, u_p=jnp.asarray(u_p, dtype), moving=jnp.asarray(driven),
                          resting=jnp.asarray(clamped & ~np.asarray(driven)), start_free=start_free,
-                         start_guess=start_guess, coarse=coarse, delta=jnp.asarray(delta, dtype), axis=int(ax), gmres_maxiter=int(maxiter or 10),
+                         start_guess=start_guess, coarse=coarse, delta=jnp.asarray(delta, dtype), axis=int(ax),
+                         gmres_maxiter=int(maxiter or 10),
                          newton_maxiter=int(newton_maxiter), slip=bool(slip))
     return prob

@@ -55,7 +55,8 @@ import jax.numpy as jnp
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.vec import cross, dot, once, safe_sqrt, stack
 
-__all__ = ["law_components", "CohesiveLaw", "CohesiveParams", "CohesiveForces", "resolve_contact_law", "restitution_damping",
+__all__ = ["law_components",
+           "CohesiveLaw", "CohesiveParams", "CohesiveForces", "resolve_contact_law", "restitution_damping",
            "cohesive_contact", "normal_stiffness", "contact_area", "pair_forces", "update_cohesion"]
 
 
@@ -257,8 +258,8 @@ def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, histor
 
     n = positions.shape[0]
     i, j, d = pair_vectors(positions, pairs, valid)
-    cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel),
-              history, p, valid)
+    cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi),
+                        _components(v_rel), history, p, valid)
     zero = jnp.zeros_like(cf.normal)
     rows_i = jnp.stack(cf.f_i + (zero,) + cf.m_i + (zero,), axis=1)
     rows_j = jnp.stack(tuple(-f for f in cf.f_i) + (zero,) + cf.m_j + (zero,), axis=1)

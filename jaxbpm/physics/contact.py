@@ -164,8 +164,8 @@ def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: Con
     """
     n = positions.shape[0]
     i, j, d = pair_vectors(positions, pairs, valid)
-    cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi), _components(v_rel), p,
-              valid)
+    cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi),
+                        _components(v_rel), p, valid)
     # one scatter of (force, 0, moment, 0) rows for both ends (see jaxbpm.physics.bond.bond_forces)
     zero = jnp.zeros_like(cf.normal)
     rows_i = jnp.stack(cf.f_i + (zero,) + cf.m_i + (zero,), axis=1)

@@ -81,15 +81,12 @@ def check_params(params, sample: Sample) -> dict:
                for name in ("bond_tensile_strength", "bond_shear_strength") if name in params]
     scalars = [(name, ok, what) for name, ok, what in (
         ("contact_E", lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
-        ("contact_nu", lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)")) if name in params]
+        ("contact_nu", lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)"))
+        if name in params]
     for name, ok, what in checks:
-        value = params[name]
-        if isinstance(value, jax.core.Tracer):
+        arr = _concrete(params, name, "numbers, one per bond material", SceneError)
+        if arr is None:
             continue
-        try:
-            arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SceneError(f"params[{name!r}] must be numbers, one per bond material, got {value!r}") from None
         if arr.shape != (m,):
             raise SceneError(f"params[{name!r}] must have shape [{m}] (one per bond material), got shape "
                              f"{arr.shape}: {arr.tolist()}")
@@ -97,19 +94,24 @@ def check_params(params, sample: Sample) -> dict:
         if bad.size:
             raise SceneError(f"params[{name!r}] must be {what}; bad entries (material: value) "
                              + ", ".join(f"{int(k)}: {arr[k]:g}" for k in bad[:8]))
-        if not isinstance(value, jax.Array):
+        if not isinstance(params[name], jax.Array):
             out[name] = _put(arr, _float_dtype())
     for name, ok, what in scalars:  # the contacts' (Hertz-Mindlin, cohesive) modulus and Poisson ratio: scalars
-        value = params[name]
-        if isinstance(value, jax.core.Tracer):
-            continue
-        try:
-            arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SceneError(f"params[{name!r}] must be a number, got {value!r}") from None
-        if arr.shape != () or not ok(arr):
+        arr = _concrete(params, name, "a number", SceneError)
+        if arr is not None and (arr.shape != () or not ok(arr)):
             raise SceneError(f"params[{name!r}] must be a scalar, {what}; got {arr.tolist()}")
     return out
+
+
+def _concrete(params, name: str, expected: str, error):
+    """``params[name]`` as a float64 NumPy array; ``None`` for a traced value (inside ``jit``/``grad``/``vmap``)."""
+    value = params[name]
+    if isinstance(value, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise error(f"params[{name!r}] must be {expected}, got {value!r}") from None
 
 
 def _float_dtype():

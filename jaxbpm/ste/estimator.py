@@ -323,7 +323,8 @@ def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
 
 
 def _contact_jacobians(est: Estimator) -> jnp.ndarray:
-    """Per-contact stiffness ``[C, 2nd, 2nd]`` at the linearisation overlap (:func:`jaxbpm.physics.tangent.contact_full`)."""
+    """Per-contact stiffness ``[C, 2nd, 2nd]`` at the linearisation overlap
+    (:func:`jaxbpm.physics.tangent.contact_full`)."""
     return tangent.contact_full(est.contact_d, est.contact_radii, est.contact_params, est.dofs)
 
 
