@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from jaxbpm import generate as g
+from jaxbpm import packing as pk
 from jaxbpm.errors import SampleError
 from jaxbpm.sample import BondMaterials
 
@@ -262,8 +263,8 @@ def test_packing_loads_only_the_neighbour_lists_of_jax_md():
     # jax-md's package __init__ imports all of it (seconds); the packing needs two modules, and a later full import
     # must still work, with the same module objects
     code = ("import sys\n"
-            "from jaxbpm import generate as g\n"
-            "partition, space = g._jax_md_neighbors()\n"
+            "from jaxbpm import packing as pk\n"
+            "partition, space = pk._jax_md_neighbors()\n"
             "assert 'jax_md' not in sys.modules and 'jax_md.energy' not in sys.modules\n"
             "import jax_md\n"
             "assert jax_md.partition is partition and jax_md.space is space and jax_md.energy.soft_sphere\n")
@@ -280,13 +281,13 @@ def first_give_up(steps, overlaps, trial, target=TOL):
     for k in range(1, len(steps) + 1):
         if overlaps[k - 1] < target:
             return None
-        if g._give_up(steps[:k], overlaps[:k], target=target, trial=trial):
+        if pk._give_up(steps[:k], overlaps[:k], target=target, trial=trial):
             return int(steps[k - 1])
     return None
 
 
 def test_give_up_predicate_on_synthetic_histories():
-    assert (g._TRIAL_FROM, g._STALL_STEPS, g._STALL_DROP) == (400, 3000, 0.1)
+    assert (pk._TRIAL_FROM, pk._STALL_STEPS, pk._STALL_DROP) == (400, 3000, 0.1)
     # packs at step ln(50) / 0.005 = 782: kept, on trial or not, also with noise on top (the lowest value so far
     # is what counts)
     steps, fast = geometric(0.005)
@@ -304,11 +305,11 @@ def test_give_up_predicate_on_synthetic_histories():
     steps = np.arange(1, 101) * 100
     jammed = np.maximum(0.06 - 3e-5 * steps, 0.03)
     assert first_give_up(steps, jammed, trial=1500) == 400
-    assert not g._give_up(steps[:3], jammed[:3], target=TOL, trial=1500)  # too early to tell
-    assert 1000 + 0.5 * g._STALL_STEPS < first_give_up(steps, jammed, trial=None) <= 1000 + g._STALL_STEPS
+    assert not pk._give_up(steps[:3], jammed[:3], target=TOL, trial=1500)  # too early to tell
+    assert 1000 + 0.5 * pk._STALL_STEPS < first_give_up(steps, jammed, trial=None) <= 1000 + pk._STALL_STEPS
     # a trial's budget is a hard limit; slow progress (15 % per 3000 steps) is not a stall
-    assert g._give_up([100, 1500], [0.02, 0.0011], target=TOL, trial=1500)
-    assert not g._give_up([100, 1400], [0.02, 0.0011], target=TOL, trial=1500)
+    assert pk._give_up([100, 1500], [0.02, 0.0011], target=TOL, trial=1500)
+    assert not pk._give_up([100, 1400], [0.02, 0.0011], target=TOL, trial=1500)
     steps = np.arange(1, 200) * 100
     assert first_give_up(steps, 0.02 * 0.85 ** (steps / 3000.0), trial=None) is None
 
@@ -317,14 +318,14 @@ def test_jamming_fraction_estimate_grows_with_the_domain():
     # boxes at 0.6 from fresh insertions: 2000 and 2500 spheres jam, 3000 pack (in 10 000 steps): the estimate
     # must put 0.6 between them, so that 3000 spheres keep 0.6 and 2000 do not wait for it
     def estimate(n, shape="box"):
-        return g._jamming_fraction(g._walls(shape, None, n * 4.0 / 3.0 * np.pi / 0.6, 1.05))
+        return pk._jamming_fraction(g._walls(shape, None, n * 4.0 / 3.0 * np.pi / 0.6, 1.05))
 
-    assert estimate(2000) < estimate(2500) < 0.6 < estimate(3000) < estimate(10_000) < g._PHI_BULK
+    assert estimate(2000) < estimate(2500) < 0.6 < estimate(3000) < estimate(10_000) < pk._PHI_BULK
     assert estimate(2000, "cylinder") < 0.6 and estimate(2000, "beam") < estimate(2000)
 
 
 def test_progress_lines_are_throttled(capsys):
-    report = g._reporter(True, 0.6)
+    report = pk._reporter(True, 0.6)
     for k in range(100):  # 10 s of chunks every 0.1 s
         report(100 * (k + 1), 0.01, 0.1 * (k + 1), False)
     report(10_100, 1e-4, 10.05, True)
@@ -332,7 +333,7 @@ def test_progress_lines_are_throttled(capsys):
     assert 4 <= len(lines) <= 6 and lines[-1] == "random_packing: packing fraction 0.6: packed after 10100 FIRE " \
                                                   "steps (10.05 s)"
     calls = []
-    g._reporter(lambda *a: calls.append(a), 0.6)(5, 0.1, 0.2, False)
+    pk._reporter(lambda *a: calls.append(a), 0.6)(5, 0.1, 0.2, False)
     assert calls == [(5, 0.1, 0.2)]
 
 

@@ -1,0 +1,462 @@
+"""LAMMPS data files (``atom_style bpm/sphere`` or ``sphere``, ``Bonds``, ``Bond Coeffs # bpm/rotational``) and
+``bpm/rotational`` coefficient files; see :mod:`jaxbpm.interop.formats` for the layout."""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import re
+import warnings
+from typing import Any, Mapping
+
+import numpy as np
+
+from jaxbpm.interop import conventions
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.io import atomic_write
+from jaxbpm.sample import ParticleMaterial, Sample
+from jaxbpm.interop._meta import _BIG, _domain, _meta, _meta_line, _N_COEFFS, _parse_meta, _r
+
+
+def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarray:
+    """Per-bond ``bpm/rotational`` coefficients ``[nb, 12]`` (Kr Ks Kt Kb Fcr Fcs Tct Tcb, dampings 0) of a sample,
+    exact translations of its bond law (:func:`jaxbpm.interop.conventions.to_lammps`); infinite strengths become 1e300."""
+    bond, length, _, _ = conventions.sample_bonds(sample)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", conventions.InexactTranslationWarning)  # stated in the docs
+        p = conventions.to_lammps(bond, length, normalize=normalize)
+    c = p.coefficients().reshape(-1, 8)
+    c = np.where(np.isfinite(c), c, _BIG)
+    return np.concatenate([c, np.zeros((c.shape[0], 4))], axis=1)
+
+
+def _group_types(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """1-based type per bond (bonds with bit-identical coefficients share one, numbered by first appearance) and
+    the ``[ntypes, 12]`` table."""
+    if len(coeffs) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, _N_COEFFS))
+    keys = np.ascontiguousarray(coeffs).view(np.dtype((np.void, coeffs.dtype.itemsize * coeffs.shape[1]))).ravel()
+    _, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[inv.reshape(-1)] + 1, coeffs[first[order]]
+
+
+def _coeff_line(t: int, row) -> str:
+    return f"{t} " + " ".join(_r(v) for v in row)
+
+
+def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational break yes smooth no") -> pathlib.Path:
+    """Write an include file for a LAMMPS input: an optional ``bond_style`` line, then one ``bond_coeff`` line per
+    row of ``table`` (``[ntypes, 8 or 12]``; missing dampings are 0). ``bond_style=None`` writes coefficients only."""
+    table = np.asarray(table, dtype=np.float64)
+    if table.ndim != 2 or table.shape[1] not in (8, _N_COEFFS):
+        raise SampleError(f"bond coefficient table must have shape [ntypes, 8] or [ntypes, 12], got {table.shape}")
+    if table.shape[1] == 8:
+        table = np.concatenate([table, np.zeros((len(table), 4))], axis=1)
+    lines = [] if bond_style is None else [f"bond_style {bond_style}"]
+    lines += ["bond_coeff " + _coeff_line(t, row) for t, row in enumerate(table, start=1)]
+
+    def write(tmp):
+        pathlib.Path(tmp).write_text("\n".join(lines) + "\n")
+
+    return atomic_write(path, write)
+
+
+def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
+    """``bond_coeff`` lines of a LAMMPS input file: ``({type: 12 coefficients}, normalize)`` (``normalize`` from a
+    ``bond_style bpm/rotational ... normalize yes`` line). Errors name the line."""
+    path = pathlib.Path(path)
+    text = _read_text(path)
+    coeffs, normalize = {}, False
+    for no, raw in enumerate(text.splitlines(), start=1):
+        words = raw.split("#", 1)[0].split()
+        if not words:
+            continue
+        if words[0] == "bond_style":
+            if len(words) < 2 or words[1] != "bpm/rotational":
+                raise SampleFileError(f"{path}:{no}: bond_style {' '.join(words[1:])!r} is not bpm/rotational")
+            kw = words[2:]
+            normalize = "normalize" in kw and kw.index("normalize") + 1 < len(kw) and \
+                kw[kw.index("normalize") + 1] in ("yes", "1", "true")
+        elif words[0] == "bond_coeff":
+            t, row = _coeff_row(words[1:], f"{path}:{no}")
+            coeffs[t] = row
+    return coeffs, normalize
+
+
+def _coeff_row(words: list[str], where: str) -> tuple[int, np.ndarray]:
+    if len(words) not in (9, 13):
+        raise SampleFileError(f"{where}: bpm/rotational coefficients need a type and 12 values (Kr Ks Kt Kb Fcr Fcs "
+                              f"Tct Tcb gamma_r gamma_s gamma_t gamma_b) or 8 without dampings; got "
+                              f"{len(words) - 1} values")
+    try:
+        t = int(words[0])
+        row = np.array([float(w) for w in words[1:]])
+    except ValueError:
+        raise SampleFileError(f"{where}: bond coefficients must be a type number and numbers, got "
+                              f"{' '.join(words)!r}") from None
+    if len(row) == 8:
+        row = np.concatenate([row, np.zeros(4)])
+    return t, row
+
+
+def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_types=None, bond_types=None,
+                      coefficients: bool = True, title: str | None = None) -> pathlib.Path:
+    """Write ``sample`` as a LAMMPS data file (``atom_style bpm/sphere``, units si), atomically.
+
+    Args:
+      path: the data file. Atom IDs are particle index + 1, bond IDs bond index + 1.
+      sample: the sample.
+      normalize: coefficients for ``bond_style bpm/rotational normalize yes`` (Kr, Ks multiplied by L).
+      atom_types: ``[n]`` LAMMPS atom type per particle (default all 1), e.g. to make groups.
+      bond_types: ``[nb]`` 1-based bond type per bond (default: bonds with identical coefficients share a type).
+        Bonds forced into one type get the coefficients of its first bond (a warning states the largest
+        difference).
+      coefficients: write the ``Bond Coeffs # bpm/rotational`` section (read it in LAMMPS with ``nocoeff`` and
+        include :func:`write_lammps_coeffs`'s lines instead, since the bond style must follow the box).
+      title: first line of the file.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
+    if not isinstance(sample, Sample):
+        raise TypeError(f"write_lammps_data expects a jaxbpm Sample, got {type(sample).__name__}")
+    n, nb = sample.n_particles, sample.n_bonds
+    pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+    b = np.asarray(sample.bonds)
+    coeffs = lammps_coefficients(sample, normalize=normalize) if nb else np.zeros((0, _N_COEFFS))
+    if bond_types is None:
+        btype, table = _group_types(coeffs)
+    else:
+        btype = np.asarray(bond_types).astype(np.int64).reshape(-1)
+        if btype.shape != (nb,) or (nb and btype.min() < 1):
+            raise SampleError(f"bond_types must hold {nb} types >= 1, got shape {btype.shape}")
+        ntype = int(btype.max()) if nb else 0
+        table = np.zeros((ntype, _N_COEFFS))
+        first = np.full(ntype, -1)
+        for k in range(nb - 1, -1, -1):
+            first[btype[k] - 1] = k
+        used = first >= 0
+        table[used] = coeffs[first[used]]
+        if nb:
+            off = np.max(np.abs(coeffs - table[btype - 1]) / np.maximum(np.abs(coeffs), 1e-300))
+            if coefficients and off > 1e-12:
+                warnings.warn(f"bond types given to write_lammps_data merge bonds whose coefficients differ by up to "
+                              f"{100 * off:.3g} %; each type gets its first bond's coefficients",
+                              conventions.InexactTranslationWarning, stacklevel=2)
+    atype = np.ones(n, np.int64) if atom_types is None else np.asarray(atom_types).astype(np.int64).reshape(-1)
+    if atype.shape != (n,) or atype.min() < 1:
+        raise SampleError(f"atom_types must hold {n} types >= 1, got shape {atype.shape}")
+    density = float(sample.particle_material.density)
+    pad = 10.0 * rad.max()
+    lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
+    from jaxbpm._version import __version__
+
+    lines = [title or f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
+                      f"jaxbpm {__version__}",
+             _meta_line(_meta(sample, normalize=bool(normalize))), "",
+             f"{n} atoms", f"{int(atype.max())} atom types", f"{nb} bonds", f"{max(len(table), 1)} bond types", "",
+             *(f"{_r(lo[c])} {_r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
+             "Atoms # bpm/sphere", ""]
+    lines += [f"{i + 1} 1 {atype[i]} {_r(2.0 * rad[i])} {_r(density)} {_r(pos[i, 0])} {_r(pos[i, 1])} {_r(pos[i, 2])}"
+              for i in range(n)]
+    if coefficients and len(table):
+        lines += ["", "Bond Coeffs # bpm/rotational", ""]
+        lines += [_coeff_line(t, row) for t, row in enumerate(table, start=1)]
+    if nb:
+        rb, bm = np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
+        lines += ["", "Bonds", ""]
+        lines += [f"{k + 1} {btype[k]} {b[k, 0] + 1} {b[k, 1] + 1} # {_r(rb[k])} {bm[k]}" for k in range(nb)]
+
+    def write(tmp):
+        pathlib.Path(tmp).write_text("\n".join(lines) + "\n")
+
+    return atomic_write(path, write)
+
+
+def _read_text(path: pathlib.Path) -> str:
+    if not path.exists():
+        raise SampleFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise SampleFileError(f"{path}: is a directory, not a file")
+    try:
+        return path.read_text()
+    except UnicodeDecodeError as exc:
+        raise SampleFileError(f"{path}: not a text file ({exc})") from None
+
+
+_SECTIONS = {"Atoms": "atoms", "Velocities": "atoms", "Masses": "atom types", "Bonds": "bonds",
+             "Bond Coeffs": "bond types", "Pair Coeffs": "atom types", "Angles": "angles", "Dihedrals": "dihedrals",
+             "Impropers": "impropers", "Ellipsoids": "ellipsoids", "Lines": "lines", "Triangles": "triangles",
+             "Bodies": "bodies", "Angle Coeffs": "angle types", "Dihedral Coeffs": "dihedral types",
+             "Improper Coeffs": "improper types"}
+_HEADER = re.compile(r"^\s*([-+0-9.eE]+)(?:\s+([-+0-9.eE]+))?(?:\s+([-+0-9.eE]+))?\s+([a-z][a-z /]*[a-z])\s*$")
+_ATOM_COLUMNS = {"bpm/sphere": 8, "sphere": 7}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Line:
+    no: int
+    words: list[str]
+    comment: str
+
+
+def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
+                     breaking: bool = True, bond_radius_ratio: float | None = None,
+                     materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
+    """Read a LAMMPS data file with spheres and bonds into a :class:`Sample`.
+
+    Particles are ordered by atom ID. Bond parameters come, in this order of preference, from jaxbpm's own comments
+    (exact, when they agree with the coefficients), from ``Bond Coeffs`` / ``coeffs`` translated by
+    :func:`jaxbpm.interop.conventions.from_lammps`, or from ``bond_radius_ratio`` + ``materials`` (geometry only).
+
+    Args:
+      path: the data file.
+      coeffs: an input file with ``bond_coeff`` lines (:func:`read_lammps_coeffs`) or ``{type: values}``; used
+        when the data file has no ``Bond Coeffs`` section.
+      normalize: whether the coefficients are for ``normalize yes`` (default: from the file's jaxbpm header or the
+        coefficient file's ``bond_style`` line, else no).
+      atom_style: ``"bpm/sphere"`` or ``"sphere"`` (default: from the ``Atoms # style`` comment or the column count).
+      breaking: ``False`` ignores the failure thresholds (LAMMPS ``break no``).
+      bond_radius_ratio, materials: ignore the coefficients; bond radius ratio and material table as in
+        :meth:`Sample.from_arrays`.
+      **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ...).
+
+    Raises:
+      SampleFileError: the file is missing or malformed (the message names the line).
+      SampleError: the content does not make a valid sample.
+      ConventionError: the coefficients have no jaxbpm counterpart.
+    """
+    path = pathlib.Path(path)
+    text = _read_text(path)
+    raw = text.splitlines()
+    meta = None
+    for no, line in enumerate(raw[1:6], start=2):
+        meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
+    # header
+    counts: dict[str, int] = {}
+    lines = [_Line(i + 1, *_split(s)) for i, s in enumerate(raw)]
+    body_start = None
+    for ln in lines[1:]:
+        if not ln.words:
+            continue
+        name = " ".join(ln.words)
+        if name in _SECTIONS:
+            body_start = ln.no - 1
+            break
+        m = _HEADER.match(" ".join(ln.words))
+        if not m:
+            raise SampleFileError(f"{path}:{ln.no}: cannot read header line {raw[ln.no - 1].strip()!r}")
+        key = m.group(4)
+        if m.group(2) is None:
+            try:
+                counts[key] = int(m.group(1))
+            except ValueError:
+                raise SampleFileError(f"{path}:{ln.no}: the count of {key!r} must be a whole number") from None
+    if body_start is None:
+        raise SampleFileError(f"{path}: no Atoms section")
+    for key in ("atoms",):
+        if key not in counts:
+            raise SampleFileError(f"{path}: header lacks the '{key}' count")
+    sections: dict[str, tuple[_Line, list[_Line]]] = {}
+    i = body_start
+    while i < len(lines):
+        ln = lines[i]
+        if not ln.words:
+            i += 1
+            continue
+        name = " ".join(ln.words)
+        if name not in _SECTIONS:
+            raise SampleFileError(f"{path}:{ln.no}: unknown section {raw[ln.no - 1].strip()!r} (or a "
+                                  f"{'section line too many' if sections else 'misplaced line'})")
+        want = counts.get(_SECTIONS[name], 0)
+        rows, i = [], i + 1
+        while len(rows) < want:
+            if i >= len(lines):
+                raise SampleFileError(f"{path}:{len(lines)}: section {name} ended after {len(rows)} of {want} lines")
+            if lines[i].words:
+                if " ".join(lines[i].words) in _SECTIONS:
+                    raise SampleFileError(f"{path}:{lines[i].no}: section {name} ended after {len(rows)} of {want} "
+                                          f"lines")
+                rows.append(lines[i])
+            i += 1
+        sections[name] = (ln, rows)
+    # a count the header declares is a section the file must hold (a file cut before its Bonds section would
+    # otherwise read as a sample without bonds)
+    for name, key in (("Atoms", "atoms"), ("Bonds", "bonds")):
+        if counts.get(key, 0) > 0 and name not in sections:
+            raise SampleFileError(f"{path}: the header declares {counts[key]} {key} but the file has no {name} section "
+                                  "(truncated?)")
+    if text and not text.endswith(("\n", "\r")) and raw[-1].split("#")[0].strip():
+        raise SampleFileError(f"{path}:{len(raw)}: the file ends in the middle of a line (truncated?): "
+                              f"{raw[-1].strip()!r}")
+    # atoms
+    head, rows = sections.get("Atoms", (None, []))
+    style = atom_style or (head.comment.strip() if head is not None and head.comment.strip() else None)
+    if style is not None and style not in _ATOM_COLUMNS:
+        raise SampleFileError(f"{path}:{head.no if head else 1}: atom style {style!r} is not supported (bpm/sphere "
+                              f"or sphere)")
+    n = len(rows)
+    if n == 0:
+        raise SampleFileError(f"{path}: the Atoms section is empty")
+    ids, dia, dens, pos = np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros((n, 3))
+    for k, ln in enumerate(rows):
+        st = style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(len(ln.words))
+        ncol = _ATOM_COLUMNS.get(st)
+        if ncol is None or len(ln.words) not in (ncol, ncol + 3):
+            raise SampleFileError(
+                f"{path}:{ln.no}: Atoms line has {len(ln.words)} values, expected 8 (bpm/sphere: id mol type "
+                f"diameter density x y z) or 7 (sphere: id type diameter density x y z), optionally + 3 image flags")
+        off = ncol - 7
+        try:
+            ids[k] = int(ln.words[0])
+            dia[k], dens[k] = float(ln.words[2 + off]), float(ln.words[3 + off])
+            pos[k] = [float(w) for w in ln.words[4 + off:7 + off]]
+        except ValueError:
+            raise SampleFileError(f"{path}:{ln.no}: Atoms line has a non-numeric value: "
+                                  f"{raw[ln.no - 1].strip()!r}") from None
+        if not (dia[k] > 0 and np.isfinite(dia[k])):
+            raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has diameter {dia[k]!r}; jaxbpm needs spheres "
+                                  f"with a finite diameter > 0")
+        if not np.all(np.isfinite(pos[k])):
+            raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has a coordinate that is not finite: "
+                                  f"{raw[ln.no - 1].strip()!r}")
+    order = np.argsort(ids, kind="stable")
+    dup = np.flatnonzero(np.diff(ids[order]) == 0)
+    if dup.size:
+        raise SampleFileError(f"{path}:{rows[order[dup[0] + 1]].no}: duplicate atom ID {ids[order[dup[0]]]}")
+    ids, dia, dens, pos = ids[order], dia[order], dens[order], pos[order]
+    atom_line = np.array([rows[o].no for o in order])
+    if np.any(dens != dens[0]):
+        k = int(np.flatnonzero(dens != dens[0])[0])
+        raise SampleFileError(f"{path}:{atom_line[k]}: atom density {dens[k]!r} differs from {dens[0]!r}; a jaxbpm "
+                              f"sample has one particle density")
+    index = {int(a): k for k, a in enumerate(ids)}
+    # bonds
+    _, brows = sections.get("Bonds", (None, []))
+    nb = len(brows)
+    bonds, btype = np.zeros((nb, 2), np.int64), np.zeros(nb, np.int64)
+    rb_c, mat_c = np.full(nb, np.nan), np.full(nb, -1)
+    for k, ln in enumerate(brows):
+        if len(ln.words) != 4:
+            raise SampleFileError(f"{path}:{ln.no}: Bonds line has {len(ln.words)} values, expected 4 (id type atom1 "
+                                  f"atom2)")
+        try:
+            _, t, a1, a2 = (int(w) for w in ln.words)
+        except ValueError:
+            raise SampleFileError(f"{path}:{ln.no}: Bonds line must hold 4 whole numbers, got "
+                                  f"{raw[ln.no - 1].strip()!r}") from None
+        for a in (a1, a2):
+            if a not in index:
+                raise SampleFileError(f"{path}:{ln.no}: bond {ln.words[0]} refers to atom {a}, which is not in Atoms")
+        if a1 == a2:
+            raise SampleFileError(f"{path}:{ln.no}: bond {ln.words[0]} joins atom {a1} to itself")
+        bonds[k], btype[k] = (index[a1], index[a2]), t
+        extra = ln.comment.split()
+        if len(extra) == 2:
+            try:
+                rb_c[k], mat_c[k] = float(extra[0]), int(extra[1])
+            except ValueError:
+                pass
+    ntypes = counts.get("bond types", 0)
+    if nb and (btype.min() < 1 or btype.max() > ntypes):
+        k = int(np.flatnonzero((btype < 1) | (btype > ntypes))[0])
+        raise SampleFileError(f"{path}:{brows[k].no}: bond type {btype[k]} is outside 1..{ntypes} (header 'bond "
+                              f"types')")
+    # coefficients
+    table: dict[int, np.ndarray] = {}
+    table_line: dict[int, int] = {}
+    if "Bond Coeffs" in sections:
+        head, crows = sections["Bond Coeffs"]
+        if head.comment.strip() and head.comment.strip() != "bpm/rotational":
+            raise SampleFileError(f"{path}:{head.no}: Bond Coeffs are for {head.comment.strip()!r}; jaxbpm reads "
+                                  f"bpm/rotational")
+        for ln in crows:
+            t, row = _coeff_row(ln.words, f"{path}:{ln.no}")
+            table[t], table_line[t] = row, ln.no
+    if coeffs is not None:
+        if isinstance(coeffs, (str, pathlib.Path)):
+            extra_table, extra_norm = read_lammps_coeffs(coeffs)
+            if normalize is None:
+                normalize = extra_norm
+        else:
+            extra_table = {}
+            for t, v in coeffs.items():
+                _, extra_table[int(t)] = _coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
+        table.update(extra_table)
+    if normalize is None:
+        normalize = bool(meta.get("normalize", False)) if meta else False
+    kw = dict(sample_kw)
+    if meta is not None:
+        kw.setdefault("particle_material", meta["particle_material"])
+        kw.setdefault("bond_contact", meta["bond_contact"])
+        kw.setdefault("domain", _domain(meta))
+    pm = kw.pop("particle_material", None) or {}
+    if isinstance(pm, ParticleMaterial):
+        pm = {f.name: getattr(pm, f.name) for f in dataclasses.fields(ParticleMaterial)}
+    pm = dict(pm)
+    pm["density"] = float(dens[0])
+    radii = dia / 2.0
+    if bond_radius_ratio is not None or materials is not None:
+        if bond_radius_ratio is None:
+            raise SampleError("read_lammps_data: materials= also needs bond_radius_ratio= (geometry only)")
+        return Sample.from_arrays(pos, radii, bonds, bond_radius_ratio=bond_radius_ratio, materials=materials,
+                                  particle_material=pm, **kw)
+    if nb == 0:
+        mats = meta["materials"] if meta else None
+        return Sample.from_arrays(pos, radii, bonds, np.zeros(0), materials=mats, particle_material=pm, **kw)
+    missing = sorted(set(btype.tolist()) - set(table))
+    if missing:
+        raise SampleFileError(f"{path}: no bpm/rotational coefficients for bond types {missing[:10]} (no Bond Coeffs "
+                              f"section or coeffs= file); give coeffs=, or bond_radius_ratio= and materials=")
+    coef = np.stack([table[t] for t in btype])
+    length = np.linalg.norm(pos[bonds[:, 1]] - pos[bonds[:, 0]], axis=1)
+    if meta is not None and not np.isnan(rb_c).any() and (mat_c >= 0).all():
+        mats = meta["materials"]
+        try:
+            trial = Sample.from_arrays(pos, radii, bonds, rb_c, bond_material=mat_c, materials=mats,
+                                       particle_material=pm, **kw)
+        except SampleError:
+            trial = None
+        if trial is not None:
+            mine = lammps_coefficients(trial, normalize=normalize)
+            same = np.allclose(mine[:, :8], coef[:, :8], rtol=1e-9, atol=0)
+            if same:
+                return trial
+            warnings.warn(f"{path}: jaxbpm's comments disagree with the bond coefficients; the coefficients (what "
+                          f"LAMMPS uses) are translated instead", conventions.InexactTranslationWarning, stacklevel=2)
+    if np.any(coef[:, 8:] != 0):
+        t = int(btype[np.flatnonzero(np.any(coef[:, 8:] != 0, axis=1))[0]])
+        warnings.warn(f"{path}: bond type {t} has bond damping (gamma) coefficients; jaxbpm's bonds are undamped and "
+                      f"ignores them", conventions.InexactTranslationWarning, stacklevel=2)
+    limits = np.where(coef[:, 4:8] >= 0.999 * _BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
+    p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
+                                        normalize=normalize)
+    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
+    mats, bm = _materials_from_bonds(bond)
+    return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
+                              particle_material=pm, **kw)
+
+
+def _split(s: str) -> tuple[list[str], str]:
+    body, _, comment = s.partition("#")
+    return body.split(), comment
+
+
+def _materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:
+    """One material component per distinct (E, nu, tensile, shear) (to 1e-12 relative), numbered by first bond."""
+    cols = [np.broadcast_to(np.asarray(getattr(bond, k), float), np.shape(bond.bond_radius))
+            for k in ("E", "nu", "tensile_strength", "shear_strength")]
+    table = np.stack(cols, axis=1)
+    scale = np.where(np.isfinite(table), np.abs(table), 1.0).max(axis=0)
+    scale[scale == 0] = 1.0
+    key = np.where(np.isfinite(table), np.round(table / scale * 1e12), np.inf)
+    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    rows = table[first[order]]
+    mats = {k: rows[:, c] for c, k in enumerate(("E", "nu", "tensile_strength", "shear_strength"))}
+    return mats, rank[inv.reshape(-1)].astype(np.int32)
