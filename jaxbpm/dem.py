@@ -27,7 +27,6 @@ compiled for any sample of that class.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
 import math
@@ -45,6 +44,8 @@ from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
+from jaxbpm.neighbors import (_contact_pairs, _jax_md_context, _Neighbors, _remap_history, _remap_springs,
+                              NeighborSettings)
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
            "potential_energy", "NeighborSettings", "progress_printer", "pad_loading", "unpad_state"]
@@ -78,109 +79,6 @@ jax.tree_util.register_dataclass(DEMState, data_fields=["positions", "velocities
                                                         "moment", "intact", "spring", "nbrs", "time", "broken",
                                                         "broken_time", "cohesion"],
                                  meta_fields=[])
-
-
-@dataclasses.dataclass(frozen=True)
-class NeighborSettings:
-    """Neighbour-list settings: ``skin`` [m] (list radius = 2 r_max + skin; rebuilt when a particle has moved more
-    than skin / 2), ``capacity_multiplier`` (spare room in the pair buffer), ``box_margin`` (relative padding of the
-    cell-list box around the sample)."""
-
-    skin: float
-    capacity_multiplier: float = 1.5
-    box_margin: float = 0.25
-
-
-def _jax_md_context():
-    """jax-md is not written for JAX's strict promotion modes: run it under the standard ones, locally."""
-    stack = contextlib.ExitStack()
-    stack.enter_context(jax.numpy_dtype_promotion("standard"))
-    stack.enter_context(jax.numpy_rank_promotion("allow"))
-    return stack
-
-
-@functools.lru_cache(maxsize=32)
-def _neighbor_fns(box: tuple, cutoff: float, skin: float, capacity_multiplier: float):
-    from jax_md import partition, space  # heavy (seconds): imported by the scenes with contacts only
-
-    displacement, _ = space.free()
-    return partition.neighbor_list(displacement, jnp.asarray(box), r_cutoff=cutoff, dr_threshold=skin,
-                                   capacity_multiplier=capacity_multiplier, format=partition.OrderedSparse)
-
-
-class _Neighbors:
-    """Host-side owner of the neighbour-list functions (box, origin), re-allocating when needed."""
-
-    def __init__(self, model: Model, settings: NeighborSettings, positions):
-        self.model, self.settings = model, settings
-        self._setup(np.asarray(positions))
-
-    def _setup(self, pos):
-        r_max = float(np.max(np.asarray(self.model.radii)))
-        lo, hi = pos.min(axis=0) - r_max, pos.max(axis=0) + r_max
-        pad = self.settings.box_margin * (hi - lo) + 4 * r_max
-        self.origin = lo - pad
-        box = tuple(float(v) for v in (hi - lo + 2 * pad))
-        cutoff = 2 * r_max + self.settings.skin
-        self.key = (box, cutoff, self.settings.skin, self.settings.capacity_multiplier)
-        self.fns = _neighbor_fns(*self.key)
-        self.lo, self.hi = self.origin + 0.05 * pad, self.origin + np.asarray(box) - 0.05 * pad
-
-    def inside(self, pos_min, pos_max) -> bool:
-        return bool(np.all(np.asarray(pos_min) > self.lo) and np.all(np.asarray(pos_max) < self.hi))
-
-    def allocate(self, positions, extra_per_particle: int = 0):
-        """A fresh list; ``extra_per_particle`` adds room for that many more pairs per particle."""
-        pos = np.asarray(positions)
-        if not self.inside(pos.min(axis=0), pos.max(axis=0)):
-            self._setup(pos)
-        with _jax_md_context():
-            nbrs = self.fns.allocate(jnp.asarray(positions) - jnp.asarray(self.origin)[None, :],
-                                     extra_capacity=extra_per_particle)
-        if getattr(nbrs, "cell_list_fn", None) is not None:
-            # jax-md makes new cell-list functions (static pytree metadata) at every allocation, which would compile
-            # the DEM chunk again for every run; those of one box, cell size and multiplier are interchangeable
-            nbrs = nbrs.set(cell_list_fn=_CELL_LIST_FNS.setdefault(self.key, nbrs.cell_list_fn))
-        return nbrs
-
-
-_CELL_LIST_FNS: dict = {}  # cell-list functions by neighbour-list settings (see _Neighbors.allocate)
-
-
-def _contact_pairs(model: Model, nbrs, intact=None):
-    pairs = nbrs.idx.T
-    valid = pairs[:, 0] < model.n
-    if model.bond_contact == "replace":
-        # bonded pairs have no contact while their bond holds; a broken bond falls back to the contact law
-        valid = valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0), intact)
-    return pairs, valid
-
-
-def _remap_springs(old_pairs, old_spring, new_pairs, n):
-    """Carry tangential springs across a neighbour-list rebuild by matching pair keys."""
-    take, found = _remap_index(old_pairs, new_pairs, n)
-    return jnp.where(found[:, None], old_spring[take], 0.0)
-
-
-def _remap_history(old_pairs, new_pairs, n, spring, cohesion):
-    """Carry the per-contact state (springs and, with the cohesive law, the cohesion history) across a rebuild; a
-    pair new to the list starts with an empty spring and zero cohesion (a new contact)."""
-    take, found = _remap_index(old_pairs, new_pairs, n)
-    spring = jnp.where(found[:, None], spring[take], 0.0)
-    return spring, (None if cohesion is None else jnp.where(found, cohesion[take], 0.0))
-
-
-def _remap_index(old_pairs, new_pairs, n):
-    """For each new pair: the index of the same pair in the old list, and whether it was there."""
-    key_t = jnp.int64 if jax.config.jax_enable_x64 else jnp.int32
-    big = jnp.asarray(jnp.iinfo(key_t).max, key_t)
-    old_key = jnp.where(old_pairs[:, 0] < n, old_pairs[:, 0].astype(key_t) * n + old_pairs[:, 1].astype(key_t), big)
-    order = jnp.argsort(old_key)
-    sorted_key = old_key[order]
-    new_key = new_pairs[:, 0].astype(key_t) * n + new_pairs[:, 1].astype(key_t)
-    pos = jnp.clip(jnp.searchsorted(sorted_key, new_key), 0, sorted_key.shape[0] - 1)
-    found = (sorted_key[pos] == new_key) & (new_pairs[:, 0] < n)
-    return order[pos], found
 
 
 def _walls(load: Loading, t):
