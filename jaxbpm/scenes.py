@@ -211,10 +211,14 @@ class UniaxialCompression:
             return 0.5 * (reaction[:, 1, ax] - reaction[:, 0, ax])
         return 0.5 * (reaction[:, 0, ax] - reaction[:, 1, ax])
 
+    def fit_mask(self, displacement: np.ndarray, target: float) -> np.ndarray:
+        """The records within ``fit_range`` of the target displacement."""
+        lo, hi = self.fit_range
+        return (displacement >= lo * target) & (displacement <= hi * target * (1 + 1e-9))
+
     def fit_stiffness(self, displacement: np.ndarray, force: np.ndarray, target: float) -> float:
         """Least-squares slope dF/du over ``fit_range`` of the target displacement."""
-        lo, hi = self.fit_range
-        sel = (displacement >= lo * target) & (displacement <= hi * target * (1 + 1e-9))
+        sel = UniaxialCompression.fit_mask(self, displacement, target)  # also for ThreePointBending
         if sel.sum() < 2:
             raise SceneError("too few records in fit_range to fit a stiffness")
         return float(np.polyfit(displacement[sel], force[sel], 1)[0])

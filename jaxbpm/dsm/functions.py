@@ -103,21 +103,20 @@ def _nonlinear_stiffness_function(sample, scene, rotations, *, tol, linear_tol, 
                                   contact_skin, slip, preconditioner, aggregate_size):
     from jaxbpm.dsm.boundary import contact_candidates
     from jaxbpm.dsm.newton import newton_outputs, newton_problem, newton_program
-    from jaxbpm.dsm.scene import boundary_inputs
+    from jaxbpm.dsm.scene import boundary_inputs, wall_touching
 
     model, free_np, fixed, driven, u_p, walls, (_, _, delta) = boundary_inputs(sample, scene, rotations)
     pairs = None
     if scene.contacts:
         skin = 0.5 * float(np.mean(sample.radii)) if contact_skin is None else float(contact_skin)
         pairs = contact_candidates(sample, model, skin)
-    _check_held(sample, model, free_np, fixed | driven, pairs, None if walls is None else np.ones(model.n, bool))
+    _check_held(sample, model, free_np, fixed | driven, pairs, wall_touching(sample, scene, delta))
     dtype = model.positions0.dtype
     prob = newton_problem(model, jnp.asarray(free_np), jnp.asarray(u_p, dtype), pairs, walls, scene, maxiter,
                           newton_maxiter, driven, delta, preconditioner, aggregate_size, slip)
     fractions = tuple(float(f) for f in np.arange(1, load_steps + 1) / load_steps)
     disp = np.asarray(fractions) * delta
-    lo, hi = scene.fit_range
-    sel = np.flatnonzero((disp >= lo * delta) & (disp <= hi * delta * (1 + 1e-9)))
+    sel = np.flatnonzero(scene.fit_mask(disp, delta))
     if len(sel) < 2 and load_steps > 1:
         raise SceneError("too few load steps in the scene's fit_range to fit a stiffness; raise load_steps")
     tols = (jnp.asarray(tol, dtype), jnp.asarray(linear_tol, dtype))

@@ -42,6 +42,18 @@ def boundary_inputs(sample, scene, rotations=None):
     return model, free_np, fixed, driven, u_p, walls, (length, area, delta)
 
 
+def wall_touching(sample, scene, delta):
+    """``[n]``: the particles within half a mean radius (plus the load's travel ``delta``) of either wall, which the
+    walls hold; ``None`` without walls."""
+    if not scene.uses_walls:
+        return None
+    ax = scene.axis
+    pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+    reach = float(np.mean(rad)) * 0.5 + delta
+    return ((pos[:, ax] - rad) <= (pos[:, ax] - rad).min() + reach) | (
+        (pos[:, ax] + rad) >= (pos[:, ax] + rad).max() - reach)
+
+
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol="auto", contact_skin=None, load_steps=4, throw=True,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
@@ -104,13 +116,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         if frac is not None:
             lin = [put(pairs, np.int32), affine_field(sample, model, ax, delta),
                    jnp.asarray(frac, model.positions0.dtype), None]
-    touching = None
-    if scene.uses_walls:
-        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-        reach = float(np.mean(rad)) * 0.5 + delta
-        touching = ((pos[:, ax] - rad) <= (pos[:, ax] - rad).min() + reach) | (
-            (pos[:, ax] + rad) >= (pos[:, ax] + rad).max() - reach)
-    _check_held(sample, model, free_np, clamped, pairs, touching)
+    _check_held(sample, model, free_np, clamped, pairs, wall_touching(sample, scene, delta))
     free = jnp.asarray(free_np)
     u_p = jnp.asarray(u_p, model.positions0.dtype)
 
