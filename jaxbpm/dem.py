@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm import _interrupt
 from jaxbpm._compile import compile_clock
 from jaxbpm.errors import InstabilityError, SimulationInterrupted
 from jaxbpm.physics import contact as contact_mod
@@ -512,6 +513,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     else:
         pre = _precompute(model, params)
     jax.block_until_ready((state, pre))
+    _interrupt.check()  # (a Ctrl-C the setup's garbage collection swallowed stops here: nothing has run yet)
     clock["setup_compile"] = compiling.seconds
     chunk = max(1, min(chunk, n_steps))
     n_chunks = -(-n_steps // chunk)  # every chunk has the same length, so the chunk function compiles once
@@ -522,6 +524,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     clock["loop"] = time.perf_counter()
     try:
         while len(records) < n_chunks:
+            _interrupt.check()
             tc, compiled = time.perf_counter(), compiling.seconds
             new, rec, overflow, finite, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk)
             jax.block_until_ready(new.positions)
@@ -566,6 +569,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
         err.state, err.records, err.stats = done, out, stats
         raise
     except KeyboardInterrupt as err:
+        _interrupt.clear()
         out, stats = _collect(model, done, records, chunk, reallocs, clock)
         stats.update(interrupted=True, steps_planned=n_chunks * chunk)
         raise SimulationInterrupted(done, out, stats) from err

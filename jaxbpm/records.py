@@ -8,8 +8,11 @@ Layout of a record file (``jaxbpm.solve(..., "dem", record_to="run.h5")``)::
     /records/reaction      [steps, W+2, 3]  reactions (walls, then the moving and the resting clamped particles) [N]
     /records/vmax          [steps]          largest speed [m/s]
     /records/broken        [steps, 2]       cumulative broken bonds (tensile, shear), with breakage
+    /checkpoint/*                          the DEM state after the last row (an interrupted run only: what
+                                            ``jaxbpm.solve(..., resume="run.h5")`` continues from)
     attributes of /:  format ("jaxbpm-records"), version, status ("running", "complete" or "interrupted"),
-                      steps (rows written), steps_planned, and the run's scalars (dt, speed, gauge_length, area, ...)
+                      steps (rows written), steps_planned, resumed (times continued), and the run's scalars (dt,
+                      speed, gauge_length, area, the sample's size and digest, ...)
 
 Every :meth:`RecordFile.append` opens the file, grows the datasets, writes the rows, updates ``steps`` and closes
 it, so the file on disk is valid HDF5 between chunks; a Ctrl-C arriving during a write is held back until the write
@@ -62,8 +65,16 @@ def _scalar(v):
     return None
 
 
+def _plain(v):
+    """A NumPy scalar as the Python number it holds (messages show ``0.7``, not ``np.float64(0.7)``)."""
+    return v.item() if isinstance(v, np.generic) else v
+
+
 # the attributes that say two runs are the same run (a record of it may be replaced by running it again)
 SAME_RUN = ("method", "scene", "dt", "speed", "gauge_length", "area", "target_displacement", "damping")
+# and the ones a resumed run must share besides (the chunks, the sample and the padding)
+RESUME_SAME = ("chunk", "steps_planned", "particles", "bonds", "sample_digest", "padded_particles", "padded_bonds",
+               "breakage", "contact_law")
 
 
 def _same_run(path: pathlib.Path, attrs: Mapping[str, Any]) -> bool:
@@ -128,12 +139,64 @@ class RecordFile:
             f.attrs["steps"] = self.steps
         return self.steps
 
+    @classmethod
+    def resume(cls, path, attrs: Mapping[str, Any]) -> tuple["RecordFile", dict, dict | None]:
+        """Reopen the record of an interrupted run to append to it: ``(record_file, records, checkpoint)`` -- the
+        rows written so far and the state saved at the interruption (:meth:`checkpoint`; ``None`` when the run was
+        interrupted before its first chunk). ``attrs`` are the resumed run's: the attributes in :data:`SAME_RUN`
+        must agree with the file's (the same sample size, scene, time step, speed and damping), else an error names
+        those that differ."""
+        import h5py
+
+        records, stored = read_records(path)
+        self = cls.__new__(cls)
+        self.path, self.steps = pathlib.Path(path), int(stored["steps"])
+        differ = [f"{k} (file {_plain(stored.get(k))!r}, this run {_plain(attrs[k])!r})" for k in SAME_RUN + RESUME_SAME
+                  if k in attrs and _scalar(attrs[k]) is not None and (k not in stored or stored[k] != _scalar(attrs[k]))]
+        if differ:
+            raise SampleFileError(f"{path}: not a record of this run, cannot resume it: " + "; ".join(differ))
+        status = stored.get("status")
+        if status == "complete":
+            raise SampleFileError(f"{path}: the run is complete ({self.steps} steps): nothing to resume")
+        checkpoint = None
+        with h5py.File(self.path, "r") as f:
+            if "checkpoint" in f:
+                g = f["checkpoint"]
+                checkpoint = {k: np.asarray(d[()]) for k, d in g.items()}
+                if int(g.attrs["steps"]) != self.steps:
+                    raise SampleFileError(f"{path}: the saved state is of step {int(g.attrs['steps'])}, the records "
+                                          f"end at step {self.steps}: the file was changed after the interruption")
+        if status != "interrupted" or (checkpoint is None and self.steps):
+            raise SampleFileError(f"{path}: the run has status {status!r} and {self.steps} steps without a saved state "
+                                  "(a run saves its state when interrupted by Ctrl-C, not when killed): it cannot be "
+                                  "resumed; run it again")
+        with _hold_interrupts(), h5py.File(self.path, "a") as f:
+            f.attrs["status"] = "running"
+            f.attrs["resumed"] = int(f.attrs.get("resumed", 0)) + 1
+        return self, records, checkpoint
+
+    def checkpoint(self, arrays: Mapping[str, Any]) -> None:
+        """Save the run's state after the rows written so far (``/checkpoint``, one dataset per named array),
+        replacing an earlier one: :meth:`resume` continues from it."""
+        import h5py
+
+        with _hold_interrupts(), h5py.File(self.path, "a") as f:
+            if "checkpoint" in f:
+                del f["checkpoint"]
+            g = f.create_group("checkpoint")
+            g.attrs["steps"] = self.steps
+            for k, v in arrays.items():
+                v = np.asarray(v)
+                g.create_dataset(k, data=v, fletcher32=v.ndim >= 1 and v.size > 0)
+
     def finish(self, status: str = "complete", attrs: Mapping[str, Any] | None = None) -> None:
         """Set the final ``status`` (``"complete"`` or ``"interrupted"``) and add scalar results to the attributes."""
         import h5py
 
         with _hold_interrupts(), h5py.File(self.path, "a") as f:
             f.attrs["status"] = status
+            if status != "interrupted" and "checkpoint" in f:  # (only an interrupted run is resumed)
+                del f["checkpoint"]
             for k, v in (attrs or {}).items():
                 if _scalar(v) is not None:
                     f.attrs[k] = _scalar(v)

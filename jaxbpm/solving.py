@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pathlib
 import time
 import warnings
 
@@ -46,7 +47,12 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     ``break_mode`` and ``broken_time``). A ``KeyboardInterrupt`` during the run (Ctrl-C, or raised by the
     ``progress`` callable) raises :class:`~jaxbpm.errors.SimulationInterrupted`, whose ``result`` is the
     :class:`Result` of the part that was run (``interrupted=True``; the record file is kept, status
-    ``"interrupted"``). ``pad`` (True): a bonds-only scene (no contacts, no walls) runs on the sample padded to its
+    ``"interrupted"``, and the state after the last completed chunk is saved in it).
+    ``resume`` (the ``.h5`` record of an interrupted run): continue that run from its saved state and append to its
+    record, giving the same records and stiffness as an uninterrupted run (to round-off; give the same sample,
+    scene and options: the record's time step, speed, damping, chunk and sample fingerprint must agree, else an
+    error names what differs). A Ctrl-C before the first chunk raises a plain ``KeyboardInterrupt`` (the record
+    file, if any, says ``"interrupted"``). ``pad`` (True): a bonds-only scene (no contacts, no walls) runs on the sample padded to its
     size class (:func:`jaxbpm._compile.size_class`: extra particles clamped at rest, joined by bonds without
     stiffness that never break), so that another sample of that class reuses the compiled programs; curves, time
     step, records, frames and the returned state are the sample's own (``pad=False`` runs the sample as it is). The
@@ -84,6 +90,15 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     volumes V^n), ``precision`` (``"float64"``, or ``"float32"``: 2-3x faster, ~1e-7 relative change). ``pad``
     (True: the estimator is padded to the sample's size class and kept for the last few samples, as for the DSM). The stats hold the Voigt tensor, E_x, E_y, E_z, nu, an isotropic fit and the skipped particles.
     """
+    from jaxbpm import _interrupt
+
+    with _interrupt.guard():  # a Ctrl-C swallowed on the way (in a garbage-collection callback) still stops it
+        result = _solve(sample, scene, method, params, options)
+        _interrupt.check()
+    return result
+
+
+def _solve(sample, scene, method, params, options) -> Result:
     from jaxbpm.options import options_for
 
     method, options = options_for(method, options)
@@ -109,7 +124,7 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 
 def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
                chunk=None, progress=False, neighbors=None, max_records=2000, record_to=None, snapshots=None,
-               vtu=None, pad=True, throw=True, overwrite=False) -> Result:
+               vtu=None, pad=True, throw=True, overwrite=False, resume=None) -> Result:
     t0 = time.perf_counter()
     from jaxbpm._compile import compile_clock
     from jaxbpm.result import settle
@@ -119,7 +134,7 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
             result = _run_dem(t0, compiling, sample, scene, params, dt=dt, safety=safety, damping=damping,
                               loading_time=loading_time, transits=transits, chunk=chunk, progress=progress,
                               neighbors=neighbors, max_records=max_records, record_to=record_to,
-                              snapshots=snapshots, vtu=vtu, pad=pad, overwrite=overwrite)
+                              snapshots=snapshots, vtu=vtu, pad=pad, overwrite=overwrite, resume=resume)
     except InstabilityError as err:
         if throw or err.result is None:
             raise
@@ -128,7 +143,7 @@ def _solve_dem(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loadi
 
 
 def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loading_time, transits, chunk, progress,
-             neighbors, max_records, record_to, snapshots, vtu, pad, overwrite) -> Result:
+             neighbors, max_records, record_to, snapshots, vtu, pad, overwrite, resume) -> Result:
     from jaxbpm import dem
     from jaxbpm._compile import size_class
     from jaxbpm.errors import SimulationInterrupted
@@ -187,11 +202,23 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
                      damping=float(damping), chunk=chunk, contact_law=model.contact_law, breakage=breaks)
 
     writers = []
-    recorder = None
+    recorder, prior, saved = None, {}, None
+    if resume is not None:
+        if record_to is not None and pathlib.Path(record_to) != pathlib.Path(resume):
+            raise SceneError(f"resume={str(resume)!r} appends to its own record file: leave record_to out")
+        if snapshots is not None:
+            raise SceneError("resume does not continue a VTU series: leave snapshots and vtu out")
+        record_to = resume
     if record_to is not None:
         from jaxbpm.records import RecordFile
 
-        recorder = RecordFile(record_to, run_attrs, steps_planned=n_steps, overwrite=overwrite)
+        run_attrs.update(particles=sample.n_particles, bonds=sample.n_bonds, sample_digest=_digest(sample),
+                         padded_particles=-1 if size is None else size.particles,
+                         padded_bonds=-1 if size is None else size.bonds)
+        if resume is None:
+            recorder = RecordFile(record_to, run_attrs, steps_planned=n_steps, overwrite=overwrite)
+        else:
+            recorder, prior, saved = RecordFile.resume(resume, {**run_attrs, "steps_planned": n_steps})
 
         def write_records(done, state, rec):
             rows = {"time": rec["time"], "displacement": speed * rec["time"],
@@ -217,6 +244,11 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
         return state if size is None else dem.unpad_state(state, sample.n_particles, sample.n_bonds)
 
     def finish(state, rec, stats, interrupted, status="converged"):
+        if prior:  # a resumed run: the rows of the earlier part first
+            rec = {k: np.concatenate([prior[k], rec[k]]) for k in rec} if rec else {k: prior[k] for k in
+                                                                                   ("time", "reaction", "vmax",
+                                                                                    "broken") if k in prior}
+            stats.update(steps=recorder.steps, resumed_at=len(prior["time"]))
         disp = speed * rec["time"] if rec else np.zeros(0)
         force = scene.compressive_force(rec["reaction"]) if rec else np.zeros(0)
         try:
@@ -266,11 +298,15 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
                       status="interrupted" if interrupted else status)
 
     t_sim, setup_compile = time.perf_counter(), compiling.seconds
+    start = None if saved is None else _restore_state(saved)
+    done_before = 0 if recorder is None else recorder.steps
     try:
-        state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps, alpha=damping,
-                                         chunk=chunk, neighbors=neighbors, progress=progress, dt_crit=dt_crit,
-                                         on_chunk=on_chunk if writers else None)
+        state, rec, stats = dem.simulate(model, params, load, dt=float(dt), n_steps=n_steps - done_before,
+                                         alpha=damping, chunk=chunk, neighbors=neighbors, progress=progress,
+                                         dt_crit=dt_crit, on_chunk=on_chunk if writers else None, state=start)
     except SimulationInterrupted as stop:
+        if recorder is not None and recorder.steps > done_before:  # what resume= continues from
+            recorder.checkpoint(_state_arrays(stop.state))
         stop.state = unpadded(stop.state)
         stop.result = finish(stop.state, stop.records, stop.stats, True)
         raise
@@ -279,7 +315,46 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
             err.stats["failure"] = str(err)
             err.result = finish(unpadded(err.state), err.records, err.stats, False, status="unstable")
         raise
+    except KeyboardInterrupt:  # before the first chunk: the record says so (a resumed one keeps its saved state)
+        if recorder is not None:
+            recorder.finish("interrupted")
+        raise
     return finish(unpadded(state), rec, stats, False)
+
+
+_STATE_FIELDS = ("positions", "velocities", "orientations", "omegas", "force", "moment", "intact", "spring", "time",
+                 "broken", "broken_time", "cohesion")
+
+
+def _state_arrays(state) -> dict:
+    """The arrays of a DEM state (and its neighbour list's pairs), as a record file's checkpoint holds them."""
+    out = {k: np.asarray(getattr(state, k)) for k in _STATE_FIELDS if getattr(state, k) is not None}
+    if state.nbrs is not None:
+        out["nbrs_idx"] = np.asarray(state.nbrs.idx)
+    return out
+
+
+def _restore_state(arrays):
+    """The DEM state of a checkpoint (:func:`_state_arrays`); its neighbour list is rebuilt by the run, which
+    carries the contact history over from the saved pairs."""
+    import types
+
+    from jaxbpm._compile import put
+    from jaxbpm.dem import DEMState
+
+    fields = {k: put(arrays[k]) if k in arrays else None for k in _STATE_FIELDS}
+    nbrs = types.SimpleNamespace(idx=put(arrays["nbrs_idx"])) if "nbrs_idx" in arrays else None
+    return DEMState(nbrs=nbrs, **fields)
+
+
+def _digest(sample) -> str:
+    """A short fingerprint of the sample's geometry (a resumed run must be of the same sample)."""
+    import hashlib
+
+    h = hashlib.sha1()
+    for a in (sample.positions, sample.radii, sample.bonds, sample.bond_radius):
+        h.update(np.ascontiguousarray(np.asarray(a)).tobytes())
+    return h.hexdigest()[:16]
 
 
 def _snapshot_writer(sample, model, vtu, snapshots, n_chunks, chunk):

@@ -135,3 +135,90 @@ def test_a_record_never_replaces_another_file(weak, tmp_path):
         jaxbpm.solve(weak, SCENE, "dem", transits=5, damping=0.5, record_to=run)
     jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=h5, overwrite=True)
     assert read_records(h5)[1]["format"] == "jaxbpm-records"
+
+
+def _interrupted_run(sample, scene, h5, after=3, **options):
+    """A run stopped by a KeyboardInterrupt after ``after`` chunks (as Ctrl-C would stop it)."""
+    calls = []
+
+    def cut(done, total, elapsed):
+        calls.append(done)
+        if len(calls) == after:
+            raise KeyboardInterrupt
+
+    with pytest.raises(SimulationInterrupted) as info:
+        jaxbpm.solve(sample, scene, "dem", record_to=h5, progress=cut, **options)
+    return info.value
+
+
+@pytest.mark.parametrize("contacts", [False, True], ids=["bonds", "contacts"])
+def test_solve_resumes_an_interrupted_run_from_its_record(weak, tmp_path, contacts):
+    scene = UniaxialCompression(strain=0.03, breakage=True, contacts=contacts)
+    options = dict(transits=10, chunk=20)
+    full = jaxbpm.solve(weak, scene, "dem", record_to=tmp_path / "full.h5", **options)
+    cut = tmp_path / "cut.h5"
+    stop = _interrupted_run(weak, scene, cut, **options)
+    assert stop.stats["steps"] == 60 and read_records(cut)[1]["status"] == "interrupted"
+    res = jaxbpm.solve(weak, scene, "dem", resume=cut, **options)
+    assert res.status == "converged" and res.stats["steps"] == full.stats["steps"] == 120
+    assert res.stats["resumed_at"] == 60
+    np.testing.assert_allclose(res.stiffness, full.stiffness, rtol=1e-9, atol=0)
+    a, _ = read_records(tmp_path / "full.h5")
+    b, attrs = read_records(cut)  # appended to: one record of the whole run
+    assert attrs["status"] == "complete" and attrs["steps"] == 120 and attrs["resumed"] == 1
+    for key in a:
+        np.testing.assert_allclose(b[key], a[key], rtol=1e-9, atol=1e-12 * np.max(np.abs(a[key])))
+    np.testing.assert_array_equal(res.state.broken, full.state.broken)
+    with pytest.raises(SampleFileError, match="complete.*nothing to resume"):
+        jaxbpm.solve(weak, scene, "dem", resume=cut, **options)
+
+
+def test_resume_refuses_another_run(weak, tmp_path):
+    cut = tmp_path / "cut.h5"
+    _interrupted_run(weak, SCENE, cut, after=2, transits=10, chunk=20)
+    with pytest.raises(SampleFileError, match=r"not a record of this run.*damping \(file 0.7, this run 0.5\)"):
+        jaxbpm.solve(weak, SCENE, "dem", resume=cut, transits=10, chunk=20, damping=0.5)
+    with pytest.raises(SampleFileError, match="chunk"):
+        jaxbpm.solve(weak, SCENE, "dem", resume=cut, transits=10, chunk=10)
+    other = jaxbpm.generate.lattice("fcc", (2, 2, 2), 1.001 * R, materials={"E": 1e9, "nu": 0.25})
+    with pytest.raises(SampleFileError, match="sample_digest|gauge_length"):
+        jaxbpm.solve(other, SCENE, "dem", resume=cut, transits=10, chunk=20)
+    with pytest.raises(SceneError, match="leave record_to out"):
+        jaxbpm.solve(weak, SCENE, "dem", resume=cut, record_to=tmp_path / "x.h5", transits=10, chunk=20)
+    assert read_records(cut)[1]["status"] == "interrupted"  # refused resumes leave the record as it was
+    killed = tmp_path / "killed.h5"
+    jaxbpm.solve(weak, SCENE, "dem", transits=10, chunk=20, record_to=killed)
+    import h5py
+
+    with h5py.File(killed, "a") as f:  # as a killed run leaves it: rows, no saved state
+        f.attrs["status"] = "running"
+    with pytest.raises(SampleFileError, match="without a saved state.*run it again"):
+        jaxbpm.solve(weak, SCENE, "dem", resume=killed, transits=10, chunk=20)
+
+
+def test_a_ctrl_c_swallowed_during_setup_still_stops_the_solve(weak, monkeypatch):
+    """Python drops a KeyboardInterrupt raised inside a garbage-collection callback (JAX runs one during setups
+    and compilations): the solve must stop all the same, not run to the end."""
+    import gc
+    import signal
+    import sys
+
+    fired, ignored = [], []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: ignored.append(u.exc_type))
+
+    def interrupt_once(phase, info):
+        if phase == "start" and not fired and jaxbpm._interrupt._state["active"]:  # (inside the solve)
+            fired.append(True)
+            signal.raise_signal(signal.SIGINT)
+
+    gc.callbacks.append(interrupt_once)
+    threshold = gc.get_threshold()
+    gc.set_threshold(10)  # (a solve whose programs are compiled allocates too little to start a collection)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            jaxbpm.solve(weak, SCENE, "dem", transits=10, chunk=20)
+    finally:
+        gc.callbacks.remove(interrupt_once)
+        gc.set_threshold(*threshold)
+    assert fired and ignored == [KeyboardInterrupt]  # it was swallowed where it arrived, and raised later
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
