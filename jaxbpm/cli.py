@@ -363,17 +363,37 @@ def _enable_cache(args: argparse.Namespace) -> None:
         print(f"warning: {exc}; running without the compilation cache (--no-cache skips it)", file=sys.stderr)
 
 
+def _negative_values(argv: list[str]) -> list[str]:
+    """``--option -1e8`` as ``--option=-1e8``: argparse takes a negative number in exponent form (or ``-inf``) for
+    an option and reports "expected one argument"; joined, the value reaches the option's own check."""
+    out = []
+    for token in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and token.startswith("-") and _is_number(token):
+            out[-1] = f"{out[-1]}={token}"
+        else:
+            out.append(token)
+    return out
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``jaxbpm`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
 
     Sample and file errors print ``error: <message>`` on stderr and return 2; argparse exits (``--help``,
     ``--version``, usage errors) raise :class:`SystemExit` as usual.
     """
+    parser = build_parser()
+    args = parser.parse_args(_negative_values(sys.argv[1:] if argv is None else list(argv)))
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    parser = build_parser()
-    args = parser.parse_args(argv)
     if args.no_cache and args.cache_dir is not None:
         parser.error("--no-cache and --cache-dir exclude each other")
     try:

@@ -226,6 +226,9 @@ def random_packing(
         raise SampleError(f"random_packing: shape must be one of {_RANDOM_SHAPES}, got {shape!r}")
     mean_radius = _positive("mean_radius", mean_radius)
     spread = _nonnegative("radius_spread", radius_spread)
+    if spread >= 1:
+        raise SampleError(f"radius_spread must be < 1 (radii are mean_radius * (1 + radius_spread * u), u in [-1, 1]: "
+                          f"{spread:g} makes some of them zero or negative)")
     if packing_fraction is None:
         fractions = tuple(float(phi) for phi in AUTO_PACKING_FRACTIONS)
     else:

@@ -25,8 +25,8 @@ name                            shape        units       meaning
 ``/particle_material/*``        scalars      see attr    density (kg/m^3), E (Pa), nu, friction,
                                                          restitution (1)
 ``/derived/*``                  ...          see attr    mass, inertia, bond_length, bond_area, bond_I,
-                                                         bond_J, coordination: for external readers
-                                                         only, recomputed on load
+                                                         bond_J, coordination: for external readers;
+                                                         recomputed on load and checked against these
 ==============================  ===========  ==========  =============================================
 
 Root attributes: ``format``, ``format_version``, ``jaxbpm_version``, ``units`` (a note), ``bond_contact``, and
@@ -307,7 +307,8 @@ def _read_sample(f, path: pathlib.Path) -> Sample:
 def load_sample(path) -> Sample:
     """Read a sample written by :func:`save_sample` and validate it with :meth:`Sample.from_arrays`.
 
-    Derived quantities (mass, bond length, ...) are recomputed, not read. Files written by this version carry a
+    Derived quantities (mass, bond length, ...) are recomputed, not read, and checked against the file's
+    ``/derived`` copies (a position, radius or bond changed after writing is an error naming the field and entry). Files written by this version carry a
     Fletcher-32 checksum on every array: a damaged byte is an error naming the field.
 
     Raises:
@@ -324,11 +325,41 @@ def load_sample(path) -> Sample:
         raise SampleFileError(f"{path}: is a directory, not a sample file")
     try:
         with h5py.File(path, "r") as f:
-            return _read_sample(f, path)
+            sample = _read_sample(f, path)
+            _check_derived(f, path, sample)
+            return sample
     except (SampleFileError, SampleError):
         raise
     except OSError as exc:  # h5py reports unreadable, truncated or non-HDF5 files as OSError
         raise SampleFileError(f"{path}: not a readable HDF5 file, or corrupt ({exc})") from exc
+
+
+def _check_derived(f, path: pathlib.Path, sample: Sample) -> None:
+    """The file's ``/derived`` quantities against the same ones recomputed from its inputs: a mismatch means the
+    positions, radii, bonds or bond radii changed after the file was written (an edit, or damage the checksums of an
+    older file cannot see). Files without ``/derived`` are not checked."""
+    if "derived" not in f:
+        return
+    g = f["derived"]
+    for name, _ in _DERIVED + [("coordination", "1")]:
+        if name not in g:
+            continue
+        stored = _read(g, name, path)
+        fresh = np.asarray(sample.coordination() if name == "coordination" else getattr(sample, name))
+        if stored.shape != fresh.shape:
+            raise SampleFileError(f"{path}: /derived/{name} has shape {stored.shape}, the sample's inputs give "
+                                  f"{fresh.shape}: {_EDITED}")
+        same = np.isclose(stored, fresh, rtol=1e-9, atol=0)
+        bad = np.flatnonzero(~same.reshape(same.shape[0], -1).all(axis=1)) if same.size else np.zeros(0, int)
+        if bad.size:
+            i = int(bad[0])
+            raise SampleFileError(
+                f"{path}: /derived/{name}[{i}] is {stored[i].tolist()!r} in the file but {fresh[i].tolist()!r} from "
+                f"its positions, radii and bonds ({bad.size} entries differ): {_EDITED}")
+
+
+_EDITED = ("the inputs changed after the file was written, or the file is damaged. If the change was intended, "
+           "delete the /derived group (jaxbpm recomputes it) or save the sample again")
 
 
 # ---------------------------------------------------------------------------------------------- VTK export

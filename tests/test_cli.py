@@ -204,3 +204,17 @@ def test_generate_checks_its_output_before_packing(tmp_path, capsys, monkeypatch
     assert code == 2 and "no such directory" in err and "missing" in err
     code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path)
     assert code == 2 and "it is a directory" in err and ".tmp" not in err
+
+
+def test_negative_and_out_of_range_numbers_get_the_options_own_message(tmp_path, capsys):
+    """``--E -1e8`` reached argparse as an option ("expected one argument"); ``--spread 5`` made negative radii."""
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["generate", "--shape", "box", "--n", "50", "--E", "-1e8", "--out", str(tmp_path / "x.h5")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "--E: expected a finite number > 0, got -1e8" in err
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--spread", 5, "--out", tmp_path / "x.h5")
+    assert code == 2 and "radius_spread must be < 1" in err and "Traceback" not in err
+    good = io.save_sample(tmp_path / "good.h5", _tiny())
+    code, _, err = _run(capsys, "calibrate", good, "--target-E", "-1e8")
+    assert code == 2 and err.startswith("error: ") and "must be > 0" in err and "np." not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["good.h5"]

@@ -331,3 +331,25 @@ def test_a_flipped_byte_is_an_error_naming_the_field(tmp_path, field):
     target.write_bytes(bytes(raw))
     with pytest.raises(SampleFileError, match=rf"field '/{field}' is corrupt"):
         io.load_sample(target)
+
+
+@pytest.mark.parametrize("field, change, derived", [
+    ("positions", lambda d: d.__setitem__((2, 0), d[2, 0] + 1e-3), "bond_length"),
+    ("radii", lambda d: d.__setitem__(1, 0.9 * d[1]), "mass"),
+    ("bonds", lambda d: d.__setitem__((0, 1), 3), "bond_length"),
+    ("bond_radius", lambda d: d.__setitem__(0, 2 * d[0]), "bond_area"),
+])
+def test_inputs_changed_after_writing_are_an_error(tmp_path, field, change, derived):
+    """An older file has no checksums, and an edit through h5py rewrites them: the derived quantities stored
+    beside the inputs still tell (and deleting /derived accepts an intended edit)."""
+    path = io.save_sample(tmp_path / "s.h5", _chain())
+    with h5py.File(path, "a") as f:
+        data = f[field][()]
+        change(data)
+        f[field][...] = data
+    with pytest.raises(SampleFileError, match=rf"/derived/{derived}\[\d+\] is .* in the file but .* from its "
+                                              r"positions.*delete the /derived group"):
+        io.load_sample(path)
+    with h5py.File(path, "a") as f:
+        del f["derived"]
+    assert io.load_sample(path).n_bonds == _chain().n_bonds
