@@ -194,11 +194,28 @@ def build_preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpa
     empty = jnp.all(jnp.abs(jnp.where(mask, blocks, 0.0)) == 0, axis=(1, 2))
     blocks = jnp.where(empty[:, None, None], jnp.diag(scale)[None], blocks)
     inv = jnp.linalg.inv(blocks)
-    factor = None if coarse is None else CholeskyBlocks.of(_factor_coarse(a_coarse))
+    factor = None if coarse is None else _coarse_blocks(jax.lax.stop_gradient(a_coarse))
     return Preconditioner(inv=inv, free=free, factor=factor, coarse=coarse)
 
 
 _build_preconditioner_jit = jax.jit(build_preconditioner)
+
+
+@jax.custom_batching.custom_vmap
+def _coarse_blocks(a):
+    """:class:`CholeskyBlocks` of the coarse matrix ``a``. Batched (``vmap`` over parameter sets), the matrices are
+    factorised one after another (``lax.map``), not as one batched LAPACK call: XLA's CPU runtime (jax 0.10) hangs
+    now and then on the batched Cholesky and triangular solves inside the batched solve (all threads idle)."""
+    return CholeskyBlocks.of(_factor_coarse(a))
+
+
+@_coarse_blocks.def_vmap
+def _coarse_blocks_batched(axis_size, in_batched, a):
+    if not in_batched[0]:
+        out = CholeskyBlocks.of(_factor_coarse(a))
+        return out, jax.tree_util.tree_map(lambda _: False, out)
+    out = jax.lax.map(lambda one: CholeskyBlocks.of(_factor_coarse(one)), a)
+    return out, jax.tree_util.tree_map(lambda _: True, out)
 
 
 @dataclasses.dataclass(frozen=True)
