@@ -24,16 +24,23 @@ import weakref
 from typing import Any, Callable
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "compile_clock", "count_compilations", "put",
-           "traced"]
+           "strong", "traced"]
 
 
 def traced(tree) -> bool:
     """Whether any leaf of ``tree`` is a tracer (inside ``jit``, ``grad``, ``vmap``): a pure function then traces its
     body; called with concrete values it can run a compiled program instead."""
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+
+
+def strong(tree):
+    """Concrete array leaves of fixed dtype (not weakly typed): ``2e9``, ``jnp.asarray(2e9)`` and ``np.float64(2e9)``
+    then give one :class:`Program` signature, so parameters in any of these forms share a compiled program."""
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), tree)
 
 
 def put(a, dtype=None) -> jax.Array:

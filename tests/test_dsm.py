@@ -373,13 +373,16 @@ def test_nonlinear_dsm_is_a_pure_differentiable_function(packing):
     f = dsm.stiffness_function(packing, scene, dofs=3, nonlinear_tol=1e-10, load_steps=2)
     p = dict(default_params(packing), contact_E=jnp.asarray(float(packing.particle_material.E)))
     k = float(f(p))
+    compiled = dsm.newton.newton_program.compilations
     ref = jaxbpm.solve(packing, scene, "dsm", dofs=3, tol=1e-10, load_steps=2, params=p)
     np.testing.assert_allclose(k, ref.stiffness, rtol=1e-9)
+    assert dsm.newton.newton_program.compilations == compiled  # the function's program serves the solve
     grad = jax.jit(jax.grad(f))(p)
     for key in ("bond_E", "contact_E"):
         x = np.asarray(p[key], float)
         h = 1e-4 * x
         fd = (f({**p, key: jnp.asarray(x + h)}) - f({**p, key: jnp.asarray(x - h)})) / (2 * h)
+        assert dsm.newton.newton_program.compilations == compiled  # (weakly typed or not, the same program)
         np.testing.assert_allclose(np.asarray(grad[key]), fd, rtol=1e-5)
         assert np.all(np.asarray(grad[key]) > 0)  # stiffer bonds or particles, stiffer sample
     batch = {**p, "bond_E": jnp.asarray([[1e9], [2e9]]), "bond_nu": jnp.asarray([[0.25], [0.25]]),

@@ -72,7 +72,9 @@ def test_sweep_over_two_host_devices_matches_the_unsharded_result(tmp_path):
         print(json.dumps({"sharded": np.asarray(sharded).tolist(), "plain": np.asarray(plain).tolist(),
                           "single": single, "calibrate": np.asarray(calib).tolist()}))
     """))
-    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2", "JAX_PLATFORMS": "cpu"}
+    # (the suite's XLA flags kept: they make compilation cheaper)
+    flags = (os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip()
+    env = {**os.environ, "XLA_FLAGS": flags, "JAX_PLATFORMS": "cpu"}
     run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     out = json.loads(run.stdout.strip().splitlines()[-1])

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import traced
+from jaxbpm._compile import strong, traced
 from jaxbpm.dsm.boundary import _check_held, free_mask
 from jaxbpm.dsm.krylov import cg, tangent_operator
 from jaxbpm.dsm.linear import (
@@ -49,7 +49,7 @@ def stiffness_function(sample, scene, *, dofs=None, tol=1e-6, maxiter=None, oper
 
     def stiffness(params):
         if not traced(params):
-            out = linear_program(setup.model, params, setup.free, setup.u_p, tol, _energy_test(stiffness_tol),
+            out = linear_program(setup.model, strong(params), setup.free, setup.u_p, tol, _energy_test(stiffness_tol),
                                   setup.coarse, setup.geometry, setup.guess, maxiter=maxiter, operator=operator)[0]
             return out[0][1] / setup.delta
         return linear_jit(setup.model, params, setup.free, setup.u_p, tol, maxiter, operator, stiffness_tol,
@@ -130,9 +130,10 @@ def _nonlinear_stiffness_function(sample, scene, rotations, *, tol, linear_tol, 
 
     def stiffness(params):
         if not traced(params):
-            out = newton_program(prob, params, *tols, fractions=fractions)[0]
+            out = newton_program(prob, strong(params), *tols, fractions=fractions, stiffness_tol=None)[0]
         else:
             out = newton_outputs(prob, params, *tols, fractions=fractions)
         return slope(out[1])
 
     return stiffness
+

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import put
+from jaxbpm._compile import put, strong
 from jaxbpm.dsm.boundary import (
     _check_contact_skin, _check_held, affine_field, contact_candidates, free_mask, LINEAR_REACH)
 from jaxbpm.dsm.linear import (
@@ -70,6 +70,8 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
     from jaxbpm.result import Result, settle
 
     t0 = time.perf_counter()
+    if params is not None:  # (one compiled program whatever the parameters' array form)
+        params = strong(params)
     rotations = None if dofs is None else {3: False, 6: True}.get(int(dofs))
     if dofs is not None and rotations is None:
         raise SceneError(f"dofs must be 3 or 6 per particle, got {dofs!r}")
