@@ -27,6 +27,10 @@ if "xla_cpu_multi_thread_eigen" not in os.environ.get("XLA_FLAGS", ""):
 # generation changes -- the same HLO, the same floating-point semantics; speed is measured in the benchmarks, not here
 if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ["XLA_FLAGS"] + " --xla_backend_optimization_level=0").strip()
+# and XLA's older loop emitters for fusions instead of the MLIR fusion emitters: a fifth to a half less compile time
+# per program (a DEM chunk with contacts 10.1 s -> 6.1 s, an STE estimate 1.6 s -> 0.7 s), again codegen only
+if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ["XLA_FLAGS"] + " --xla_cpu_use_fusion_emitters=false").strip()
 
 import jax  # noqa: E402
 import jax_md  # noqa: E402,F401  (jax-md's import-time code does not pass strict promotion: import it first)
