@@ -31,6 +31,16 @@ name                            shape        units       meaning
 
 Root attributes: ``format``, ``format_version``, ``jaxbpm_version``, ``units`` (a note), ``bond_contact``, and
 ``domain_kind`` / ``domain_lo`` / ``domain_hi`` [m] when the sample has a domain (absent otherwise).
+
+Checks on load. The file starts with a 512-byte HDF5 user block (HDF5 readers skip it) whose first line,
+``jaxbpm-sample crc32=XXXXXXXX bytes=N``, holds the CRC-32 (zlib) and length of the rest of the file: ``load_sample``
+compares them before HDF5 reads anything, so a damaged or cut file is an error (HDF5's own reader can fail in
+unpredictable ways on a damaged file, even hang). Inside, every non-empty array carries a Fletcher-32 checksum
+(HDF5's ``fletcher32`` filter), and the ``/derived`` group's attribute ``inputs_crc32`` is the CRC-32 of everything
+the sample is built from (the input arrays, the material table, the particle material's scalars, ``bond_contact``
+and the domain, in a fixed order), compared with the sample loaded; these cover files without the header (written
+before it existed, or rewritten by other tools). An edit through h5py changes the file too: load it with
+``load_sample(path, verify=False)`` (the sample is still validated) and save it again.
 """
 
 from __future__ import annotations
@@ -39,7 +49,9 @@ import contextlib
 import errno
 import os
 import pathlib
+import re
 import tempfile
+import zlib
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -197,10 +209,41 @@ def _write_inputs(f, sample: Sample) -> None:
         _dataset(pm, name, np.float64(getattr(sample.particle_material, name)), units)
 
 
+def _inputs_crc32(sample: Sample) -> int:
+    """CRC-32 (zlib) of everything ``sample`` is built from, in a fixed order: ``positions``, ``radii`` (float64),
+    ``bonds``, ``bond_material`` (int32), ``bond_radius``, the material table ``E``, ``nu``, ``tensile_strength``,
+    ``shear_strength`` and the particle material's scalars (float64), each array preceded by its shape (int64),
+    little-endian; then ``bond_contact`` and the domain (``kind``, ``lo``, ``hi``; ``none`` without one)."""
+    crc = 0
+
+    def add(arr, dtype):
+        nonlocal crc
+        arr = np.ascontiguousarray(np.asarray(arr), dtype=np.dtype(dtype).newbyteorder("<"))
+        crc = zlib.crc32(np.asarray(arr.shape, "<i8").tobytes(), crc)
+        crc = zlib.crc32(arr.tobytes(), crc)
+
+    add(sample.positions, np.float64)
+    add(sample.radii, np.float64)
+    add(sample.bonds, np.int32)
+    add(sample.bond_material, np.int32)
+    add(sample.bond_radius, np.float64)
+    for name, _ in _MATERIALS:
+        add(getattr(sample.materials, name), np.float64)
+    add([getattr(sample.particle_material, name) for name, _ in _PARTICLE_MATERIAL], np.float64)
+    crc = zlib.crc32(str(sample.bond_contact).encode("utf-8", "surrogatepass"), crc)
+    d = sample.domain
+    crc = zlib.crc32(b"none" if d is None else str(d.kind).encode("utf-8", "surrogatepass"), crc)
+    if d is not None:
+        add([d.lo, d.hi], np.float64)
+    return crc
+
+
 def _write_derived(f, sample: Sample) -> None:
-    """Derived per-particle and per-bond quantities, for readers other than jaxbpm (ignored on load)."""
+    """Derived per-particle and per-bond quantities, for readers other than jaxbpm, and the inputs' CRC-32 (all
+    checked on load)."""
     g = f.create_group("derived")
     g.attrs["description"] = "computed from the other fields; jaxbpm recomputes these on load"
+    g.attrs["inputs_crc32"] = np.int64(_inputs_crc32(sample))
     for name, units in _DERIVED:
         _dataset(g, name, np.asarray(getattr(sample, name), dtype=np.float64), units)
     _dataset(g, "coordination", np.asarray(sample.coordination(), dtype=np.int32), "1")
@@ -226,11 +269,53 @@ def save_sample(path, sample: Sample) -> pathlib.Path:
         raise TypeError(f"save_sample expects a jaxbpm Sample, got {type(sample).__name__}")
 
     def write(tmp: str) -> None:
-        with h5py.File(tmp, "w") as f:
+        with h5py.File(tmp, "w", userblock_size=_USERBLOCK) as f:
             _write_inputs(f, sample)
             _write_derived(f, sample)
+        with open(tmp, "r+b") as fh:  # the header: CRC-32 and length of what follows it
+            crc, size = _crc_after_userblock(fh)
+            fh.seek(0)
+            fh.write(f"{_SEAL} crc32={crc:08x} bytes={size}\n".encode().ljust(_USERBLOCK, b"\0"))
 
     return atomic_write(path, write)
+
+
+_USERBLOCK = 512  # bytes before the HDF5 data (an HDF5 user block): jaxbpm's header line
+_SEAL = "jaxbpm-sample"
+
+
+def _crc_after_userblock(fh) -> tuple[int, int]:
+    """CRC-32 and length of the open file ``fh`` after its user block."""
+    fh.seek(_USERBLOCK)
+    crc, size = 0, 0
+    while chunk := fh.read(1 << 24):
+        crc, size = zlib.crc32(chunk, crc), size + len(chunk)
+    return crc, size
+
+
+def _check_seal(path: pathlib.Path) -> None:
+    """The file against the CRC-32 and length in its header (files without the header are not checked here)."""
+    with open(path, "rb") as fh:
+        head = fh.read(_USERBLOCK)
+        if not head.startswith(_SEAL.encode() + b" "):
+            return
+        m = re.fullmatch(rb"jaxbpm-sample crc32=([0-9a-f]{8}) bytes=([0-9]{1,20})", head.split(b"\n", 1)[0])
+        if m is None or b"\n" not in head:
+            raise SampleFileError(f"{path}: the file's header (its first line, {head[:60]!r}) is damaged")
+        crc, size = _crc_after_userblock(fh)
+    want_crc, want_size = int(m[1], 16), int(m[2])
+    if size != want_size:
+        how = "cut short" if size < want_size else "longer than written"
+        raise SampleFileError(f"{path}: the file holds {size + _USERBLOCK} bytes, but {want_size + _USERBLOCK} were "
+                              f"written (its header says so): the file is {how}; {_CHANGED}")
+    if crc != want_crc:
+        raise SampleFileError(f"{path}: the file does not match the CRC-32 in its header (crc32={want_crc:08x}, the "
+                              f"file gives {crc:08x}): the file is damaged, or was changed after jaxbpm wrote it; "
+                              f"{_CHANGED}")
+
+
+_CHANGED = ("if the change was intended (an edit through h5py), load it with load_sample(path, verify=False) (the "
+            "sample is still validated) and save it again")
 
 
 def _attr_str(value) -> str:
@@ -262,13 +347,20 @@ def _check_header(f, path: pathlib.Path) -> None:
             f"(this jaxbpm {__version__} reads format_version {FORMAT_VERSION})")
 
 
-def _read(group, name: str, path: pathlib.Path) -> np.ndarray:
+_SIZE_SLACK = 1000  # a dataset may claim at most this many times the file's size (compressed data): more is damage
+
+
+def _read(group, name: str, path: pathlib.Path, limit: int) -> np.ndarray:
     where = f"{group.name.rstrip('/')}/{name}"
     if name not in group:
         raise SampleFileError(f"{path}: missing field '{where}'")
     obj = group[name]
     if not hasattr(obj, "shape") or not hasattr(obj, "dtype"):
         raise SampleFileError(f"{path}: field '{where}' is not a dataset")
+    nbytes = int(np.prod(obj.shape, dtype=np.float64) * obj.dtype.itemsize) if obj.shape is not None else 0
+    if nbytes > limit:
+        raise SampleFileError(f"{path}: field '{where}' claims shape {tuple(obj.shape)}, far more data than the file "
+                              f"holds: the file is corrupt")
     try:
         return np.asarray(obj[()])
     except OSError as exc:  # a checksum that does not match, or unreadable storage
@@ -276,40 +368,65 @@ def _read(group, name: str, path: pathlib.Path) -> np.ndarray:
                               f"read: {exc})") from exc
 
 
-def _read_sample(f, path: pathlib.Path) -> Sample:
+def _read_inputs(f, path: pathlib.Path, limit: int) -> dict:
+    """What :meth:`Sample.from_arrays` needs, read from the open file as plain NumPy values and strings."""
     _check_header(f, path)
-    data = {name: _read(f, name, path) for name, _ in _INPUTS}
+    data = {name: _read(f, name, path, limit) for name, _ in _INPUTS}
     for group_name in ("materials", "particle_material"):
-        if group_name not in f:
+        if group_name not in f or not hasattr(f[group_name], "keys"):
             raise SampleFileError(f"{path}: missing field '/{group_name}' (group)")
-    materials = {name: _read(f["materials"], name, path) for name, _ in _MATERIALS}
-    particle_material = {name: _read(f["particle_material"], name, path) for name, _ in _PARTICLE_MATERIAL}
-    bond_contact = _attr_str(f.attrs["bond_contact"]) if "bond_contact" in f.attrs else None
-    if bond_contact is None:
+    data["materials"] = {name: _read(f["materials"], name, path, limit) for name, _ in _MATERIALS}
+    data["particle_material"] = {name: _read(f["particle_material"], name, path, limit)
+                                 for name, _ in _PARTICLE_MATERIAL}
+    for name, value in data["particle_material"].items():
+        if value.shape != () or not (np.issubdtype(value.dtype, np.floating) or np.issubdtype(value.dtype, np.integer)):
+            raise SampleFileError(f"{path}: field '/particle_material/{name}' must be one number, got shape "
+                                  f"{value.shape} of {value.dtype}")
+    if "bond_contact" not in f.attrs:
         raise SampleFileError(f"{path}: missing field 'bond_contact' (root attribute)")
-    domain = None
+    data["bond_contact"] = _attr_str(f.attrs["bond_contact"])
+    data["domain"] = None
     domain_keys = [k for k in ("domain_kind", "domain_lo", "domain_hi") if k in f.attrs]
     if domain_keys:
         missing = sorted({"domain_kind", "domain_lo", "domain_hi"} - set(domain_keys))
         if missing:
             raise SampleFileError(f"{path}: missing field '{missing[0]}' (root attribute; the domain is partial)")
-        lo, hi = (np.asarray(f.attrs[k], dtype=np.float64) for k in ("domain_lo", "domain_hi"))
+        try:
+            lo, hi = (np.asarray(f.attrs[k], dtype=np.float64) for k in ("domain_lo", "domain_hi"))
+        except (TypeError, ValueError) as exc:
+            raise SampleFileError(f"{path}: domain_lo and domain_hi must be numbers ({exc})") from None
         if lo.shape != (3,) or hi.shape != (3,):
             raise SampleError(f"{path}: domain_lo and domain_hi must hold 3 values, got shapes {lo.shape}, {hi.shape}")
-        domain = Domain(_attr_str(f.attrs["domain_kind"]), tuple(float(v) for v in lo),
-                        tuple(float(v) for v in hi))
-    return Sample.from_arrays(
-        data["positions"], data["radii"], data["bonds"], data["bond_radius"],
-        bond_material=data["bond_material"], materials=materials, particle_material=particle_material,
-        bond_contact=bond_contact, domain=domain)
+        data["domain"] = Domain(_attr_str(f.attrs["domain_kind"]), tuple(lo.tolist()), tuple(hi.tolist()))
+    return data
 
 
-def load_sample(path) -> Sample:
+def _read_derived(f, path: pathlib.Path, limit: int) -> dict | None:
+    """The file's ``/derived`` quantities and ``inputs_crc32`` (``None`` without ``/derived``)."""
+    if "derived" not in f:
+        return None
+    g = f["derived"]
+    if not hasattr(g, "keys"):
+        raise SampleFileError(f"{path}: '/derived' is not a group")
+    out = {name: _read(g, name, path, limit) for name, _ in _DERIVED + [("coordination", "1")] if name in g}
+    if "inputs_crc32" in g.attrs:
+        crc = np.asarray(g.attrs["inputs_crc32"])
+        if crc.shape != () or not np.issubdtype(crc.dtype, np.integer):
+            raise SampleFileError(f"{path}: the /derived attribute 'inputs_crc32' must be one whole number, got "
+                                  f"{crc.tolist()!r}: the file is corrupt")
+        out["inputs_crc32"] = int(crc)
+    return out
+
+
+def load_sample(path, *, verify: bool = True) -> Sample:
     """Read a sample written by :func:`save_sample` and validate it with :meth:`Sample.from_arrays`.
 
-    Derived quantities (mass, bond length, ...) are recomputed, not read, and checked against the file's
-    ``/derived`` copies (a position, radius or bond changed after writing is an error naming the field and entry). Files written by this version carry a
-    Fletcher-32 checksum on every array: a damaged byte is an error naming the field.
+    With ``verify`` (the default), the file is first compared with the CRC-32 and length in its header (a damaged,
+    cut or edited file is an error before HDF5 reads it), and derived quantities (mass, bond length, ...) are
+    recomputed, not read, and checked against the file's ``/derived`` copies and ``inputs_crc32`` (for files without
+    the header). Every array carries a Fletcher-32 checksum: a damaged byte is an error naming the field.
+    ``verify=False`` reads a file changed on purpose (an edit through h5py) as it is: only the Fletcher-32 sums and
+    the validation of the sample apply.
 
     Raises:
       SampleFileError: the file is missing, is not an HDF5 file (or is corrupt), is not a jaxbpm sample, has an
@@ -323,43 +440,61 @@ def load_sample(path) -> Sample:
         raise SampleFileError(f"{path}: no such sample file")
     if path.is_dir():
         raise SampleFileError(f"{path}: is a directory, not a sample file")
+    limit = _SIZE_SLACK * path.stat().st_size + (1 << 20)
     try:
+        if verify:
+            _check_seal(path)
         with h5py.File(path, "r") as f:
-            sample = _read_sample(f, path)
-            _check_derived(f, path, sample)
-            return sample
+            data = _read_inputs(f, path, limit)
+            derived = _read_derived(f, path, limit) if verify else None
     except (SampleFileError, SampleError):
         raise
-    except OSError as exc:  # h5py reports unreadable, truncated or non-HDF5 files as OSError
-        raise SampleFileError(f"{path}: not a readable HDF5 file, or corrupt ({exc})") from exc
+    except Exception as exc:  # noqa: BLE001  h5py reports a damaged file as OSError, KeyError, ValueError, ...
+        raise SampleFileError(f"{path}: not a readable HDF5 file, or corrupt ({type(exc).__name__}: {exc})") from exc
+    try:
+        sample = Sample.from_arrays(
+            data["positions"], data["radii"], data["bonds"], data["bond_radius"],
+            bond_material=data["bond_material"], materials=data["materials"],
+            particle_material=data["particle_material"], bond_contact=data["bond_contact"], domain=data["domain"])
+    except SampleError as exc:
+        raise SampleError(f"{path}: {exc}") from exc
+    if derived is not None:
+        _check_derived(derived, path, sample)
+    return sample
 
 
-def _check_derived(f, path: pathlib.Path, sample: Sample) -> None:
-    """The file's ``/derived`` quantities against the same ones recomputed from its inputs: a mismatch means the
-    positions, radii, bonds or bond radii changed after the file was written (an edit, or damage the checksums of an
-    older file cannot see). Files without ``/derived`` are not checked."""
-    if "derived" not in f:
-        return
-    g = f["derived"]
+def _check_derived(stored_all: dict, path: pathlib.Path, sample: Sample) -> None:
+    """The file's ``/derived`` quantities against the same ones recomputed from its inputs, and its
+    ``inputs_crc32`` against the sample loaded: a mismatch means the inputs changed after the file was written (an
+    edit, or damage the Fletcher-32 checksums cannot see)."""
     for name, _ in _DERIVED + [("coordination", "1")]:
-        if name not in g:
+        if name not in stored_all:
             continue
-        stored = _read(g, name, path)
+        stored = stored_all[name]
         fresh = np.asarray(sample.coordination() if name == "coordination" else getattr(sample, name))
         if stored.shape != fresh.shape:
             raise SampleFileError(f"{path}: /derived/{name} has shape {stored.shape}, the sample's inputs give "
                                   f"{fresh.shape}: {_EDITED}")
-        same = np.isclose(stored, fresh, rtol=1e-9, atol=0)
+        try:
+            same = np.isclose(stored, fresh, rtol=1e-9, atol=0)
+        except TypeError:
+            raise SampleFileError(f"{path}: /derived/{name} holds {stored.dtype}, not numbers: {_EDITED}") from None
         bad = np.flatnonzero(~same.reshape(same.shape[0], -1).all(axis=1)) if same.size else np.zeros(0, int)
         if bad.size:
             i = int(bad[0])
             raise SampleFileError(
                 f"{path}: /derived/{name}[{i}] is {stored[i].tolist()!r} in the file but {fresh[i].tolist()!r} from "
                 f"its positions, radii and bonds ({bad.size} entries differ): {_EDITED}")
+    if "inputs_crc32" in stored_all:
+        crc = _inputs_crc32(sample)
+        if stored_all["inputs_crc32"] != crc:
+            raise SampleFileError(f"{path}: the sample read does not match the file's checksum (/derived attribute "
+                                  f"inputs_crc32 = {stored_all['inputs_crc32']}, the data give {crc}): {_EDITED}")
 
 
 _EDITED = ("the inputs changed after the file was written, or the file is damaged. If the change was intended, "
-           "delete the /derived group (jaxbpm recomputes it) or save the sample again")
+           "delete the /derived group (jaxbpm recomputes it) or load the file with load_sample(path, verify=False), "
+           "and save the sample again")
 
 
 # ---------------------------------------------------------------------------------------------- VTK export

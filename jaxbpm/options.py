@@ -14,6 +14,7 @@ import functools
 import inspect
 import math
 import numbers
+import os
 from typing import Any, ClassVar
 
 from jaxbpm.errors import SceneError
@@ -21,9 +22,16 @@ from jaxbpm.errors import SceneError
 __all__ = ["SolverOptions", "DEM", "DSM", "STE", "options_for"]
 
 
+def _shown(v) -> str:
+    """``v`` for a message: plain numbers (``0.5``, not ``np.float64(0.5)``), shortened."""
+    from jaxbpm.sample import _shown as shown
+
+    return shown(v)
+
+
 def _positive(name, v):
     if isinstance(v, bool) or not isinstance(v, numbers.Real) or not (v > 0 and math.isfinite(v)):
-        raise SceneError(f"{name} must be a positive number, got {v!r}")
+        raise SceneError(f"{name} must be a positive number, got {_shown(v)}")
 
 
 def _optional_positive(name, v):
@@ -35,12 +43,13 @@ def _fraction(name, v, lo_open=True, hi_closed=True):
     ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and (v > 0 if lo_open else v >= 0) and (
         v <= 1 if hi_closed else v < 1)
     if not ok:
-        raise SceneError(f"{name} must lie in {'(' if lo_open else '['}0, 1{']' if hi_closed else ')'}, got {v!r}")
+        raise SceneError(f"{name} must lie in {'(' if lo_open else '['}0, 1{']' if hi_closed else ')'}, got "
+                         f"{_shown(v)}")
 
 
 def _whole(name, v, minimum=1):
     if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < minimum:
-        raise SceneError(f"{name} must be a whole number >= {minimum}, got {v!r}")
+        raise SceneError(f"{name} must be a whole number >= {minimum}, got {_shown(v)}")
 
 
 def _optional_whole(name, v, minimum=1):
@@ -48,18 +57,67 @@ def _optional_whole(name, v, minimum=1):
         _whole(name, v, minimum)
 
 
+def _same_choice(v, a) -> bool:
+    """``v`` is the choice ``a``: ``None`` is ``None``, a string that string, a number that whole number (not
+    ``True``, ``3.0`` or an array)."""
+    if a is None:
+        return v is None
+    if isinstance(a, str):
+        return isinstance(v, str) and v == a
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool) and int(v) == a
+
+
 def _choice(*allowed):
     def check(name, v):
-        if v not in allowed:
+        if not any(_same_choice(v, a) for a in allowed):
             names = [repr(a) for a in allowed]
             choices = " or ".join(names) if len(names) == 2 else "one of " + ", ".join(names)
-            raise SceneError(f"{name} must be {choices}, got {v!r}")
+            raise SceneError(f"{name} must be {choices}, got {_shown(v)}")
     return check
 
 
 def _flag(name, v):
     if not isinstance(v, bool):
-        raise SceneError(f"{name} must be True or False, got {v!r}")
+        raise SceneError(f"{name} must be True or False, got {_shown(v)}")
+
+
+def _optional_path(name, v):
+    if v is not None and not isinstance(v, (str, os.PathLike)):
+        raise SceneError(f"{name} must be a file path (a str or pathlib.Path) or None, got {_shown(v)}")
+
+
+def _progress(name, v):
+    if v is not None and not isinstance(v, bool) and not callable(v):
+        raise SceneError(f"{name} must be True, False (or None) or a callable progress(steps_done, steps_total, "
+                         f"elapsed_s), got {_shown(v)}")
+
+
+def _neighbors(name, v):
+    from jaxbpm.neighbors import NeighborSettings
+
+    if v is not None and not isinstance(v, NeighborSettings):
+        raise SceneError(f"{name} must be a jaxbpm.dem.NeighborSettings or None, got {_shown(v)}")
+
+
+def _surface_depth(name, v):
+    if v is None or (isinstance(v, numbers.Real) and not isinstance(v, bool) and v == 0):
+        return
+    _positive(name, v)
+
+
+def _volumes(name, v):
+    if v is None:
+        return
+    import numpy as np
+
+    try:
+        arr = np.asarray(v)
+        ok = arr.dtype != bool and (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer))
+        ok = ok and arr.ndim == 1 and bool(np.all(np.isfinite(arr) & (arr > 0)))
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise SceneError(f"{name} must be [n] finite positive particle volumes [m^3], got {_shown(v)}")
 
 
 def _optional_flag(name, v):
@@ -67,16 +125,14 @@ def _optional_flag(name, v):
         _flag(name, v)
 
 
-def _any(name, v):
-    return None
-
-
-# value checks per option (options without an entry are passed through; the solver checks them)
+# value checks per option (every option has one; the solver checks what needs the sample, e.g. the length of
+# volumes)
 _CHECKS = {
     "dem": {"dt": _optional_positive, "safety": _fraction, "damping": lambda n, v: _fraction(n, v, False, False),
             "loading_time": _optional_positive, "transits": _positive, "chunk": _optional_whole,
             "max_records": _whole, "snapshots": _optional_whole, "pad": _flag, "throw": _flag,
-            "overwrite": _flag},
+            "overwrite": _flag, "progress": _progress, "neighbors": _neighbors, "record_to": _optional_path,
+            "vtu": _optional_path, "resume": _optional_path},
     "dsm": {"dofs": _choice(None, 3, 6), "nonlinear": _optional_flag, "tol": _optional_positive,
             "linear_tol": _positive, "maxiter": _optional_whole, "newton_maxiter": _whole,
             "stiffness_tol": lambda n, v: None if isinstance(v, str) and v == "auto" else _optional_positive(n, v),
@@ -87,8 +143,7 @@ _CHECKS = {
             "contact_passes": _whole, "pad": _flag},
     "ste": {"dofs": _choice(3, 6), "first_neighbour": _flag, "layered": _flag, "contacts": _optional_flag,
             "contact_fraction": lambda n, v: None if v is None else _fraction(n, v),
-            "layer_thickness": _optional_positive, "surface_depth": lambda n, v: None if v is None else (
-                _positive(n, v) if v != 0 else None),
+            "layer_thickness": _optional_positive, "surface_depth": _surface_depth, "volumes": _volumes,
             "precision": _choice("float64", "float32"), "pad": _flag, "throw": _flag},
 }
 
@@ -106,7 +161,7 @@ def accepted(method: str) -> tuple[str, ...]:
         names = set(inspect.signature(ste.solve_scene).parameters) | set(inspect.signature(ste.estimator).parameters)
         return tuple(sorted(names - {"sample", "scene", "params", "options", "self"}))
     else:
-        raise ValueError(f"unknown method {method!r}")
+        raise SceneError(f"unknown method {_shown(method)}; choose one of {tuple(_CHECKS)}")
     names = [p.name for p in inspect.signature(fn).parameters.values()
              if p.kind == p.KEYWORD_ONLY and not p.name.startswith("_")]
     return tuple(sorted(names))
@@ -118,7 +173,7 @@ def check_options(method: str, options: dict) -> None:
     names = accepted(method)
     for name, value in options.items():
         if name not in names:
-            close = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
+            close = difflib.get_close_matches(name, names, n=3, cutoff=0.6) if isinstance(name, str) else []
             hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
             raise SceneError(f"unknown {method.upper()} option {name!r}{hint} (options: {', '.join(names)})")
         check = _CHECKS[method].get(name)
@@ -226,7 +281,7 @@ def options_for(method, options: dict) -> tuple[str, dict]:
     elif isinstance(method, str) and method in _CLASSES:
         merged, name = dict(options), method
     else:
-        raise ValueError(f"unknown method {method!r}; choose one of {tuple(_CLASSES)} or pass jaxbpm.DEM(...), "
+        raise SceneError(f"unknown method {_shown(method)}; choose one of {tuple(_CLASSES)} or pass jaxbpm.DEM(...), "
                          "jaxbpm.DSM(...) or jaxbpm.STE(...)")
     check_options(name, merged)
     return name, merged

@@ -55,9 +55,24 @@ def _register(cls, data, meta=()):
 def _numbers(name: str, value) -> np.ndarray:
     """``value`` as float64, or a :class:`SampleError` naming the material field (not a bare ``ValueError``)."""
     try:
+        arr = np.asarray(value)
+        if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == object) or \
+                np.issubdtype(arr.dtype, np.complexfloating):
+            raise TypeError
         return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SampleError(f"materials: {name} must be numbers, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError):
+        raise SampleError(f"materials: {name} must be numbers, got {_shown(value)}") from None
+
+
+def _shown(value, limit: int = 80) -> str:
+    """``value`` for an error message: plain numbers (``1.5``, ``[1.0, 2.0]``, not NumPy reprs), shortened."""
+    try:
+        if isinstance(value, (np.ndarray, np.generic)):
+            value = value.tolist()
+        text = repr(value)
+    except Exception:  # noqa: BLE001 (a value whose repr fails still gets a message)
+        text = f"a {type(value).__name__}"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,15 +145,28 @@ class ParticleMaterial:
     def create(cls, **kw) -> "ParticleMaterial":
         unknown = set(kw) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
-            raise SampleError(f"particle_material: unknown fields {sorted(unknown)}")
-        pm = cls(**{k: np.float64(v) for k, v in {**dataclasses.asdict(cls()), **kw}.items()})
+            raise SampleError(f"particle_material: unknown fields {sorted(map(str, unknown))}")
+        values = {}
+        for k, v in {**dataclasses.asdict(cls()), **kw}.items():
+            arr = np.asarray(v) if not isinstance(v, (str, bytes)) else None
+            if arr is None or arr.shape != () or arr.dtype == bool or not (
+                    np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+                raise SampleError(f"particle_material: {k} must be a real number, got {_shown(v)}")
+            try:
+                values[k] = np.float64(arr)
+            except OverflowError:
+                raise SampleError(f"particle_material: {k} must be a real number, got {_shown(v)}") from None
+        pm = cls(**values)
         checks = {
             "density": pm.density > 0, "E": pm.E > 0, "nu": -1 < pm.nu < 0.5,
             "friction": pm.friction >= 0, "restitution": 0 < pm.restitution <= 1,
         }
+        ranges = {"density": "> 0 [kg/m^3]", "E": "> 0 [Pa]", "nu": "in (-1, 0.5)", "friction": ">= 0",
+                  "restitution": "in (0, 1]"}
         for name, ok in checks.items():
             if not (ok and np.isfinite(getattr(pm, name))):
-                raise SampleError(f"particle_material: {name}={getattr(pm, name)!r} is out of range")
+                raise SampleError(f"particle_material: {name}={float(getattr(pm, name))!r} is out of range (must "
+                                  f"be finite and {ranges[name]})")
         return pm
 
 
@@ -283,7 +311,7 @@ class Sample:
             raise SampleError(f"radii must lie where mass and inertia are finite and > 0 in float64 (about 1e-60 to "
                               f"1e60 m); bad radius {rad[bad[0]]:g} m at particles {_listed(bad)}")
 
-        b = np.asarray(bonds)
+        b = _array("bonds", bonds)
         if b.size == 0:
             b = np.zeros((0, 2), dtype=np.int32)
         if b.ndim != 2 or b.shape[1] != 2:
@@ -337,9 +365,14 @@ class Sample:
         if (bond_radius is None) == (bond_radius_ratio is None):
             raise SampleError("give exactly one of bond_radius and bond_radius_ratio")
         if bond_radius_ratio is not None:
-            ratio = float(bond_radius_ratio)
+            try:
+                if isinstance(bond_radius_ratio, (str, bytes, bool)):
+                    raise TypeError
+                ratio = float(bond_radius_ratio)
+            except (TypeError, ValueError, OverflowError):
+                ratio = float("nan")
             if not np.isfinite(ratio) or ratio <= 0:
-                raise SampleError(f"bond_radius_ratio must be finite and > 0, got {bond_radius_ratio!r}")
+                raise SampleError(f"bond_radius_ratio must be finite and > 0, got {_shown(bond_radius_ratio)}")
             rb = ratio * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
         else:
             rb = _float_array("bond_radius", bond_radius)
@@ -368,7 +401,7 @@ class Sample:
         if bond_material is None:
             bm = np.zeros(nb, dtype=np.int32)
         else:
-            bm = np.asarray(bond_material)
+            bm = _array("bond_material", bond_material)
             if bm.ndim == 0:
                 bm = np.full(nb, bm)
             if bm.shape != (nb,):
@@ -390,8 +423,9 @@ class Sample:
             pm_kw["density"] = density
         pm = ParticleMaterial.create(**pm_kw)
 
-        if bond_contact not in _BOND_CONTACT:
-            raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {bond_contact!r}")
+        if not isinstance(bond_contact, str) or bond_contact not in _BOND_CONTACT:
+            raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {_shown(bond_contact)}")
+        domain = _checked_domain(domain)
 
         mass = pm.density * 4.0 / 3.0 * np.pi * rad**3
         return cls(
@@ -537,8 +571,39 @@ _register(
 )
 
 
+_DOMAIN_KINDS = ("box", "cylinder")
+
+
+def _checked_domain(domain) -> Domain | None:
+    """``domain`` as a :class:`Domain` of plain floats, or a :class:`SampleError` saying what is wrong."""
+    if domain is None:
+        return None
+    if not isinstance(domain, tuple) or len(domain) != 3:
+        raise SampleError(f"domain must be a Domain(kind, lo, hi) or None, got {_shown(domain)}")
+    kind, lo, hi = domain
+    if not isinstance(kind, str) or kind not in _DOMAIN_KINDS:
+        raise SampleError(f"domain kind must be one of {_DOMAIN_KINDS}, got {_shown(kind)}")
+    try:
+        lo_a, hi_a = (np.asarray(v, dtype=np.float64) for v in (lo, hi))
+    except (TypeError, ValueError, OverflowError):
+        raise SampleError(f"domain lo and hi must be 3 numbers each [m], got {_shown(lo)}, {_shown(hi)}") from None
+    if lo_a.shape != (3,) or hi_a.shape != (3,) or not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
+        raise SampleError(f"domain lo and hi must be 3 finite numbers each [m], got {_shown(lo)}, {_shown(hi)}")
+    if not np.all(hi_a > lo_a):
+        raise SampleError(f"domain hi must exceed lo in x, y and z, got lo {lo_a.tolist()}, hi {hi_a.tolist()}")
+    return Domain(kind, tuple(lo_a.tolist()), tuple(hi_a.tolist()))
+
+
+def _array(name: str, x) -> np.ndarray:
+    """``np.asarray(x)``, or a :class:`SampleError` naming ``name`` for what makes no array (ragged lists, ...)."""
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise SampleError(f"{name} must be an array of numbers, got {_shown(x)} ({exc})") from None
+
+
 def _float_array(name: str, x) -> np.ndarray:
-    arr = np.asarray(x)
+    arr = _array(name, x)
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
         raise SampleError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
     return arr.astype(np.float64)

@@ -3,6 +3,7 @@ CSV, VTU series), with exact round trips, errors naming the line, and the CLI.""
 
 import dataclasses
 import os
+import re
 import subprocess
 import textwrap
 import warnings
@@ -17,7 +18,7 @@ import pytest
 from jaxbpm import cli, io
 from jaxbpm.interop import conventions, formats
 from jaxbpm.interop.conventions import InexactTranslationWarning, JaxbpmBond
-from jaxbpm.errors import ConventionError, SampleFileError
+from jaxbpm.errors import ConventionError, SampleError, SampleFileError
 from jaxbpm.physics.bond import bond_law
 from jaxbpm.sample import Domain, Sample
 
@@ -196,6 +197,7 @@ def test_lammps_data_without_jaxbpm_comments(tmp_path):
     text = formats.write_lammps_data(tmp_path / "s.data", sample).read_text().splitlines()
     plain = [ln.split("#")[0].rstrip() if not ln.startswith(("Atoms", "Bond Coeffs")) else ln
              for ln in text if not ln.startswith("# jaxbpm")]
+    plain[0] = "LAMMPS data file"  # (a title without jaxbpm's checksum)
     (tmp_path / "plain.data").write_text("\n".join(plain) + "\n")
     with pytest.warns(InexactTranslationWarning, match="summed"):
         back = formats.read_lammps_data(tmp_path / "plain.data", particle_material=sample.particle_material)
@@ -306,6 +308,13 @@ def test_csv_copied_pair_reads_its_own_bonds(tmp_path):
     first = rows[1].split(",")
     first[2] = repr(0.5 * float(first[2]))  # the copy's first bond is thinner
     (tmp_path / "b_bonds.csv").write_text("\n".join([rows[0], ",".join(first)] + rows[2:]) + "\n")
+    # an edited file no longer matches the checksum; deleting the checksum line accepts the edit
+    with pytest.raises(SampleFileError, match=r"b_bonds\.csv: the content does not match its CRC-32 checksum "
+                                              r"\(bonds_crc32=.*To accept an intended edit, delete line \d+ "
+                                              r"\('# crc32=.*'\) of b\.csv"):
+        formats.read_csv(tmp_path / "b.csv")
+    lines = (tmp_path / "b.csv").read_text().splitlines()
+    (tmp_path / "b.csv").write_text("\n".join(ln for ln in lines if not ln.startswith("# crc32=")) + "\n")
     got = formats.read_csv(tmp_path / "b.csv")  # b_bonds.csv, not a_bonds.csv (the name in the metadata)
     np.testing.assert_allclose(got.bond_radius[0], 0.5 * sample.bond_radius[0], rtol=1e-15)
     (tmp_path / "b_bonds.csv").unlink()  # without a file of its own name, the one the metadata names
@@ -333,6 +342,57 @@ def test_csv_foreign_and_errors(tmp_path):
     (tmp_path / "p.csv").write_text("id,x,y,z,radius\n0,0,0,0,0.5\n1,1,zero,0,0.5\n")
     with pytest.raises(SampleFileError, match=r"p\.csv:3: column 'y' must hold numbers"):
         formats.read_csv(tmp_path / "p.csv")
+
+
+# ============================================================================================== checksums
+def test_lammps_checksum(tmp_path):
+    """A changed digit is an error saying how to accept an intended edit; without the checksum (deleted, or a file
+    from another program) the file reads as it is."""
+    sample = _multi()
+    path = formats.write_lammps_data(tmp_path / "s.data", sample)
+    lines = path.read_text().splitlines()
+    assert re.fullmatch(r".* crc32=[0-9a-f]{8}", lines[0])
+    atom = lines.index("Atoms # bpm/sphere") + 2
+    words = lines[atom].split()
+    words[-1] = repr(float(words[-1]) + 1e-9)  # a hand edit of particle 0's z
+    lines[atom] = " ".join(words)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(SampleFileError, match=r"s\.data: the content does not match its CRC-32 checksum \(crc32=.* on "
+                                              r"line 1.*To accept an intended edit, delete 'crc32=[0-9a-f]{8}' from "
+                                              r"line 1 of s\.data"):
+        formats.read_lammps_data(path)
+    lines[0] = lines[0].split(" crc32=")[0]
+    path.write_text("\n".join(lines) + "\n")
+    edited = formats.read_lammps_data(path)
+    assert edited.positions[0, 2] == sample.positions[0, 2] + 1e-9
+    # a damaged checksum itself
+    path.write_text(formats.write_lammps_data(tmp_path / "t.data", sample).read_text().replace(" crc32=", " crc32=x"))
+    with pytest.raises(SampleFileError, match=r"s\.data:1: malformed checksum crc32"):
+        formats.read_lammps_data(path)
+    with pytest.raises(SampleError, match="title must be one line"):
+        formats.write_lammps_data(tmp_path / "u.data", sample, title="two\nlines")
+
+
+def test_csv_checksums(tmp_path):
+    sample = _multi()
+    p, b = formats.write_csv(tmp_path / "s.csv", sample)
+    last = p.read_text().splitlines()[-1]
+    assert re.fullmatch(r"# crc32=[0-9a-f]{8} bonds_crc32=[0-9a-f]{8}", last)
+    text = p.read_text()
+    p.write_text(text.replace("2650.0", "2651.0"))  # the particle density, in the metadata line
+    with pytest.raises(SampleFileError, match=r"s\.csv: the content does not match its CRC-32 checksum \(crc32="):
+        formats.read_csv(p)
+    p.write_text(text)
+    rows = b.read_text().splitlines()
+    b.write_text("\n".join([rows[0], rows[2], rows[1]] + rows[3:]) + "\n")  # two bonds swapped
+    with pytest.raises(SampleFileError, match=r"s_bonds\.csv: the content does not match its CRC-32 checksum "
+                                              r"\(bonds_crc32=.* on line \d+ of s\.csv"):
+        formats.read_csv(p)
+    p.write_text("".join(ln for ln in text.splitlines(keepends=True) if not ln.startswith("# crc32=")))
+    swapped = formats.read_csv(p)  # without the checksum line, the edit is accepted
+    np.testing.assert_array_equal(swapped.bonds[[1, 0]], sample.bonds[:2])
+    b.write_text("\n".join(rows) + "\n")
+    _assert_same(sample, formats.read_csv(p))
 
 
 # ============================================================================================== VTU series

@@ -1,6 +1,7 @@
 """Sample files (HDF5) and VTK export: exact round trip, atomic writes, clear errors."""
 
 import os
+import re
 
 import h5py
 import jax
@@ -32,6 +33,19 @@ def _multi():
         particle_material={"density": 2650.0, "E": 7e10, "nu": 0.17, "friction": 0.3, "restitution": 0.8},
         bond_contact="replace",
         domain=Domain("cylinder", (-0.5, -1.0, -1.0), (5.5, 1.0, 1.0)))
+
+
+def _without_header(path):
+    """The file's HDF5 content copied into a file without jaxbpm's header (as older jaxbpm versions and other tools
+    write it)."""
+    plain = path.with_name("plain-" + path.name)
+    with h5py.File(path, "r") as a, h5py.File(plain, "w") as b:
+        for key, value in a.attrs.items():
+            b.attrs[key] = value
+        for name in a:
+            a.copy(a[name], b, name=name)
+    plain.replace(path)
+    return path
 
 
 def _assert_same(a: Sample, b: Sample):
@@ -172,8 +186,38 @@ def test_truncated_file(tmp_path):
     path = io.save_sample(tmp_path / "s.h5", _multi())
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(SampleFileError, match=rf"s\.h5: the file holds {len(data) // 2} bytes, but {len(data)} were "
+                                              r"written.*cut short"):
+        io.load_sample(path)
+    _without_header(io.save_sample(path, _multi()))  # a file without the header: HDF5 finds the cut
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
     with pytest.raises(SampleFileError, match="s.h5"):
         io.load_sample(path)
+
+
+def test_header_checks_the_whole_file(tmp_path):
+    """The header's CRC-32 and length cover every byte after it; a file edited through h5py says how to read it."""
+    path = io.save_sample(tmp_path / "s.h5", _multi())
+    data = path.read_bytes()
+    assert re.fullmatch(rb"jaxbpm-sample crc32=[0-9a-f]{8} bytes=%d" % (len(data) - 512), data[:512].split(b"\n")[0])
+    damaged = bytearray(data)
+    damaged[len(data) // 3] ^= 0x10
+    path.write_bytes(bytes(damaged))
+    with pytest.raises(SampleFileError, match=r"does not match the CRC-32 in its header \(crc32=[0-9a-f]{8}, the file "
+                                              r"gives [0-9a-f]{8}\): the file is damaged"):
+        io.load_sample(path)
+    path.write_bytes(data.replace(b" bytes=", b" bytes=x", 1))
+    with pytest.raises(SampleFileError, match=r"the file's header .* is damaged"):
+        io.load_sample(path)
+    path.write_bytes(data)
+    with h5py.File(path, "a") as f:
+        f["particle_material/friction"][()] = 0.4
+    with pytest.raises(SampleFileError, match=r"load it with load_sample\(path, verify=False\) .* and save it again"):
+        io.load_sample(path)
+    edited = io.load_sample(path, verify=False)
+    assert edited.particle_material.friction == 0.4
+    _assert_same(edited, io.load_sample(io.save_sample(path, edited)))
 
 
 def test_not_a_jaxbpm_file(tmp_path):
@@ -193,7 +237,7 @@ def test_wrong_format_version(tmp_path):
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = 99
     with pytest.raises(SampleFileError, match=r"format_version 99.*reads format_version 1"):
-        io.load_sample(path)
+        io.load_sample(path, verify=False)
 
 
 @pytest.mark.parametrize("field", ["positions", "bond_radius", "materials/E", "particle_material/friction",
@@ -203,7 +247,7 @@ def test_missing_field(tmp_path, field):
     with h5py.File(path, "a") as f:
         del f[field]
     with pytest.raises(SampleFileError, match=f"missing field '/{field}'"):
-        io.load_sample(path)
+        io.load_sample(path, verify=False)
 
 
 def test_missing_attribute(tmp_path):
@@ -211,15 +255,15 @@ def test_missing_attribute(tmp_path):
     with h5py.File(path, "a") as f:
         del f.attrs["domain_hi"]
     with pytest.raises(SampleFileError, match="domain_hi"):
-        io.load_sample(path)
+        io.load_sample(path, verify=False)
 
 
 def test_invalid_content_is_a_sample_error(tmp_path):
     path = io.save_sample(tmp_path / "s.h5", _chain())
     with h5py.File(path, "a") as f:
         f["bonds"][0] = [0, 100]  # bond to a missing particle
-    with pytest.raises(SampleError, match="missing particles"):
-        io.load_sample(path)
+    with pytest.raises(SampleError, match=r"s\.h5: bonds reference missing particles"):
+        io.load_sample(path, verify=False)
 
 
 # ---------------------------------------------------------------------------------------------- VTK
@@ -329,8 +373,10 @@ def test_a_flipped_byte_is_an_error_naming_the_field(tmp_path, field):
     raw = bytearray(target.read_bytes())
     raw[offset + 3] ^= 0x01  # one bit of the field's first chunk
     target.write_bytes(bytes(raw))
-    with pytest.raises(SampleFileError, match=rf"field '/{field}' is corrupt"):
+    with pytest.raises(SampleFileError, match="does not match the CRC-32 in its header"):
         io.load_sample(target)
+    with pytest.raises(SampleFileError, match=rf"field '/{field}' is corrupt"):
+        io.load_sample(target, verify=False)
 
 
 @pytest.mark.parametrize("field, change, derived", [
@@ -340,9 +386,9 @@ def test_a_flipped_byte_is_an_error_naming_the_field(tmp_path, field):
     ("bond_radius", lambda d: d.__setitem__(0, 2 * d[0]), "bond_area"),
 ])
 def test_inputs_changed_after_writing_are_an_error(tmp_path, field, change, derived):
-    """An older file has no checksums, and an edit through h5py rewrites them: the derived quantities stored
-    beside the inputs still tell (and deleting /derived accepts an intended edit)."""
-    path = io.save_sample(tmp_path / "s.h5", _chain())
+    """A file without the header (an older one), edited through h5py (which rewrites the Fletcher-32 sums): the
+    derived quantities stored beside the inputs still tell (and deleting /derived accepts an intended edit)."""
+    path = _without_header(io.save_sample(tmp_path / "s.h5", _chain()))
     with h5py.File(path, "a") as f:
         data = f[field][()]
         change(data)
@@ -353,3 +399,24 @@ def test_inputs_changed_after_writing_are_an_error(tmp_path, field, change, deri
     with h5py.File(path, "a") as f:
         del f["derived"]
     assert io.load_sample(path).n_bonds == _chain().n_bonds
+
+
+@pytest.mark.parametrize("edit, changed", [
+    (lambda f: f["particle_material/friction"].write_direct(np.asarray(0.31)),
+     lambda s: s.particle_material.friction == 0.31),
+    (lambda f: f.attrs.__setitem__("domain_lo", np.array([-0.5, -1.0, -1.25])), lambda s: s.domain.lo[2] == -1.25),
+    (lambda f: f.attrs.__setitem__("bond_contact", "superimpose"), lambda s: s.bond_contact == "superimpose"),
+], ids=["friction", "domain", "bond_contact"])
+def test_scalars_and_attributes_changed_after_writing_are_an_error(tmp_path, edit, changed):
+    """In a file without the header, what no Fletcher-32 sum covers (scalars, attributes) is covered by the inputs'
+    CRC-32 in /derived; without it (an older file, or the attribute deleted to accept an intended edit) the file
+    loads as it is."""
+    path = _without_header(io.save_sample(tmp_path / "s.h5", _multi()))
+    with h5py.File(path, "a") as f:
+        edit(f)
+    with pytest.raises(SampleFileError, match=r"does not match the file's checksum \(/derived attribute inputs_crc32"
+                                              r".*delete the /derived group"):
+        io.load_sample(path)
+    with h5py.File(path, "a") as f:
+        del f["derived"].attrs["inputs_crc32"]
+    assert changed(io.load_sample(path))

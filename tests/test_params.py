@@ -30,6 +30,13 @@ BAD = [
     ([1e9, 0.25], r"'bond_E' and 'bond_nu'.*list"),
     ({"bond_E": [1e9], "bond_nu": [0.25], "bond_tensile_strength": [-1.0]}, r"bond_tensile_strength.*>= 0"),
     ({"bond_E": [1e9], "bond_nu": [0.25], "bond_shear_strength": [float("nan")]}, r"bond_shear_strength.*>= 0"),
+    ({"bond_E": [1e9], "bond_nu": [0.25], "bond_e": [1e9]}, r"unknown key 'bond_e'; did you mean 'bond_E'"),
+    ({"bond_E": [1e9], "bond_nu": [0.25], "bond_friction_angle": [2.0]}, r"bond_friction_angle.*\[0, pi/2\).*0: 2"),
+    ({"bond_E": [1e9], "bond_nu": [0.25], "friction": -0.1}, r"'friction'.*scalar, finite and >= 0; got -0\.1"),
+    ({"bond_E": [1e9], "bond_nu": [0.25], "cohesion_initial": 2e6, "cohesion_max": 1e6},
+     r"cohesion_max.*at least.*cohesion_initial"),
+    ({"bond_E": [1e9 + 1j], "bond_nu": [0.25]}, r"bond_E.*real numbers"),
+    ({"bond_E": [True], "bond_nu": [0.25]}, r"bond_E.*real numbers"),
 ]
 
 
@@ -48,3 +55,18 @@ def test_the_list_form_gives_the_array_answer(lattice):
     assert lists.stiffness == arrays.stiffness
     ste = jaxbpm.solve(lattice, SCENE, "ste", params={"bond_E": (2e9,), "bond_nu": (0.3,)})
     assert np.isfinite(ste.stiffness) and ste.status == "converged"
+
+
+@pytest.mark.parametrize("options, match", [
+    (dict(damping=-1.0), r"damping must lie in \[0, 1\), got -1"),
+    (dict(damping=5), r"damping must lie in \[0, 1\), got 5"),
+    (dict(chunk=0), r"chunk must be a whole number >= 1, got 0"),
+    (dict(transits=0), r"transits must be a positive number, got 0"),
+    (dict(dampnig=0.5), r"unknown.*'dampnig'.*did you mean.*'damping'"),
+])
+def test_bad_dem_options_are_named_before_anything_runs(lattice, options, match):
+    """A negative damping gave a negative stiffness, chunk=0 a ZeroDivisionError and a misspelt option a TypeError
+    naming private functions: each is now refused up front, naming the option."""
+    with jaxbpm.count_compilations() as c, pytest.raises(SceneError, match=match):
+        jaxbpm.solve(lattice, SCENE, "dem", **options)
+    assert c.count == 0

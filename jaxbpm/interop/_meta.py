@@ -1,14 +1,19 @@
-"""The ``# jaxbpm {...}`` metadata line the LAMMPS and CSV writers add (what their columns cannot hold),
-and the number format they share."""
+"""The ``# jaxbpm {...}`` metadata line the LAMMPS and CSV writers add (what their columns cannot hold), the
+CRC-32 checksums they write, and the number format they share."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
+import math
+import numbers
+import re
+import zlib
 
 import numpy as np
 
-from jaxbpm.errors import SampleFileError
+from jaxbpm.errors import ConventionError, SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
 
@@ -43,17 +48,109 @@ def _meta_line(meta: dict) -> str:
 
 
 def _parse_meta(text: str, where: str) -> dict | None:
+    """The metadata of a ``# jaxbpm {...}`` line (``None`` for any other line), its fields checked."""
     if not text.startswith(_META):
         return None
     try:
         meta = json.loads(text[len(_META):])
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:
         raise SampleFileError(f"{where}: unreadable jaxbpm header comment ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != "jaxbpm-exchange":
         raise SampleFileError(f"{where}: the '# jaxbpm' header comment is not a jaxbpm exchange header")
+    _check_meta(meta, where)
     return meta
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _check_meta(meta: dict, where: str) -> None:
+    """Every field the readers use has the type they expect (a damaged header is a named error, not a KeyError)."""
+    def bad(field, expected):
+        raise SampleFileError(f"{where}: the '# jaxbpm' header comment's {field!r} must be {expected}, got "
+                              f"{json.dumps(meta.get(field.split('.')[0]))[:80]}")
+
+    for field in ("bond_contact", "particle_material", "materials"):
+        if field not in meta:
+            raise SampleFileError(f"{where}: the '# jaxbpm' header comment lacks {field!r}")
+    if not isinstance(meta["bond_contact"], str):
+        bad("bond_contact", "a string")
+    pm = meta["particle_material"]
+    if not isinstance(pm, dict) or not all(isinstance(k, str) and _is_number(v) for k, v in pm.items()):
+        bad("particle_material", "an object of numbers")
+    mats = meta["materials"]
+    names = ("E", "nu", "tensile_strength", "shear_strength")
+    if not isinstance(mats, dict) or set(mats) != set(names) or not all(
+            isinstance(mats[k], list) and mats[k] and all(_is_number(v) for v in mats[k]) for k in names):
+        bad("materials", f"an object of non-empty number lists {list(names)}")
+    if len({len(mats[k]) for k in names}) != 1:
+        bad("materials", "lists of one length (one entry per material)")
+    d = meta.get("domain")
+    if d is not None and not (isinstance(d, dict) and isinstance(d.get("kind"), str) and all(
+            isinstance(d.get(k), list) and len(d[k]) == 3 and all(_is_number(v) and math.isfinite(v) for v in d[k])
+            for k in ("lo", "hi"))):
+        bad("domain", "null or an object with 'kind' and 3 finite 'lo' and 'hi' values")
+    if "normalize" in meta and not isinstance(meta["normalize"], bool):
+        bad("normalize", "true or false")
+    if "bonds_file" in meta and not (isinstance(meta["bonds_file"], str) and meta["bonds_file"]
+                                     and "/" not in meta["bonds_file"] and "\\" not in meta["bonds_file"]):
+        bad("bonds_file", "a file name")
+    for field in ("particles", "bonds"):
+        if field in meta and not (isinstance(meta[field], int) and not isinstance(meta[field], bool)
+                                  and meta[field] >= 0):
+            bad(field, "a whole number >= 0")
 
 
 def _domain(meta: dict | None):
     d = None if meta is None else meta.get("domain")
     return None if d is None else Domain(d["kind"], tuple(d["lo"]), tuple(d["hi"]))
+
+
+# ---------------------------------------------------------------------------------------------- checksums
+def _crc32(text: str) -> str:
+    """CRC-32 (zlib) of ``text`` encoded as UTF-8, as 8 lowercase hex digits."""
+    return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
+
+
+def _without_line(text: str, index: int) -> str:
+    """``text`` without its line ``index`` (0-based, as ``str.splitlines`` counts) and that line's break."""
+    parts = text.splitlines(keepends=True)
+    return "".join(parts[:index] + parts[index + 1:])
+
+
+def _checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
+    """The ``NAME=XXXXXXXX`` checksums (``names``, e.g. ``("crc32",)``) of a checksum line; malformed ones are an
+    error (the line was damaged)."""
+    out = {}
+    for name in names:
+        m = re.search(rf"(?:^|\s){name}=(\S*)", line)
+        if m is None or not re.fullmatch(r"[0-9a-f]{8}", m.group(1)):
+            raise SampleFileError(f"{where}: malformed checksum {name} in {line.strip()!r} (expected {name}= and 8 "
+                                  f"hex digits): the file is damaged, or was edited by hand")
+        out[name] = m.group(1)
+    return out
+
+
+def _verify(text: str, name: str, expected: str, path, where: str, how: str) -> None:
+    """``text`` has CRC-32 ``expected`` (checksum ``name`` on ``where``), else a :class:`SampleFileError` for
+    ``path`` saying how to accept an intended edit (``how``)."""
+    got = _crc32(text)
+    if got != expected:
+        raise SampleFileError(f"{path}: the content does not match its CRC-32 checksum ({name}={expected} on {where}; "
+                              f"the file gives {got}): the file is damaged, or was edited after jaxbpm wrote it. To "
+                              f"accept an intended edit, {how} (the file is then read as it is)")
+
+
+def _names_file(read):
+    """``read(path, ...)`` whose :class:`SampleError` (content that makes no valid sample) and
+    :class:`ConventionError` (coefficients with no jaxbpm counterpart) name the file."""
+    @functools.wraps(read)
+    def wrapper(path, *args, **kw):
+        try:
+            return read(path, *args, **kw)
+        except (SampleError, ConventionError) as exc:
+            if str(path) in str(exc):
+                raise
+            raise type(exc)(f"{path}: {exc}") from exc
+    return wrapper

@@ -1,9 +1,16 @@
-"""CSV samples: ``NAME.csv`` (particles) and ``NAME_bonds.csv`` (bonds); see :mod:`jaxbpm.interop.formats`."""
+"""CSV samples: ``NAME.csv`` (particles) and ``NAME_bonds.csv`` (bonds); see :mod:`jaxbpm.interop.formats`.
+
+A particles file written by jaxbpm ends with the comment line ``# crc32=XXXXXXXX bonds_crc32=YYYYYYYY``: the CRC-32
+(zlib, 8 hex digits) of the particles file without that line, and of the whole bonds file. The reader checks both
+when the line is there (a damaged, cut or swapped file is an error) and reads files without it (from other programs,
+or with the line deleted after an intended hand edit) as they are."""
 
 from __future__ import annotations
 
 import csv
 import pathlib
+import re
+from typing import NamedTuple
 
 import numpy as np
 
@@ -11,7 +18,8 @@ from jaxbpm.interop import conventions
 from jaxbpm.errors import SampleFileError
 from jaxbpm.io import atomic_write
 from jaxbpm.sample import Sample
-from jaxbpm.interop._meta import _r, _meta, _meta_line, _parse_meta, _domain
+from jaxbpm.interop._meta import (_checksums, _crc32, _domain, _meta, _meta_line, _names_file, _parse_meta, _r,
+                                  _verify, _without_line)
 from jaxbpm.interop.lammps import _materials_from_bonds
 from jaxbpm.interop.lammps import _read_text
 
@@ -38,19 +46,40 @@ def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     blines = ["i,j,bond_radius,material,E,nu,tensile_strength,shear_strength"]
     blines += [f"{b[k, 0]},{b[k, 1]},{_r(rb[k])},{bm[k]},{_r(m.E[bm[k]])},{_r(m.nu[bm[k]])},"
                f"{_r(m.tensile_strength[bm[k]])},{_r(m.shear_strength[bm[k]])}" for k in range(sample.n_bonds)]
-    out_b = atomic_write(bpath, lambda tmp: pathlib.Path(tmp).write_text("\n".join(blines) + "\n"))
-    out_p = atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text("\n".join(plines) + "\n"))
+    btext = "\n".join(blines) + "\n"
+    ptext = "\n".join(plines) + "\n"
+    ptext += f"# crc32={_crc32(ptext)} bonds_crc32={_crc32(btext)}\n"
+    out_b = atomic_write(bpath, lambda tmp: pathlib.Path(tmp).write_text(btext, encoding="utf-8"))
+    out_p = atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(ptext, encoding="utf-8"))
     return out_p, out_b
 
 
-def _csv_rows(path: pathlib.Path) -> tuple[dict | None, list[str], list[tuple[int, list[str]]]]:
+_CHECKSUM_LINE = re.compile(r"#\s*crc32=")
+
+
+class _Rows(NamedTuple):
+    """A CSV file read: its text, metadata, column names, ``(line number, values)`` rows and checksum line."""
+
+    text: str
+    meta: dict | None
+    header: list[str]
+    rows: list[tuple[int, list[str]]]
+    crc_line: tuple[int, str] | None
+
+
+def _csv_rows(path: pathlib.Path) -> _Rows:
     text = _read_text(path)
-    meta, rows, header = None, [], None
+    meta, rows, header, crc_line = None, [], None, None
     for no, line in enumerate(text.splitlines(), start=1):
         if line.lstrip().startswith("#"):
+            if crc_line is None and _CHECKSUM_LINE.match(line.strip()):
+                crc_line = (no, line)
             meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
             continue
-        row = next(csv.reader([line]), [])
+        try:
+            row = next(csv.reader([line]), [])
+        except csv.Error as exc:
+            raise SampleFileError(f"{path}:{no}: not a CSV line ({exc}): {line.strip()!r}") from None
         if not row or all(not c.strip() for c in row):
             continue
         if header is None:
@@ -61,27 +90,36 @@ def _csv_rows(path: pathlib.Path) -> tuple[dict | None, list[str], list[tuple[in
         rows.append((no, [c.strip() for c in row]))
     if header is None:
         raise SampleFileError(f"{path}: no header line (column names)")
-    return meta, header, rows
+    return _Rows(text, meta, header, rows, crc_line)
+
+
+def _whole_lines(path: pathlib.Path, text: str) -> None:
+    """A file jaxbpm wrote ends with a line break: one that does not was cut in the middle of a line."""
+    if text and not text.endswith(("\n", "\r")):
+        last = text.splitlines()[-1]
+        raise SampleFileError(f"{path}:{len(text.splitlines())}: the file ends in the middle of a line "
+                              f"(truncated?): {last.strip()!r}")
 
 
 def _column(path, header, rows, names, cast=float, required=True):
     for name in names:
         if name in header:
             c = header.index(name)
-            out = []
-            for no, row in rows:
+            out = np.zeros(len(rows), dtype=np.int64 if cast is int else np.float64)
+            for k, (no, row) in enumerate(rows):
                 try:
-                    out.append(cast(row[c]))
-                except ValueError:
+                    out[k] = cast(row[c])
+                except (ValueError, OverflowError):
                     raise SampleFileError(f"{path}:{no}: column {name!r} must hold "
                                           f"{'whole numbers' if cast is int else 'numbers'}, got {row[c]!r}") from None
-            return np.asarray(out, dtype=np.int64 if cast is int else np.float64), name
+            return out, name
     if required:
         raise SampleFileError(f"{path}: missing column {' or '.join(repr(n) for n in names)} (columns: "
                               f"{','.join(header)})")
     return None, None
 
 
+@_names_file
 def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, **sample_kw) -> Sample:
     """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
     file named in the particles file's metadata) CSV files.
@@ -90,7 +128,10 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     ``bond_radius``/``bond_diameter`` column; ``sample_kw`` go to :meth:`Sample.from_arrays`.
     """
     path = pathlib.Path(path)
-    meta, header, rows = _csv_rows(path)
+    prows = _csv_rows(path)
+    meta, header, rows = prows.meta, prows.header, prows.rows
+    if meta is not None:
+        _whole_lines(path, prows.text)
     if not rows:
         raise SampleFileError(f"{path}: no particles")
     # the bonds file next to the particles file by its own name first (a copied or renamed pair of files reads its
@@ -115,11 +156,20 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])
         kw.setdefault("domain", _domain(meta))
+    sums = None
+    if prows.crc_line is not None:
+        no, line = prows.crc_line
+        sums = _checksums(line, f"{path}:{no}", ("crc32", "bonds_crc32"))
     if not bpath.exists():
-        if meta is not None:
+        if meta is not None or sums is not None:
             raise SampleFileError(f"{bpath}: no such file (the bonds of {path})")
         return Sample.from_arrays(pos, rad, np.zeros((0, 2), int), np.zeros(0), **kw)
-    _, bheader, brows = _csv_rows(bpath)
+    if bpath.is_dir():
+        raise SampleFileError(f"{bpath}: is a directory, not the bonds file of {path}")
+    brows_all = _csv_rows(bpath)
+    bheader, brows = brows_all.header, brows_all.rows
+    if meta is not None:
+        _whole_lines(bpath, brows_all.text)
     nb = len(brows)
     # the counts the metadata declares (files written by jaxbpm) must be what was read: a cut file is an error
     for what, declared, read, where in (("particles", meta and meta.get("particles"), len(rows), path),
@@ -132,6 +182,11 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
         if pair[0] in bheader:
             ends = [_column(bpath, bheader, brows, (p,), cast=int)[0] for p in pair]
             break
+    if sums is not None:  # the files read well: are they the ones jaxbpm wrote?
+        no, line = prows.crc_line
+        how = f"delete line {no} ({line.strip()!r}) of {path.name}"
+        _verify(_without_line(prows.text, no - 1), "crc32", sums["crc32"], path, f"line {no}", how)
+        _verify(brows_all.text, "bonds_crc32", sums["bonds_crc32"], bpath, f"line {no} of {path.name}", how)
     if not ends:
         raise SampleFileError(f"{bpath}: missing particle columns i,j (or id1,id2) (columns: {','.join(bheader)})")
     bonds = np.zeros((nb, 2), np.int64)
@@ -158,8 +213,8 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
                 bad = np.flatnonzero(~((v == want) | (np.isnan(v) & np.isnan(want))))
                 if bad.size:
                     no = brows[bad[0]][0]
-                    raise SampleFileError(f"{bpath}:{no}: {k} = {v[bad[0]]!r} disagrees with material "
-                                          f"{bm[bad[0]]}'s {want[bad[0]]!r} in the header")
+                    raise SampleFileError(f"{bpath}:{no}: {k} = {float(v[bad[0]])!r} disagrees with material "
+                                          f"{int(bm[bad[0]])}'s {float(want[bad[0]])!r} in the header")
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, materials=mats, **geom, **kw)
     if "materials" in kw:
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, **geom, **kw)

@@ -97,13 +97,26 @@ def read_lammps_dump(path) -> list[DumpFrame]:
         for c in range(3):
             if i + 5 + c >= len(lines):
                 raise SampleFileError(f"{path}:{len(lines)}: the box bounds are cut short")
+            words = lines[i + 5 + c].split()[:2]
             try:
-                box[c] = [float(w) for w in lines[i + 5 + c].split()[:2]]
+                box[c] = [float(w) for w in words]
+                if len(words) != 2 or not np.isfinite(box[c]).all():
+                    raise ValueError
             except ValueError:
-                raise SampleFileError(f"{path}:{i + 6 + c}: box bounds must be numbers") from None
+                raise SampleFileError(f"{path}:{i + 6 + c}: box bounds must be two finite numbers (lo hi), got "
+                                      f"{lines[i + 5 + c].strip()!r}") from None
         names = expect(i + 8, "ITEM: ATOMS" if kind == "atoms" else "ITEM: ENTRIES").split()
         if not names:
             raise SampleFileError(f"{path}:{i + 9}: the ITEM line names no columns")
+        if kind == "local" and len(names) < 2:
+            raise SampleFileError(f"{path}:{i + 9}: an ENTRIES frame needs two columns of bond atom IDs, got "
+                                  f"{' '.join(names)!r}")
+        if count < 0:
+            raise SampleFileError(f"{path}:{i + 4}: the number of {'atoms' if kind == 'atoms' else 'entries'} is "
+                                  f"{count} (< 0)")
+        if count > len(lines) - (i + 9):  # (before any memory is taken for the rows)
+            raise SampleFileError(f"{path}:{len(lines)}: the frame at timestep {step} ends after "
+                                  f"{len(lines) - (i + 9)} of {count} rows")
         data = np.zeros((count, len(names)))
         for r in range(count):
             k = i + 9 + r
@@ -120,6 +133,14 @@ def read_lammps_dump(path) -> list[DumpFrame]:
         cols = {name: data[:, c] for c, name in enumerate(names)}
         if kind == "atoms" and "id" not in cols:
             raise SampleFileError(f"{path}:{i + 9}: an ATOMS frame needs an 'id' column")
+        id_cols = ["id"] if kind == "atoms" else [next((c for c in names if key in c), names[k])
+                                                  for k, key in enumerate(("batom1", "batom2"))]
+        for name in id_cols:  # atom IDs: whole numbers (a NaN would become an arbitrary integer)
+            bad = np.flatnonzero(~np.isfinite(cols[name]) | (cols[name] != np.round(cols[name]))
+                                 | (np.abs(cols[name]) >= 2.0**62))
+            if bad.size:
+                raise SampleFileError(f"{path}:{i + 10 + int(bad[0])}: column {name!r} holds atom IDs, which must be "
+                                      f"whole numbers; got {lines[i + 9 + int(bad[0])].strip()!r}")
         frames.append(DumpFrame(step, box, kind, cols))
         i += 9 + count
     if not frames:

@@ -3,6 +3,12 @@
 All writers are atomic (a temporary file next to the target, renamed onto it when complete). Readers raise
 :class:`~jaxbpm.errors.SampleFileError` naming the file and line of a malformed entry.
 
+Checksums: jaxbpm's text files carry a CRC-32 (zlib) of what they hold -- a LAMMPS data file at the end of its title
+line (``crc32=XXXXXXXX``, of the text after that line), a CSV pair on the last line of the particles file (``#
+crc32=XXXXXXXX bonds_crc32=YYYYYYYY``, of the particles file without that line and of the bonds file). The readers
+check them, so a damaged, cut or swapped file is an error, not a silently different sample; files without them (from
+other programs) are read as they are. To accept an intended hand edit, delete the checksum (the error says where).
+
 LAMMPS data (:func:`write_lammps_data`, :func:`read_lammps_data`)
     ``atom_style bpm/sphere`` (``id mol type diameter density x y z``; ``sphere``: ``id type diameter density x y
     z``; optional image flags), ``Bonds`` (``id type atom1 atom2``) and a ``Bond Coeffs # bpm/rotational`` section

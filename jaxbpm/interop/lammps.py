@@ -1,5 +1,10 @@
 """LAMMPS data files (``atom_style bpm/sphere`` or ``sphere``, ``Bonds``, ``Bond Coeffs # bpm/rotational``) and
-``bpm/rotational`` coefficient files; see :mod:`jaxbpm.interop.formats` for the layout."""
+``bpm/rotational`` coefficient files; see :mod:`jaxbpm.interop.formats` for the layout.
+
+A data file written by jaxbpm ends its title line with ``crc32=XXXXXXXX``, the CRC-32 (zlib, 8 hex digits) of the
+file's text after the title line; the reader checks it when present (a damaged or cut file is an error) and reads
+files without it (from LAMMPS or other programs, or with the checksum deleted after an intended hand edit) as they
+are."""
 
 from __future__ import annotations
 
@@ -15,7 +20,8 @@ from jaxbpm.interop import conventions
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.io import atomic_write
 from jaxbpm.sample import ParticleMaterial, Sample
-from jaxbpm.interop._meta import _BIG, _domain, _meta, _meta_line, _N_COEFFS, _parse_meta, _r
+from jaxbpm.interop._meta import (_BIG, _checksums, _crc32, _domain, _meta, _meta_line, _N_COEFFS, _names_file,
+                                  _parse_meta, _r, _verify, _without_line)
 
 
 def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarray:
@@ -97,6 +103,9 @@ def _coeff_row(words: list[str], where: str) -> tuple[int, np.ndarray]:
     except ValueError:
         raise SampleFileError(f"{where}: bond coefficients must be a type number and numbers, got "
                               f"{' '.join(words)!r}") from None
+    if np.isnan(row).any() or not np.isfinite(row[:4]).all():
+        raise SampleFileError(f"{where}: bond coefficients must be numbers, the stiffnesses Kr Ks Kt Kb finite; got "
+                              f"{' '.join(words)!r}")
     if len(row) == 8:
         row = np.concatenate([row, np.zeros(4)])
     return t, row
@@ -116,13 +125,15 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
         difference).
       coefficients: write the ``Bond Coeffs # bpm/rotational`` section (read it in LAMMPS with ``nocoeff`` and
         include :func:`write_lammps_coeffs`'s lines instead, since the bond style must follow the box).
-      title: first line of the file.
+      title: first line of the file (one line; jaxbpm appends its checksum ``crc32=XXXXXXXX``).
 
     Returns:
       ``path`` as a :class:`pathlib.Path`.
     """
     if not isinstance(sample, Sample):
         raise TypeError(f"write_lammps_data expects a jaxbpm Sample, got {type(sample).__name__}")
+    if title and (not isinstance(title, str) or title.splitlines() != [title] or "crc32=" in title):
+        raise SampleError(f"title must be one line of text (without 'crc32='), got {title!r}")
     n, nb = sample.n_particles, sample.n_bonds
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     b = np.asarray(sample.bonds)
@@ -154,9 +165,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
     from jaxbpm._version import __version__
 
-    lines = [title or f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
-                      f"jaxbpm {__version__}",
-             _meta_line(_meta(sample, normalize=bool(normalize))), "",
+    lines = [_meta_line(_meta(sample, normalize=bool(normalize))), "",
              f"{n} atoms", f"{int(atype.max())} atom types", f"{nb} bonds", f"{max(len(table), 1)} bond types", "",
              *(f"{_r(lo[c])} {_r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
              "Atoms # bpm/sphere", ""]
@@ -169,9 +178,13 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
         rb, bm = np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
         lines += ["", "Bonds", ""]
         lines += [f"{k + 1} {btype[k]} {b[k, 0] + 1} {b[k, 1] + 1} # {_r(rb[k])} {bm[k]}" for k in range(nb)]
+    body = "\n".join(lines) + "\n"
+    head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
+                     f"jaxbpm {__version__}")
+    text = f"{head} crc32={_crc32(body)}\n{body}"
 
     def write(tmp):
-        pathlib.Path(tmp).write_text("\n".join(lines) + "\n")
+        pathlib.Path(tmp).write_text(text, encoding="utf-8")
 
     return atomic_write(path, write)
 
@@ -203,6 +216,7 @@ class _Line:
     comment: str
 
 
+@_names_file
 def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
                      breaking: bool = True, bond_radius_ratio: float | None = None,
                      materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
@@ -232,8 +246,10 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     path = pathlib.Path(path)
     text = _read_text(path)
     raw = text.splitlines()
+    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
+    crc = _checksums(raw[0], f"{path}:1", ("crc32",))["crc32"] if raw and "crc32=" in raw[0] else None
     meta = None
-    for no, line in enumerate(raw[1:6], start=2):
+    for no, line in enumerate(raw[:6], start=1):
         meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
     # header
     counts: dict[str, int] = {}
@@ -314,12 +330,12 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
             ids[k] = int(ln.words[0])
             dia[k], dens[k] = float(ln.words[2 + off]), float(ln.words[3 + off])
             pos[k] = [float(w) for w in ln.words[4 + off:7 + off]]
-        except ValueError:
+        except (ValueError, OverflowError):
             raise SampleFileError(f"{path}:{ln.no}: Atoms line has a non-numeric value: "
                                   f"{raw[ln.no - 1].strip()!r}") from None
         if not (dia[k] > 0 and np.isfinite(dia[k])):
-            raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has diameter {dia[k]!r}; jaxbpm needs spheres "
-                                  f"with a finite diameter > 0")
+            raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has diameter {float(dia[k])!r}; jaxbpm needs "
+                                  f"spheres with a finite diameter > 0")
         if not np.all(np.isfinite(pos[k])):
             raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has a coordinate that is not finite: "
                                   f"{raw[ln.no - 1].strip()!r}")
@@ -331,8 +347,8 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     atom_line = np.array([rows[o].no for o in order])
     if np.any(dens != dens[0]):
         k = int(np.flatnonzero(dens != dens[0])[0])
-        raise SampleFileError(f"{path}:{atom_line[k]}: atom density {dens[k]!r} differs from {dens[0]!r}; a jaxbpm "
-                              f"sample has one particle density")
+        raise SampleFileError(f"{path}:{atom_line[k]}: atom density {float(dens[k])!r} differs from "
+                              f"{float(dens[0])!r}; a jaxbpm sample has one particle density")
     index = {int(a): k for k, a in enumerate(ids)}
     # bonds
     _, brows = sections.get("Bonds", (None, []))
@@ -353,18 +369,16 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
                 raise SampleFileError(f"{path}:{ln.no}: bond {ln.words[0]} refers to atom {a}, which is not in Atoms")
         if a1 == a2:
             raise SampleFileError(f"{path}:{ln.no}: bond {ln.words[0]} joins atom {a1} to itself")
+        if not 1 <= t <= counts.get("bond types", 0):
+            raise SampleFileError(f"{path}:{ln.no}: bond type {t} is outside 1..{counts.get('bond types', 0)} "
+                                  "(header 'bond types')")
         bonds[k], btype[k] = (index[a1], index[a2]), t
         extra = ln.comment.split()
         if len(extra) == 2:
             try:
                 rb_c[k], mat_c[k] = float(extra[0]), int(extra[1])
-            except ValueError:
-                pass
-    ntypes = counts.get("bond types", 0)
-    if nb and (btype.min() < 1 or btype.max() > ntypes):
-        k = int(np.flatnonzero((btype < 1) | (btype > ntypes))[0])
-        raise SampleFileError(f"{path}:{brows[k].no}: bond type {btype[k]} is outside 1..{ntypes} (header 'bond "
-                              f"types')")
+            except (ValueError, OverflowError):  # not jaxbpm's comment: the coefficients are translated
+                rb_c[k], mat_c[k] = np.nan, -1
     # coefficients
     table: dict[int, np.ndarray] = {}
     table_line: dict[int, int] = {}
@@ -376,6 +390,9 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         for ln in crows:
             t, row = _coeff_row(ln.words, f"{path}:{ln.no}")
             table[t], table_line[t] = row, ln.no
+    if crc is not None:  # the file read well: is it the one jaxbpm wrote?
+        _verify(_without_line(text, 0), "crc32", crc, path, "line 1",
+                f"delete 'crc32={crc}' from line 1 of {path.name}")
     if coeffs is not None:
         if isinstance(coeffs, (str, pathlib.Path)):
             extra_table, extra_norm = read_lammps_coeffs(coeffs)
