@@ -196,7 +196,7 @@ def test_resume_refuses_another_run(weak, tmp_path):
         jaxbpm.solve(weak, SCENE, "dem", resume=killed, transits=10, chunk=20)
 
 
-def test_a_ctrl_c_swallowed_during_setup_still_stops_the_solve(weak, monkeypatch):
+def test_a_ctrl_c_swallowed_during_setup_still_stops_the_solve(weak, monkeypatch, tmp_path):
     """Python drops a KeyboardInterrupt raised inside a garbage-collection callback (JAX runs one during setups
     and compilations): the solve must stop all the same, not run to the end."""
     import gc
@@ -216,9 +216,10 @@ def test_a_ctrl_c_swallowed_during_setup_still_stops_the_solve(weak, monkeypatch
     gc.set_threshold(10)  # (a solve whose programs are compiled allocates too little to start a collection)
     try:
         with pytest.raises(KeyboardInterrupt):
-            jaxbpm.solve(weak, SCENE, "dem", transits=10, chunk=20)
+            jaxbpm.solve(weak, SCENE, "dem", transits=10, chunk=20, record_to=tmp_path / "run.h5")
     finally:
         gc.callbacks.remove(interrupt_once)
         gc.set_threshold(*threshold)
     assert fired and ignored == [KeyboardInterrupt]  # it was swallowed where it arrived, and raised later
+    assert read_records(tmp_path / "run.h5")[1]["status"] == "interrupted"  # the record says so
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
