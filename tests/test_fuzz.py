@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import jaxbpm
+import test_interop
 from jaxbpm import io
 from jaxbpm.errors import JaxbpmError, SceneError
 from jaxbpm.interop import formats
@@ -257,30 +258,7 @@ def test_fuzz_csv(tmp_path):
     tally.finish("CSV", 650)
 
 
-DUMP = b"""ITEM: TIMESTEP
-100
-ITEM: NUMBER OF ATOMS
-3
-ITEM: BOX BOUNDS ff ff ff
-0.0 10.0
-0.0 10.0
-0.0 5.0
-ITEM: ATOMS id type xs ys zs vx
-3 1 0.3 0.0 0.2 1.5
-1 1 0.1 0.5 0.0 0.5
-2 1 0.2 1.0 1.0 1.0
-ITEM: TIMESTEP
-100
-ITEM: NUMBER OF ENTRIES
-2
-ITEM: BOX BOUNDS ff ff ff
-0.0 10.0
-0.0 10.0
-0.0 5.0
-ITEM: ENTRIES c_b[1] c_b[2] c_b[3]
-1 2 1
-3 2 1
-"""
+DUMP = test_interop.DUMP.encode()  # two frames: atoms and a local bond list
 
 
 def test_fuzz_lammps_dump(tmp_path):
