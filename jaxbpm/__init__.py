@@ -2,16 +2,15 @@
 
 jaxbpm never changes JAX's global settings at import. Stiffness solves want float64: call
 ``jax.config.update("jax_enable_x64", True)`` before creating arrays (the ``jaxbpm`` command does this).
+
+``import jaxbpm`` does not import JAX: the names below that need it (samples, solvers, scenes, ...) and the
+submodules load on first use, so ``jaxbpm --help`` answers at once.
 """
 
-from jaxbpm import errors, generate, io, scenes
+from jaxbpm import errors
 from jaxbpm._cache import compilation_cache_dir, default_cache_dir, enable_compilation_cache
-from jaxbpm.options import DEM, DSM, STE
 from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotFiniteError, SampleError,
                            SampleFileError, SceneError, SimulationInterrupted, SolveError)
-from jaxbpm.result import Result
-from jaxbpm.sample import BondMaterials, Domain, ParticleMaterial, Sample, SampleSummary
-from jaxbpm.solving import solve
 
 from jaxbpm._version import __version__
 
@@ -26,21 +25,29 @@ __all__ = [
 ]
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
-_LAZY = ("dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options", "physics", "sample", "result",
+_LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options",
+         "physics", "sample", "result",
          "formats", "conventions")  # (the last two: old names of jaxbpm.interop's modules, deprecated)
+# names loaded on first use: name -> the module that defines it
+_LAZY_NAMES = {
+    "Sample": "jaxbpm.sample", "BondMaterials": "jaxbpm.sample", "ParticleMaterial": "jaxbpm.sample",
+    "Domain": "jaxbpm.sample", "SampleSummary": "jaxbpm.sample", "solve": "jaxbpm.solving",
+    "Result": "jaxbpm.result", "DEM": "jaxbpm.options", "DSM": "jaxbpm.options", "STE": "jaxbpm.options",
+    "count_compilations": "jaxbpm._compile",
+}
 
 
 def __getattr__(name):
+    import importlib
+
     if name in _LAZY:
-        import importlib
-
         return importlib.import_module(f"jaxbpm.{name}")
-    if name == "count_compilations":
-        from jaxbpm._compile import count_compilations
-
-        return count_compilations
+    if name in _LAZY_NAMES:
+        value = getattr(importlib.import_module(_LAZY_NAMES[name]), name)
+        globals()[name] = value  # later look-ups skip this function
+        return value
     raise AttributeError(f"module 'jaxbpm' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY) | {"count_compilations"})
+    return sorted(set(globals()) | set(_LAZY) | set(_LAZY_NAMES))

@@ -4,12 +4,14 @@ Run ``jaxbpm --help`` (or ``python -m jaxbpm --help``) for the sub-commands. The
 when it starts, and JAX's persistent compilation cache (:func:`jaxbpm.enable_compilation_cache`; ``--no-cache``
 to leave it off, ``--cache-dir DIR`` for another directory); library code never changes JAX settings. Errors about
 samples and files are printed as one ``error: ...`` line on stderr with exit code 2; argparse usage errors also
-exit with 2.
+exit with 2. JAX is imported only when a command runs: ``--help`` and ``--version`` answer at once. Options given on
+the command line override a ``--config`` file, which overrides the defaults.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import pathlib
 import sys
 import time
@@ -192,30 +194,36 @@ def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: 
 
 
 def _demo_chart(path, table, sample):
-    """Run time against difference to the DEM, one point per method (log-log)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """Run time against difference to the DEM, one point per method (log-log), wall time beside run time; saved
+    atomically to ``path`` (the format from its suffix). Uses no global matplotlib state."""
+    from matplotlib.figure import Figure
 
     from jaxbpm.io import atomic_write
 
-    fig, ax = plt.subplots(figsize=(6.5, 4.5))
-    for row in table:
+    fig = Figure(figsize=(7.5, 5.5))
+    fig.set_layout_engine("constrained")
+    ax = fig.add_subplot()
+    for k, row in enumerate(table):
         err = max(abs(row["difference_to_dem"]) * 100, 1e-3)
-        ax.scatter(row["run_time"], err, s=60)
-        ax.annotate(f"{row['method']}\n{row['speedup_run']:.0f}x", (row["run_time"], err), fontsize=8,
-                    xytext=(6, 4), textcoords="offset points")
+        color = f"C{k}"
+        ax.scatter(row["run_time"], err, s=60, color=color, zorder=3,
+                   label=f"{row['method']}: run {row['run_time']:.3g} s, wall {row['wall_time']:.3g} s")
+        if row["wall_time"] > row["run_time"]:  # wall time (compilation included) on the same accuracy
+            ax.scatter(row["wall_time"], err, s=60, facecolors="none", edgecolors=color, zorder=3)
+            ax.plot([row["run_time"], row["wall_time"]], [err, err], color=color, lw=1, alpha=0.5)
+        # alternate the label above and below the point so that neighbours do not overlap
+        ax.annotate(f"{row['method']} ({row['speedup_run']:.0f}x)", (row["run_time"], err), fontsize=8,
+                    xytext=(6, 8 if k % 2 == 0 else -14), textcoords="offset points", color=color)
+    ax.scatter([], [], s=60, facecolors="none", edgecolors="grey", label="open: wall time (with compilation)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("run time [s] (compilation excluded)")
+    ax.set_xlabel("time [s]: filled = run time (compilation excluded), open = wall time")
     ax.set_ylabel("|stiffness difference to DEM| [%] (DEM: floor 1e-3)")
     ax.set_title(f"speed against accuracy: {sample.n_particles} particles, {sample.n_bonds} bonds")
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
-    plt.close(fig)
-    return path
+    fig.legend(fontsize=8, loc="outside lower center", ncols=2)  # below the axes: covers no point
+    suffix = pathlib.Path(path).suffix.lstrip(".") or "png"
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=suffix))
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -255,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "export them to ParaView.",
         epilog="Run 'jaxbpm COMMAND --help' for the options of a command. Units are SI (m, kg, Pa).")
     parser.add_argument("--version", action="version", version=f"jaxbpm {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_CommandParser)
 
     d = _GENERATE_DEFAULTS
     p = sub.add_parser(
@@ -323,20 +331,80 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the calibration step")
     p.set_defaults(func=_cmd_demo)
 
-    from jaxbpm.interop.cli import add_parsers as _add_interop  # convert, params
-
-    _add_interop(sub)
-
-    from jaxbpm.calibrate._cli import add_parser as _add_calibrate
-
-    _add_calibrate(sub)
+    # commands defined in packages that import JAX: their options are added when the command is used (or its
+    # help shown), so that `jaxbpm --help` and the other commands' parsing stay free of JAX
+    lazy = {name: sub.add_parser(name, help=text) for name, text in _LAZY_COMMANDS.items()}
+    for name, parser_ in lazy.items():
+        parser_.populate = functools.partial(_populate, lazy, _LAZY_LOADERS[name])
     # the cache options are global, accepted before the command and after it (SUPPRESS: an option absent after the
     # command does not overwrite the value given before it)
     _add_cache_options(parser, argparse.SUPPRESS)
-    for command_parser in sub.choices.values():
-        _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
+    for name, command_parser in sub.choices.items():
+        if name not in lazy:
+            _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
     parser.set_defaults(no_cache=False, cache_dir=None)
     return parser
+
+
+# commands whose options come from another module (it imports JAX): name -> one-line help, name -> loader
+_LAZY_COMMANDS = {
+    "convert": "convert a sample between file formats (HDF5, LAMMPS data, CSV, VTU; dump -> VTU series)",
+    "params": "translate bond parameters between jaxbpm, PFC, LAMMPS, Yade and MUSEN",
+    "calibrate": "calibrate the bond moduli of a sample to measured targets",
+}
+_LAZY_LOADERS = {"convert": ("jaxbpm.interop.cli", "add_parsers"), "params": ("jaxbpm.interop.cli", "add_parsers"),
+                 "calibrate": ("jaxbpm.calibrate._cli", "add_parser")}
+
+
+class _CommandParser(argparse.ArgumentParser):
+    """A sub-command's parser; with ``populate`` set, its options are added on first use (parse or help)."""
+
+    populate = None
+
+    def _ready(self) -> None:
+        populate, self.populate = self.populate, None
+        if populate is not None:
+            populate()
+
+    def parse_known_args(self, args=None, namespace=None):
+        self._ready()
+        return super().parse_known_args(args, namespace)
+
+    def format_usage(self):
+        self._ready()
+        return super().format_usage()
+
+    def format_help(self):
+        self._ready()
+        return super().format_help()
+
+
+class _Into:
+    """Stands in for the sub-parsers of ``jaxbpm`` for a module's ``add_parser(s)``: ``add_parser(name, ...)``
+    returns the parser already registered under ``name`` (description and epilog taken from the call)."""
+
+    def __init__(self, parsers: dict[str, argparse.ArgumentParser]):
+        self.parsers = parsers
+
+    def add_parser(self, name, **kwargs):
+        parser = self.parsers[name]
+        for key in ("description", "epilog"):
+            if key in kwargs:
+                setattr(parser, key, kwargs[key])
+        return parser
+
+
+def _populate(parsers: dict[str, argparse.ArgumentParser], loader: tuple[str, str]) -> None:
+    """Add the options of the commands ``loader`` defines (module, function) to their registered parsers."""
+    import importlib
+
+    module, function = loader
+    before = {name: len(p._actions) for name, p in parsers.items()}
+    getattr(importlib.import_module(module), function)(_Into(parsers))
+    for name, parser in parsers.items():
+        if len(parser._actions) > before[name]:  # filled by this loader
+            parser.populate = None
+            _add_cache_options(parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
 
 
 def _add_cache_options(parser, default) -> None:

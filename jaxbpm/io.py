@@ -609,19 +609,19 @@ def export_local_map_vtk(path, sample, lmap) -> pathlib.Path:
 
 
 def plot_local_map(path, lmap, *, direction: int = 2, slice_axis: int = 1, thickness: float | None = None):
-    """Save a picture (PNG, ...) of the deviation (Eq. 36, percent) along ``direction`` in a slice through the
-    middle of the sample normal to ``slice_axis`` (``thickness`` default two neighbourhood radii)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    """Save a picture (format from the suffix: PNG, SVG, PDF, ...) of the deviation (Eq. 36, percent) along
+    ``direction`` in a slice through the middle of the sample normal to ``slice_axis`` (``thickness`` default two
+    neighbourhood radii). Written atomically, without pyplot or any global matplotlib state; returns the path."""
+    from matplotlib.figure import Figure
 
     pos = lmap.positions
     mid = 0.5 * (pos[:, slice_axis].min() + pos[:, slice_axis].max())
     t = 2.0 * lmap.radius if thickness is None else float(thickness)
     sel = (np.abs(pos[:, slice_axis] - mid) <= 0.5 * t) & np.isfinite(lmap.deviation[:, direction])
     axes = [k for k in range(3) if k != slice_axis]
-    fig, ax = plt.subplots(figsize=(5, 4.5))
+    fig = Figure(figsize=(5, 4.5))
+    fig.set_layout_engine("constrained")
+    ax = fig.add_subplot()
     val = 100.0 * lmap.deviation[sel, direction]
     lim = float(np.nanmax(np.abs(val))) if val.size else 1.0
     sc = ax.scatter(pos[sel, axes[0]], pos[sel, axes[1]], c=val, cmap="coolwarm", vmin=-lim, vmax=lim, s=12)
@@ -630,7 +630,5 @@ def plot_local_map(path, lmap, *, direction: int = 2, slice_axis: int = 1, thick
     ax.set_ylabel(f"{'xyz'[axes[1]]} [m]")
     ax.set_aspect("equal")
     ax.set_title(f"STE local stiffness, slice normal to {'xyz'[slice_axis]}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return pathlib.Path(path)
+    suffix = pathlib.Path(path).suffix.lstrip(".") or "png"
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=suffix))

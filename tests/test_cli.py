@@ -5,6 +5,7 @@ import os
 import pathlib
 import subprocess
 import sys
+import textwrap
 
 import meshio
 import numpy as np
@@ -173,6 +174,68 @@ def test_errors_are_one_line_exit_2(tmp_path, capsys):
     code, _, err = _run(capsys, "generate", "--shape", "sc", "--n", 8, "--out", tmp_path / "nodir" / "x.h5", "--quiet")
     assert code == 2 and err.startswith("error: ")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["good.h5", "junk.h5"]
+
+
+@pytest.mark.parametrize("command, option", [("calibrate", "--target-E"), ("convert", "--normalize"),
+                                             ("params", "--radius1")])
+def test_help_of_the_commands_loaded_on_use(capsys, command, option):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--help"])
+    out = capsys.readouterr().out
+    assert exc.value.code == 0 and command in out and cli._LAZY_COMMANDS[command][:30] in out.replace("\n", " ")
+    with pytest.raises(SystemExit) as exc:
+        cli.main([command, "--help"])
+    out = capsys.readouterr().out
+    assert exc.value.code == 0 and f"usage: jaxbpm {command}" in out and option in out and "--cache-dir" in out
+
+
+def test_help_and_version_import_no_jax():
+    """``jaxbpm --help``, ``--version`` and ``COMMAND --help`` (of commands defined in jaxbpm.cli) answer without
+    importing JAX; ``import jaxbpm`` imports none either and still lists every public name."""
+    code = textwrap.dedent("""
+        import contextlib, io, sys
+        import jaxbpm, jaxbpm.cli
+        assert set(jaxbpm.__all__) <= set(dir(jaxbpm)), set(jaxbpm.__all__) - set(dir(jaxbpm))
+        jaxbpm.cli.build_parser().parse_args(["info", "x.h5", "--no-cache"])
+        out = io.StringIO()
+        for argv in (["--help"], ["--version"], ["generate", "--help"], ["demo", "--help"], ["info", "--help"]):
+            with contextlib.redirect_stdout(out):
+                try:
+                    jaxbpm.cli.main(argv)
+                except SystemExit as exc:
+                    assert exc.code == 0, argv
+        assert "jax" not in sys.modules, [m for m in sys.modules if m.startswith("jaxbpm")]
+        print(out.getvalue())
+    """)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
+    assert res.returncode == 0, res.stderr
+    assert "usage: jaxbpm" in res.stdout and "jaxbpm 0.1.0" in res.stdout and "--packing-fraction" in res.stdout
+
+
+def test_calibrate_options_override_the_config(tmp_path, capsys, monkeypatch):
+    """defaults < --config < options given on the command line."""
+    import jaxbpm.calibrate
+    from jaxbpm.errors import JaxbpmError
+
+    calls = []
+
+    def fake_calibrate(sample, scene, targets, **kw):
+        calls.append({k: kw[k] for k in ("method", "model", "tol")})
+        raise JaxbpmError("stop after the options")
+
+    monkeypatch.setattr(jaxbpm.calibrate, "calibrate", fake_calibrate)
+    sample = io.save_sample(tmp_path / "s.h5", _tiny())
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({"method": "adam", "model": "ste", "tol": 0.02}))
+    for argv, expected in (
+            ([], {"method": "auto", "model": "dsm", "tol": 0.05}),  # the defaults
+            (["--config", config], {"method": "adam", "model": "ste", "tol": 0.02}),  # the config over them
+            (["--config", config, "--model", "dem", "--tol", 0.1], {"method": "adam", "model": "dem", "tol": 0.1}),
+            (["--method", "surrogate", "--config", config], {"method": "surrogate", "model": "ste", "tol": 0.02}),
+            (["--model", "dsm", "--config", config], {"method": "adam", "model": "dsm", "tol": 0.02})):  # = default
+        code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, *argv)
+        assert code == 2 and "stop after the options" in err
+        assert calls[-1] == expected, argv
 
 
 def _env():

@@ -14,18 +14,20 @@ def add_parser(sub) -> None:
                     "targets. Scalar targets come from --target-E / --target-K; vector targets (stress-strain "
                     "points), several parameters and calibrator options from --config FILE.json: "
                     '{"targets": [{"observable": "stress", "at": [...], "value": [...], "weight": 1}], '
-                    '"parameters": [{"key": "bond_E", "index": 0, "bounds": [lo, hi]}], "options": {...}}.')
+                    '"parameters": [{"key": "bond_E", "index": 0, "bounds": [lo, hi]}], "options": {...}}. The '
+                    'config may also set "method", "model" and "tol"; --method, --model and --tol given on the '
+                    'command line override them.')
     p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
     p.add_argument("--target-E", type=float, default=None, dest="target_E", metavar="PA",
                    help="target Young's modulus [Pa]")
     p.add_argument("--target-K", type=float, default=None, dest="target_K", metavar="N/M",
                    help="target stiffness [N/m]")
     p.add_argument("--config", type=pathlib.Path, default=None, help="JSON file with targets, parameters, options")
-    p.add_argument("--method", default="auto", choices=("auto", "adam", "surrogate", "closed-form"),
+    p.add_argument("--method", default=None, choices=("auto", "adam", "surrogate", "closed-form"),
                    help="calibrator (default: auto = multi-fidelity, closed form where it applies)")
-    p.add_argument("--model", default="dsm", choices=("dsm", "ste", "dem"),
+    p.add_argument("--model", default=None, choices=("dsm", "ste", "dem"),
                    help="solver for adam/surrogate/closed-form (default: dsm)")
-    p.add_argument("--tol", type=float, default=0.05, help="relative tolerance on every target (default: 0.05)")
+    p.add_argument("--tol", type=float, default=None, help="relative tolerance on every target (default: 0.05)")
     p.add_argument("--strain", type=float, default=0.002, help="compression strain (default: 0.002)")
     p.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="loading axis (default: 2)")
     p.add_argument("--check", default=None, choices=("dsm", "ste", "dem"),
@@ -35,6 +37,9 @@ def add_parser(sub) -> None:
     p.add_argument("--history", type=pathlib.Path, default=None, help="write the history to this HDF5 file")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
+
+
+_DEFAULTS = {"method": "auto", "model": "dsm", "tol": 0.05}  # of the options a --config can also set
 
 
 def _config(path: pathlib.Path) -> dict:
@@ -86,9 +91,9 @@ def run(args: argparse.Namespace) -> int:
         raise CalibrationError("config options must be an object")
     sample = load_sample(args.sample)
     scene = UniaxialCompression(axis=args.axis, strain=args.strain)
-    method = cfg.get("method", args.method)
-    model = cfg.get("model", args.model)
-    tol = cfg.get("tol", args.tol)
+    # defaults < --config < options given on the command line (those default to None when not given)
+    method, model, tol = (getattr(args, key) if getattr(args, key) is not None else cfg.get(key, default)
+                          for key, default in _DEFAULTS.items())
     print(f"calibrating {sample.n_particles} particles, {sample.n_bonds} bonds: method {method}, model {model}, "
           f"tol {100 * tol:g} %", flush=True)
     try:

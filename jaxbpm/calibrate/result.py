@@ -135,6 +135,7 @@ class CalibrationResult:
         return self.history.save(path, extra=extra)
 
     def plot(self, path=None):
+        """:func:`plot_history` of this result's history: the figure, saved to ``path`` if given."""
         return plot_history(self.history, path)
 
     def table(self) -> str:
@@ -165,15 +166,14 @@ class CalibrationResult:
 
 def plot_history(history: History, path=None):
     """Plot loss, largest error per target and parameter values against the iteration; save to ``path`` if
-    given. Returns the matplotlib figure (Agg backend; matplotlib is imported here only)."""
-    import matplotlib
-
-    if path is not None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    given (atomically, the format from its suffix). Returns the :class:`matplotlib.figure.Figure`, made without
+    pyplot or any global matplotlib state (in a notebook, show it as a cell's last expression)."""
+    from matplotlib.figure import Figure
 
     it = history.column("iteration")
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.5))
+    fig = Figure(figsize=(12, 3.5))
+    fig.set_layout_engine("constrained")
+    axes = fig.subplots(1, 3)
     axes[0].semilogy(it, np.maximum(history.column("loss"), 1e-300), "o-")
     axes[0].set(xlabel="iteration", ylabel="loss L", title="objective")
     errs = np.abs(np.asarray([r["errors"] for r in history.rows]).reshape(len(it), -1))
@@ -186,7 +186,11 @@ def plot_history(history: History, path=None):
         axes[2].plot(it, vals[:, k] / vals[0, k], "o-", label=name)
     axes[2].set(xlabel="iteration", ylabel="value / first value", title="parameters")
     axes[2].legend(fontsize=8)
-    fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=120)
+        import pathlib
+
+        from jaxbpm.io import atomic_write
+
+        suffix = pathlib.Path(path).suffix.lstrip(".") or "png"
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=suffix))
     return fig
