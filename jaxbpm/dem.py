@@ -30,7 +30,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-import sys
 import time
 from typing import Any, Callable
 
@@ -592,16 +591,21 @@ def _collect(model, state, records, chunk, reallocs, clock):
 
 
 def progress_printer(strain_per_step: float | None = None):
-    """A progress callback for :func:`simulate` printing steps (and simulated strain, when the strain per step is
-    given) and elapsed time to stderr, at most every 2 s."""
-    last = [-1e9]
+    """A progress callback for :func:`simulate`: a bar of DEM steps on stderr (:mod:`jaxbpm.progress`) with the
+    simulated strain, when the strain per step is given."""
+    from jaxbpm.progress import bar
+
+    shown = []
 
     def report(done, total, elapsed):
-        if elapsed - last[0] >= 2.0 or done == total:
-            last[0] = elapsed
-            strain = "" if strain_per_step is None else f"  strain {100 * strain_per_step * done:.4f} %"
-            print(f"  DEM step {done}/{total} ({100.0 * done / total:5.1f} %){strain}  elapsed {elapsed:7.1f} s",
-                  file=sys.stderr, flush=True)
+        if not shown:
+            shown.append(bar("DEM steps", total=total))
+        b = shown[0]
+        b.update(done - b.n)
+        if strain_per_step is not None:
+            b.set_postfix_str(f"strain {100 * strain_per_step * done:.4f} %", refresh=False)
+        if done >= total:
+            b.close()
 
     return report
 

@@ -204,8 +204,8 @@ def random_packing(
       bond_radius_ratio: bond radius / radius of the smaller particle of the pair.
       seed: seed of the NumPy generator used for the radii and the insertion (the result is deterministic).
       max_steps: FIRE step budget (per fraction tried).
-      progress: ``True`` prints to stderr, per fraction tried, a line (step, largest overlap / mean radius,
-        elapsed s) at most every 2 s and one line when it packed or was given up; a callable is called after
+      progress: ``True`` shows on stderr, per fraction tried, a bar of FIRE steps with the largest overlap / mean
+        radius (:mod:`jaxbpm.progress`) and one line when it packed or was given up; a callable is called after
         every chunk of FIRE steps as ``progress(step, max_overlap_rel, elapsed_s)`` (step and time counted per
         fraction tried); ``False``/``None``: off.
       **sample_kw: forwarded to :meth:`Sample.from_arrays` (``materials``, ``density``, ``particle_material``,

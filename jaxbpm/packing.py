@@ -48,7 +48,6 @@ _PHI_BULK, _WALL_LOSS = 0.645, 0.2  # expected jamming fraction: _PHI_BULK - _WA
 _AUTO_CHUNK = 100  # FIRE steps per chunk: the attempts are judged after each
 _TRIAL_STEPS, _TRIAL_FROM = 1500, 400  # a fraction above the expected one: step budget, extrapolated from step 400
 _STALL_STEPS, _STALL_DROP = 3000, 0.1  # stalled: the lowest largest overlap fell < 10 % over the last 3000 steps
-_PRINT_EVERY = 2.0  # seconds between progress lines
 
 
 class _Fire(NamedTuple):
@@ -191,8 +190,9 @@ def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, p
     cell_box = _cell_box(walls)
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         packer = _packer(cell_box, float(cutoff), walls.cylinder)
-        run = _relax(packer, x0, radii, walls, _target(tol, cell_box), max_steps, _CHUNK, _jammed,
-                     _reporter(progress, phi))
+        report = _reporter(progress, phi)
+        run = _relax(packer, x0, radii, walls, _target(tol, cell_box), max_steps, _CHUNK, _jammed, report)
+        getattr(report, "close", lambda: None)()
     if not run.packed:
         raise SampleError(_not_converged(run, max_steps, tol, phi))
     return run.x
@@ -213,8 +213,10 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
             trial = None if phi <= _jamming_fraction(wall) else _TRIAL_STEPS
             give_up = _jammed if last else functools.partial(_give_up, target=target, trial=trial)
             t0 = time.perf_counter()
+            report = _reporter(progress, phi)
             run = _relax(packer, start(wall), radii, wall, target, max_steps, _CHUNK if last else _AUTO_CHUNK,
-                         give_up, _reporter(progress, phi), nbrs)
+                         give_up, report, nbrs)
+            getattr(report, "close", lambda: None)()
             if run.packed:
                 return run.x, k
             if last:
@@ -337,25 +339,29 @@ def _not_converged(run: _Attempt, max_steps: int, tol: float, phi: float) -> str
 
 
 def _reporter(progress, phi: float) -> Callable[[int, float, float, bool], None]:
-    """Progress of one attempt: a callable gets every chunk; ``True`` prints at most every ``_PRINT_EVERY`` s, and
-    a last line when the attempt packed."""
+    """Progress of one attempt: a callable gets every chunk; ``True`` shows a bar of FIRE steps with the largest
+    overlap (:mod:`jaxbpm.progress`), and a last line when the attempt packed."""
     if callable(progress):
         return lambda step, worst, elapsed, packed: progress(step, worst, elapsed)
     if not progress:
         return lambda step, worst, elapsed, packed: None
-    printed = [0.0]
+    from jaxbpm.progress import bar
+
+    shown = bar(f"random_packing: packing fraction {phi:g}", unit=" FIRE step", leave=False)
 
     def report(step, worst, elapsed, packed):
+        shown.update(step - shown.n)
+        shown.set_postfix_str(f"max overlap / mean radius {worst:.3e}", refresh=False)
         if packed:
+            shown.close()
             _say(True, f"packing fraction {phi:g}: packed after {step} FIRE steps ({elapsed:.2f} s)")
-        elif elapsed - printed[0] >= _PRINT_EVERY:
-            printed[0] = elapsed
-            _say(True, f"packing fraction {phi:g}: step {step:7d}  max overlap / mean radius {worst:.3e}  "
-                       f"{elapsed:8.2f} s")
 
+    report.close = shown.close
     return report
 
 
 def _say(progress, message: str) -> None:
     if progress is True:
-        print(f"random_packing: {message}", file=sys.stderr, flush=True)
+        from jaxbpm.progress import say
+
+        say(f"random_packing: {message}")

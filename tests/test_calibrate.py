@@ -5,6 +5,7 @@ import json
 
 import jax.numpy as jnp
 import numpy as np
+import optax
 import pytest
 
 import jaxbpm
@@ -175,6 +176,36 @@ def test_target_scaled_form():
     assert res.converged and abs(res.values["bond_E[0]"] - 10.0) < 1e-5
 
 
+def test_adam_default_optimizer_is_optax_adam():
+    kw = dict(gradient="fd-forward", tol=1e-9, max_iterations=8, first_estimate=False, second_estimate=False)
+    res = cal.adam(_analytic_problem([Target("youngs_modulus", 30.0)]), **kw)
+    # the iterates of the hand-applied Adam step before optimizer= existed: exp(0.1 k) for the first steps
+    ref = [1.0, 1.1051709119385378, 1.221540328442136, 1.3504150578882226, 1.4932737582894595, 1.6517910123846327,
+           1.8278647301850988, 2.0236472535478476]
+    np.testing.assert_allclose(res.history.column("values")[:, 0], ref, rtol=1e-13)
+    np.testing.assert_allclose([r["loss"] for r in res.history.rows][:2], [0.81, 0.791179845058243], rtol=1e-13)
+    assert res.info["optimizer"] == "adam" and res.info["learning_rate"] == 0.1
+    same = cal.adam(_analytic_problem([Target("youngs_modulus", 30.0)]),
+                    optimizer=optax.adam(0.1, b1=0.9, b2=0.99, eps=1e-8), **kw)
+    np.testing.assert_array_equal(same.history.column("values"), res.history.column("values"))
+    assert same.info["optimizer"] == "custom" and same.info["learning_rate"] is None
+
+
+@pytest.mark.parametrize("name", ["sgd", "adamw"])
+def test_adam_accepts_any_optax_optimizer(name):
+    opt = optax.sgd(0.5) if name == "sgd" else optax.adamw(0.2, b2=0.99, weight_decay=1e-4)
+    res = cal.adam(_analytic_problem([Target("youngs_modulus", 30.0)]), gradient="autodiff", optimizer=opt, tol=1e-3,
+                   max_iterations=40, first_estimate=False, second_estimate=False)
+    assert res.converged and abs(res.values["bond_E[0]"] / 10.0 - 1) < 1e-3  # E = 3 bond_E = 30
+    # a different optimizer takes a different path from the default Adam's
+    first = cal.adam(_analytic_problem([Target("youngs_modulus", 30.0)]), gradient="autodiff", max_iterations=2,
+                     first_estimate=False, second_estimate=False)
+    assert abs(res.history.rows[1]["values"][0] - first.history.rows[1]["values"][0]) > 1e-3
+    for bad in ("sgd", optax.sgd, 0.1):
+        with pytest.raises(CalibrationError, match="optimizer must be an optax.GradientTransformation"):
+            cal.adam(_analytic_problem([Target("youngs_modulus", 30.0)]), optimizer=bad)
+
+
 # ---------------------------------------------------------------------------------------------------- surrogate
 AT = np.linspace(0.2, 1.0, 5)
 
@@ -221,6 +252,40 @@ def test_surrogate_drops_unimportant_parameter_and_resamples():
                         resample_runs=60, seed=0)
     assert res.info["dropped"] == ["bond_nu[0]"] and res.evaluations == 120
     assert res.values["bond_nu[0]"] == 0.3 and res.info["mean_importance"][2] == 0.0
+
+
+def test_surrogate_takes_any_scikit_learn_regressor():
+    from sklearn.cluster import KMeans
+    from sklearn.ensemble import ExtraTreesRegressor, RandomForestRegressor
+    from sklearn.multioutput import MultiOutputRegressor
+    from sklearn.neighbors import KNeighborsRegressor
+    from sklearn.svm import SVR
+
+    pb = _curve_problem(2.2, 1.1)
+    kw = dict(L_s=200, it_max=6, seed=1)
+    base = cal.surrogate(pb, n_runs=60, n_trees=20, **kw)
+    models = base.info["models"]
+    assert len(models) == 5 and all(type(m) is RandomForestRegressor for m in models)  # one forest per element
+    assert [m.random_state for m in models] == [1, 2, 3, 4, 5]
+    runs = base.info["runs"]
+    et = ExtraTreesRegressor(n_estimators=30, bootstrap=True, oob_score=True)
+    res = cal.surrogate(pb, runs=runs, regressor=et, n_jobs=1, **kw)
+    (model,) = res.info["models"]
+    assert type(model) is ExtraTreesRegressor and model.n_outputs_ == 5  # one multi-output model
+    assert model.random_state == 1 and model.n_jobs == 1 and not hasattr(et, "estimators_")  # a fitted clone
+    assert res.info["oob_r2"].shape == (5,) and np.all(res.info["oob_r2"] > 0.3)
+    assert res.info["importance"].shape == (5, 3) and np.argmin(res.info["mean_importance"]) == 2
+    assert abs(res.values["bond_E[0]"] / 2.2 - 1) < 0.1
+    knn = cal.surrogate(pb, runs=runs, regressor=KNeighborsRegressor(3), **kw)
+    assert type(knn.info["models"][0]) is KNeighborsRegressor and np.all(np.isnan(knn.info["oob_r2"]))
+    with pytest.raises(CalibrationError, match="importance_threshold needs feature importances"):
+        cal.surrogate(pb, runs=runs, regressor=KNeighborsRegressor(3), importance_threshold=0.1, **kw)
+    svr = cal.surrogate(pb, runs=runs, regressor=SVR(C=10.0, epsilon=0.001), I_e=0.5, **kw)
+    (wrapped,) = svr.info["models"]  # SVR fits one output: one clone per element
+    assert type(wrapped) is MultiOutputRegressor and len(wrapped.estimators_) == 5
+    for bad in (KMeans(2), RandomForestRegressor, "rf"):
+        with pytest.raises(CalibrationError, match="regressor must be a scikit-learn regressor"):
+            cal.surrogate(pb, runs=runs, regressor=bad, **kw)
 
 
 # ---------------------------------------------------------------------------------------------------- multi-fidelity

@@ -3,7 +3,8 @@
 The variable is ``z``, the free parameters in log form or target-scaled form (Qu et al. 2020, Eq. 10-11; see
 :class:`~jaxbpm.calibrate.objective.ParameterSpace`). Each iteration evaluates the model at ``z``; once every target
 lies within ``tol`` the calibration stops, else the gradient of the objective (Eq. 3) is taken and optax's Adam
-(Eq. 4-8) makes the step. Options of Qu et al. 2020:
+(Eq. 4-8) makes the step (``optimizer=``: any other ``optax.GradientTransformation``; the step is applied with
+``optax.apply_updates`` and the point then clipped to the parameter bounds). Options of Qu et al. 2020:
 
 * ``loss_scaled``: the Adam step multiplied by the current loss L (Eq. 9): smaller steps near the target, larger far
   from it.
@@ -94,13 +95,16 @@ def loss_and_gradient(problem: Problem, z, method: str = "autodiff", *, step: fl
 def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float = 0.1, b1: float = 0.9,
          b2: float = 0.99, eps: float = 1e-8, tol: float = 0.05, max_iterations: int = 20, loss_scaled: bool = False,
          first_estimate: bool | None = None, second_estimate: bool | None = None, tie: Mapping[str, str] | None = None,
-         simplified: bool = False, fd_step: float = 1e-3, progress=None) -> CalibrationResult:
+         simplified: bool = False, fd_step: float = 1e-3, optimizer: optax.GradientTransformation | None = None,
+         progress=None) -> CalibrationResult:
     """Calibrate ``problem`` with Adam (Qu et al. 2020). Returns a :class:`CalibrationResult` at the best point seen.
 
     gradient: one of :data:`GRADIENTS`. learning_rate, b1, b2, eps: Adam's (Qu et al. 2020 uses b2 = 0.99); the step is
-    in
-    ``z`` (log form: a relative change). tol: stop when every target's relative error is within it (Qu et al. 2020
-    5.1.2: 5 %). max_iterations: evaluated points at most (estimates included). loss_scaled: Eq. 9.
+    in ``z`` (log form: a relative change). optimizer: an ``optax.GradientTransformation`` that makes the step instead
+    (e.g. ``optax.sgd(0.05)``, ``optax.chain(optax.clip_by_global_norm(1.0), optax.adam(0.1))``; learning_rate, b1,
+    b2 and eps are then unused); default ``optax.adam(learning_rate, b1=b1, b2=b2, eps=eps)``. tol: stop when every
+    target's relative error is within it (Qu et al. 2020 5.1.2: 5 %). max_iterations: evaluated points at most
+    (estimates included). loss_scaled: Eq. 9.
     first_estimate / second_estimate: Eq. 14 / 15; ``None`` = on where they make sense (a tie exists; Eq. 14 only
     when each parameter and its target share units, e.g. bond E and Young's modulus). tie: ``{parameter: target}``
     (default: the only parameter to the only scalar target). simplified: Eq. 16-19 (needs ties): ``True``/``"secant"``
@@ -117,6 +121,14 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0) or (name in ("b1", "b2") and v >= 1):
             raise CalibrationError(f"{name} must be a number > 0{' and < 1' if name in ('b1', 'b2') else ''}, "
                                    f"got {v!r}")
+    if optimizer is None:
+        optimizer = optax.adam(learning_rate, b1=b1, b2=b2, eps=eps)
+        opt_name = "adam"
+    elif isinstance(optimizer, optax.GradientTransformation):
+        opt_name = "custom"
+    else:
+        raise CalibrationError(f"optimizer must be an optax.GradientTransformation (e.g. optax.sgd(0.05)), got "
+                               f"{type(optimizer).__name__}")
     if gradient == "autodiff" and not problem.differentiable:
         raise CalibrationError(f"gradient='autodiff' needs a pure (differentiable) model; the "
                                f"{problem.forward.name} model has none for targets {problem.target_names} "
@@ -150,8 +162,7 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         kind = "estimate-1"
         notes.append("first estimate (Qu et al. 2020, Eq. 14): each parameter starts at its target's value")
     z = space.to_z(values)
-    opt = optax.adam(learning_rate, b1=b1, b2=b2, eps=eps)
-    state = opt.init(jnp.asarray(z))
+    state = optimizer.init(jnp.asarray(z))
     pending_second = bool(second_estimate)
     history = History(space.names, problem.target_names)
     evals0 = problem.evaluations
@@ -199,12 +210,13 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         _common.record(history, problem, progress, kind=kind, values=values, errors=e,
                        time=time.perf_counter() - t0)
         with jax.numpy_dtype_promotion("standard"):  # optax mixes float decay rates with an int32 step count
-            updates, state = opt.update(jnp.asarray(g), state, jnp.asarray(z))
-        updates = np.asarray(updates)
-        if loss_scaled:
-            updates = updates * loss
+            updates, state = optimizer.update(jnp.asarray(g), state, jnp.asarray(z))
+            updates = np.asarray(updates)
+            if loss_scaled:
+                updates = updates * loss
+            stepped = np.asarray(optax.apply_updates(z, updates), dtype=np.float64)
         previous = (z.copy(), e.copy())
-        z = space.to_z(space.clip(space.from_z(z + updates)))
+        z = space.to_z(space.clip(space.from_z(stepped)))
         kind = "adam"
     _, values, e = best
     if loss_scaled:
@@ -213,7 +225,8 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         notes.append("simplified scheme (Qu et al. 2020, Eq. 16-19): " + (
             f"one parameter set per iteration ({secants} secant gradients between successive points)" if secant
             else "one perturbed point per iteration"))
-    info = {"gradient": grad_method, "learning_rate": learning_rate, "scaling": space.scaling,
+    info = {"gradient": grad_method, "optimizer": opt_name,
+            "learning_rate": learning_rate if opt_name == "adam" else None, "scaling": space.scaling,
             "first_estimate": bool(first_estimate), "second_estimate": bool(second_estimate),
             "loss_scaled": bool(loss_scaled), "simplified": ("secant" if secant else "perturbed") if simplified
             else False, "secant_gradients": secants, "fd_step": fd_step}

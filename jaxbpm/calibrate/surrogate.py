@@ -3,7 +3,8 @@
 1. A run set: N parameter sets by optimised Latin hypercube sampling (``scipy.stats.qmc``) within the parameter
    ranges, all solved as one batch (``jax.vmap`` for pure models). It is stored in HDF5 (:meth:`RunSet.save`) and
    re-used for other targets on the same specimen without new runs.
-2. One :class:`sklearn.ensemble.RandomForestRegressor` per element of the output vector, trained on
+2. One :class:`sklearn.ensemble.RandomForestRegressor` per element of the output vector (``regressor=``: any
+   scikit-learn regressor instead, one model for all elements), trained on
    ``err = y_target - y_run`` (Irazabal et al. 2023, Eq. 1; divided by the target's scale when ``normalize``), 500
    trees and a
    third of the inputs per split by default; out-of-bag R^2 and the impurity importance of each parameter per element
@@ -139,8 +140,19 @@ def _errors(problem: Problem, runs: RunSet, normalize: bool) -> np.ndarray:
     return np.concatenate(cols, axis=1)
 
 
-def fit_forests(X, err, *, n_trees=500, max_features=1 / 3, seed=0, n_jobs=None):
-    """One random forest per column of ``err [N, m]``; returns ``(forests, oob_r2 [m], importance [m, n])``."""
+def fit_forests(X, err, *, n_trees=500, max_features=1 / 3, seed=0, n_jobs=None, regressor=None):
+    """Fit the surrogate of ``err [N, m]`` on ``X [N, n]``; returns ``(models, oob_r2 [m], importance [m, n])``.
+
+    regressor ``None``: one random forest per column of ``err`` (``n_trees`` trees, ``max_features``, out-of-bag
+    scores, ``random_state = seed + column``). Else a scikit-learn regressor, cloned and fitted once on all columns:
+    natively where it supports several outputs, else wrapped in :class:`sklearn.multioutput.MultiOutputRegressor`;
+    its ``random_state`` (when ``None``) becomes ``seed`` and ``n_jobs`` is passed on where it has that parameter.
+    ``oob_r2`` comes from the model's out-of-bag prediction (e.g. a forest with ``oob_score=True``) and
+    ``importance`` from its ``feature_importances_`` (one model for all columns: the same row for each); both are
+    NaN where the model reports none.
+    """
+    if regressor is not None:
+        return _fit_regressor(regressor, X, err, seed=seed, n_jobs=n_jobs)
     from sklearn.ensemble import RandomForestRegressor
 
     forests, r2, imp = [], [], []
@@ -154,26 +166,77 @@ def fit_forests(X, err, *, n_trees=500, max_features=1 / 3, seed=0, n_jobs=None)
     return forests, np.asarray(r2), np.asarray(imp)
 
 
-def _predict(forests, X) -> np.ndarray:
-    return np.stack([f.predict(X) for f in forests], axis=1)
+def _check_regressor(regressor):
+    """Raise :class:`CalibrationError` unless ``regressor`` is a scikit-learn regressor instance."""
+    from sklearn.base import is_regressor
+
+    if isinstance(regressor, type) or not (hasattr(regressor, "fit") and hasattr(regressor, "predict")
+                                           and hasattr(regressor, "get_params") and is_regressor(regressor)):
+        what = regressor.__name__ if isinstance(regressor, type) else type(regressor).__name__
+        raise CalibrationError(f"regressor must be a scikit-learn regressor instance (e.g. "
+                               f"ExtraTreesRegressor(n_estimators=200)), got {what}")
+
+
+def _multi_output(est) -> bool:
+    try:
+        from sklearn.utils import get_tags  # scikit-learn >= 1.6
+    except ImportError:
+        return bool(est._get_tags().get("multioutput", False))
+    return bool(get_tags(est).target_tags.multi_output)
+
+
+def _fit_regressor(regressor, X, err, *, seed=0, n_jobs=None):
+    from sklearn.base import clone
+    from sklearn.metrics import r2_score
+    from sklearn.multioutput import MultiOutputRegressor
+
+    _check_regressor(regressor)
+    est = clone(regressor)
+    params = est.get_params(deep=False)
+    if "random_state" in params and params["random_state"] is None:
+        est.set_params(random_state=seed)
+    if n_jobs is not None and "n_jobs" in params:
+        est.set_params(n_jobs=n_jobs)
+    if not _multi_output(est):
+        est = MultiOutputRegressor(est, n_jobs=n_jobs)
+    est.fit(X, err)
+    m, n = err.shape[1], X.shape[1]
+    parts = est.estimators_ if isinstance(est, MultiOutputRegressor) else [est]
+    imp = [getattr(p, "feature_importances_", None) for p in parts]
+    imp = (np.full((m, n), np.nan) if any(i is None for i in imp)
+           else np.broadcast_to(np.asarray(imp, dtype=np.float64).reshape(len(parts), n), (m, n)).copy())
+    oob = [getattr(p, "oob_prediction_", None) for p in parts]
+    if any(o is None for o in oob):
+        r2 = np.full(m, np.nan)
+    else:
+        oob = np.concatenate([np.reshape(o, (len(X), -1)) for o in oob], axis=1)
+        r2 = np.array([r2_score(err[:, j], oob[:, j]) for j in range(m)])
+    return [est], r2, imp
+
+
+def _predict(models, X) -> np.ndarray:
+    return np.concatenate([np.reshape(f.predict(X), (len(X), -1)) for f in models], axis=1)
 
 
 def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100, I_e: float = 0.2, L_s: int = 1000,
               it_max: int = 50, n_trees: int = 500, max_features: float = 1 / 3, exclude: float = 0.05,
               normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
               seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, chunk: int | None = None,
-              progress=None) -> CalibrationResult:
+              regressor=None, progress=None) -> CalibrationResult:
     """Calibrate with the random-forest surrogate of Irazabal et al. 2023 (see the module docstring).
 
     runs: a stored :class:`RunSet` to re-use (no new runs); else ``n_runs`` are solved. I_e: initial admissible
     error (relative to each target's scale when ``normalize``, else in the output's units); L_s: combinations per
     iteration; it_max: iterations at most. n_trees, max_features: the forests (Irazabal et al. 2023: 500 and 1/3).
+    regressor: a scikit-learn regressor instance (e.g. ``ExtraTreesRegressor(n_estimators=200)``,
+    ``KNeighborsRegressor(5)``) fitted instead of the forests, cloned per fit (see :func:`fit_forests`; n_trees and
+    max_features then unused). n_jobs: parallel jobs of the forests or of the regressor where it takes them.
     importance_threshold: drop parameters whose mean importance is below it; resample_runs: then solve that many new
     runs on the remaining parameters. chunk: solve the runs in batches of this many (bounds the memory of a
     ``vmap`` of large solves; ``None``: one batch). verify: solve once at the answer and report the measured errors
     (else the surrogate's prediction). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
-    ``mean_importance``, ``dropped``, ``narrowing`` (per iteration: admissible count, error bound, ranges) and the
-    run set (``runs``).
+    ``mean_importance``, ``dropped``, ``narrowing`` (per iteration: admissible count, error bound, ranges), the fitted
+    models (``models``) and the run set (``runs``).
     """
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)
@@ -186,6 +249,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
         raise CalibrationError(f"exclude must lie in [0, 0.5), got {exclude!r}")
     if not (isinstance(max_features, (int, float)) and 0 < max_features <= 1):
         raise CalibrationError(f"max_features must be a fraction in (0, 1], got {max_features!r}")
+    if regressor is not None:
+        _check_regressor(regressor)
     progress = _common.progress_fn(progress)
     evals0 = problem.evaluations
     notes = []
@@ -200,12 +265,15 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
         notes.append(f"re-used a stored run set of {runs.n_runs} runs (no new runs for training)")
     err = _errors(problem, runs, normalize)
     forests, r2, imp = fit_forests(runs.X, err, n_trees=n_trees, max_features=max_features, seed=seed,
-                                   n_jobs=n_jobs)
+                                   n_jobs=n_jobs, regressor=regressor)
     mean_imp = imp.mean(axis=0)
     dropped = []
     active = np.ones(space.n, bool)
     fixed = space.clip(space.initial)
     if importance_threshold is not None:
+        if np.isnan(mean_imp).any():
+            raise CalibrationError(f"importance_threshold needs feature importances; the regressor "
+                                   f"{type(regressor).__name__} reports none")
         active = mean_imp >= importance_threshold
         if not active.any():
             raise CalibrationError(f"every parameter's mean importance is below {importance_threshold}")
@@ -227,7 +295,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
                               {**sub_runs.info, "resampled_from": runs.n_runs})
                 err = _errors(problem, runs, normalize)
                 forests, r2, imp_active = fit_forests(runs.X[:, active], err, n_trees=n_trees,
-                                                      max_features=max_features, seed=seed, n_jobs=n_jobs)
+                                                      max_features=max_features, seed=seed, n_jobs=n_jobs,
+                                                      regressor=regressor)
                 imp = np.zeros((err.shape[1], space.n))
                 imp[:, active] = imp_active
                 notes.append(f"re-sampled {resample_runs} runs on the remaining parameters")
@@ -292,7 +361,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
         notes.append("errors at the answer are the surrogate's prediction")
     notes.append(f"range narrowing stopped: {stop}")
     info = {"oob_r2": r2, "importance": imp, "mean_importance": imp.mean(axis=0), "dropped": dropped,
-            "narrowing": narrowing, "runs": runs, "n_runs": runs.n_runs, "stop": stop, "normalize": normalize}
+            "narrowing": narrowing, "models": forests, "runs": runs, "n_runs": runs.n_runs, "stop": stop,
+            "normalize": normalize}
     return _common.make_result(problem, history, values, e, method="surrogate", tol=tol,
                                wall_time=time.perf_counter() - t_start, evaluations=problem.evaluations - evals0,
                                notes=notes, info=info, band=band)

@@ -1,0 +1,35 @@
+"""One progress display for long work (packing, DEM runs): a tqdm bar on stderr.
+
+Off by default in the library (``progress=True`` turns it on; a callable receives the raw numbers instead) and on in
+the ``jaxbpm`` command. In a notebook with ipywidgets installed the bar is a widget (``tqdm.auto``), elsewhere text.
+Messages that must stay (an attempt given up, a packing done) are printed above the bar, so they are never mixed
+with it.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+
+__all__ = ["bar", "say"]
+
+
+def _tqdm():
+    if importlib.util.find_spec("ipywidgets") is not None and "ipykernel" in sys.modules:
+        from tqdm.auto import tqdm
+    else:
+        from tqdm.std import tqdm
+    return tqdm
+
+
+def bar(desc: str, total: int | None = None, unit: str = "step", leave: bool = True):
+    """A progress bar on stderr (``total=None``: a counter with its rate); update it with ``.update(n)``, set
+    ``.set_postfix_str(...)`` for the quantity that tells how far the work is, and ``.close()`` it."""
+    return _tqdm()(total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave, dynamic_ncols=True,
+                   mininterval=0.5, smoothing=0.1)
+
+
+def say(message: str) -> None:
+    """Print ``message`` on its own line of stderr, above any open bar."""
+    _tqdm().write(message, file=sys.stderr)
+    sys.stderr.flush()
