@@ -77,7 +77,7 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
       levels: multi-fidelity levels (``method="auto"``; default :func:`default_levels`).
       check: a model (e.g. ``"dem"``) solved once at the answer; its errors go to ``result.info["check"]``.
       solve_options: ``{model: options for jaxbpm.solve}``.
-      progress: True to print each iteration, or a callable ``(row, parameter_names, target_names)``.
+      progress: True to print each iteration (stderr), or a callable ``(row, parameter_names, target_names)``.
       **options: passed to the calibrator (:func:`adam`, :func:`surrogate`, :func:`closed_form`; for ``"auto"``
         they are Adam's options).
     """

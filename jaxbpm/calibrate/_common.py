@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from typing import Callable, Mapping
 
 import numpy as np
@@ -52,13 +51,15 @@ def same_units(problem: Problem, ties: list[int]) -> bool:
 
 
 def printer(prefix: str = "") -> Callable[[dict, list[str], list[str]], None]:
-    """A progress callback printing one line per iteration."""
+    """A progress callback printing one line per iteration on stderr (:func:`jaxbpm.progress.say`: above any
+    progress bar, beside the packing's and the DEM's progress)."""
+    from jaxbpm.progress import say
 
     def show(row, parameter_names, target_names):
         vals = " ".join(f"{n}={v:.6g}" for n, v in zip(parameter_names, row["values"]))
         errs = " ".join(f"{n}={100 * e:+.3f}%" for n, e in zip(target_names, row["errors"]))
-        print(f"{prefix}[{row['level']}] it {row['iteration']:>3} {row['kind']:<12} {vals}  loss={row['loss']:.3e}  "
-              f"{errs}  evals={row['evaluations']}  {row['time']:.2f} s", file=sys.stdout, flush=True)
+        say(f"{prefix}[{row['level']}] it {row['iteration']:>3} {row['kind']:<12} {vals}  loss={row['loss']:.3e}  "
+            f"{errs}  evals={row['evaluations']}  {row['time']:.2f} s")
 
     return show
 

@@ -67,7 +67,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
       tol: relative tolerance on both strengths (default 5 %, Qu et al. 2020). max_iterations: evaluated points at most
         (estimates included). bounds: each strength is kept within ``[target / bounds, target * bounds]``.
       solve_options: options of ``jaxbpm.solve`` (default ``{"transits": 30}``).
-      progress: True to print each iteration, or a callable.
+      progress: True to print each iteration (stderr), or a callable.
 
     Returns a :class:`~jaxbpm.calibrate.CalibrationResult`; ``info["targets"]`` holds the targets and
     ``info["scheme"]`` the scheme; :func:`strength_table` gives its history table.
