@@ -10,6 +10,7 @@ import sys
 import textwrap
 import warnings
 import xml.etree.ElementTree as ET
+import zlib
 
 import jax
 import jax.numpy as jnp
@@ -210,6 +211,116 @@ def test_lammps_data_without_jaxbpm_comments(tmp_path):
     for name in ("E", "nu", "tensile_strength", "shear_strength"):
         np.testing.assert_allclose(getattr(back.materials, name)[back.bond_material],
                                    getattr(sample.materials, name)[sample.bond_material], rtol=1e-12)
+
+
+def _reference_lammps_body(sample: Sample, atom_types=None) -> str:
+    """The text after the title line of a LAMMPS data file, built line by line (the reference for the writer, which
+    formats whole sections at once)."""
+    from jaxbpm.interop import _meta as meta
+    from jaxbpm.interop.lammps import lammps_coefficients
+
+    r = meta._r
+    pos, rad, b = np.asarray(sample.positions), np.asarray(sample.radii), np.asarray(sample.bonds)
+    types, table = {}, []
+    for row in lammps_coefficients(sample):
+        key = tuple(np.asarray(row).view(np.uint64).tolist())
+        if key not in types:
+            types[key] = len(types) + 1
+            table.append(row)
+    btype = [types[tuple(np.asarray(row).view(np.uint64).tolist())] for row in lammps_coefficients(sample)]
+    atype = [1] * len(pos) if atom_types is None else list(atom_types)
+    lo, hi = pos.min(axis=0) - 10 * rad.max(), pos.max(axis=0) + 10 * rad.max()
+    lines = [meta._meta_line(meta._meta(sample, normalize=False)), "", f"{len(pos)} atoms",
+             f"{max(atype)} atom types", f"{len(b)} bonds", f"{max(len(table), 1)} bond types", "",
+             *(f"{r(lo[c])} {r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "", "Atoms # bpm/sphere", ""]
+    density = r(sample.particle_material.density)
+    lines += [f"{i + 1} 1 {atype[i]} {r(2 * rad[i])} {density} {r(pos[i, 0])} {r(pos[i, 1])} {r(pos[i, 2])}"
+              for i in range(len(pos))]
+    lines += ["", "Bond Coeffs # bpm/rotational", ""] + [f"{t} " + " ".join(r(v) for v in row)
+                                                         for t, row in enumerate(table, start=1)]
+    lines += ["", "Bonds", ""] + [f"{k + 1} {btype[k]} {b[k, 0] + 1} {b[k, 1] + 1} # "
+                                  f"{r(sample.bond_radius[k])} {sample.bond_material[k]}" for k in range(len(b))]
+    return "\n".join(lines) + "\n"
+
+
+def _lattice_sample():
+    from jaxbpm import generate
+
+    s = generate.lattice("fcc", (2, 2, 1), 1e-3)
+    return Sample.from_arrays(s.positions, s.radii, s.bonds, s.bond_radius, bond_material=np.arange(s.n_bonds) % 2,
+                              materials={"E": [1e9, 3e9], "nu": [0.25, 0.3]}, domain=s.domain)
+
+
+@pytest.mark.parametrize("make", [_sample, _multi, _lattice_sample])
+def test_lammps_data_text_as_written_line_by_line(tmp_path, make):
+    """The writer's text (formatted a section at a time) is the line-by-line text: the same bytes, so the same
+    checksum and files of earlier versions read alike; and it reads back exactly."""
+    sample = make()
+    types = None if sample.n_particles > 10 else [1, 2, 1, 3, 1, 2][:sample.n_particles]
+    path = formats.write_lammps_data(tmp_path / "s.data", sample, atom_types=types)
+    title, body = path.read_text().split("\n", 1)
+    assert body == _reference_lammps_body(sample, types)
+    assert title.endswith(f" crc32={zlib.crc32(body.encode()):08x}")
+    _assert_same(sample, formats.read_lammps_data(path))
+
+
+def test_lammps_data_fast_and_line_by_line_reading_agree(tmp_path):
+    """Files read in one go per section give what reading them line by line gives; files that are not plainly
+    regular (leading blanks, comments, blank lines inside a section) are read line by line."""
+    from jaxbpm.interop import _lammps_fast, lammps
+
+    written = formats.write_lammps_data(tmp_path / "s.data", _multi()).read_text()
+    lines = written.splitlines()
+    plain = "\n".join(ln.split("#")[0].rstrip() if not ln.startswith(("Atoms", "Bond Coeffs")) else ln
+                      for ln in lines[1:] if not ln.startswith("# jaxbpm")) + "\n"
+    sphere = "\n".join(" ".join(ln.split()[:1] + ln.split()[2:]) if ln[:1].isdigit() and len(ln.split()) == 8
+                       else ln.replace("Atoms # bpm/sphere", "Atoms # sphere") for ln in plain.splitlines()) + "\n"
+    base = "LAMMPS data file\n" + written.split("\n", 1)[1]  # (without the checksum, which edits break)
+    velocities = base + "\nVelocities\n\n" + "".join(f"{i + 1} 0 0 0 0 0 0\n" for i in range(6))
+    images = "\n".join(ln + " 0 -1 0" if ln[:1].isdigit() and len(ln.split()) == 8 else ln
+                       for ln in plain.splitlines()) + "\n"
+    fast = {"written": written, "plain": plain, "sphere": sphere, "velocities": velocities, "images": images,
+            "comment before rows": plain.replace("Atoms # bpm/sphere\n\n1 1 1", "Atoms\n\n# c\n1 1 1")}
+    slow = {"leading blanks": base.replace("\n1 ", "\n 1 "), "blank line in Bonds": base.replace(
+        "\n2 ", "\n\n2 ", 1), "comment in Atoms": plain.replace("\n3 1 1 ", "\n# c\n3 1 1 ", 1)}
+    for label, text in [*fast.items(), *slow.items()]:
+        path = tmp_path / f"{label}.data"
+        path.write_text(text)
+        got = _lammps_fast.parse_fast(path, text, None)
+        assert (got is None) == (label in slow), label
+        want = lammps._parse_lines(path, text, None)
+        if got is not None:
+            for x, y in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(want)):
+                if isinstance(x, np.ndarray):
+                    assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), label
+                else:
+                    assert x == y, label
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", InexactTranslationWarning)
+            formats.read_lammps_data(path, particle_material=_multi().particle_material)
+
+
+@pytest.mark.parametrize("section, word, new, message", [
+    ("Atoms", 3, "x", "Atoms line has a non-numeric value"),
+    ("Atoms", 6, "nan", "atom 3 has a coordinate that is not finite"),
+    ("Atoms", 3, "0.5 0.5", "Atoms line has 9 values"),
+    ("Bonds", 2, "# 3", "Bonds line has 2 values"),
+    ("Bonds", 4, "nan #", "Bonds line has 5 values"),
+    ("Bonds", 3, "3.0", "Bonds line must hold 4 whole numbers"),
+    ("Bonds", 3, "3", "bond 3 joins atom 3 to itself"),
+    ("Bonds", 1, "9", "bond type 9 is outside"),
+])
+def test_lammps_data_damaged_row_names_its_line(tmp_path, section, word, new, message):
+    """A damaged row (the 3rd of its section, without the checksum) is reported with its line number, as the
+    line-by-line reader reports it."""
+    lines = formats.write_lammps_data(tmp_path / "s.data", _multi()).read_text().splitlines()
+    lines[0] = "LAMMPS data file"
+    no = next(k for k, ln in enumerate(lines) if ln.split("#")[0].strip() == section) + 5  # header, blank, 3rd row
+    words = lines[no - 1].split()
+    lines[no - 1] = " ".join(words[:word] + [new] + words[word + 1:])
+    (tmp_path / "d.data").write_text("\n".join(lines) + "\n")
+    with pytest.raises(SampleFileError, match=re.escape(f"d.data:{no}: {message}")):
+        formats.read_lammps_data(tmp_path / "d.data")
 
 
 def test_lammps_data_errors_name_the_line(tmp_path):

@@ -41,12 +41,46 @@ def _group_types(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     the ``[ntypes, 12]`` table."""
     if len(coeffs) == 0:
         return np.zeros(0, np.int64), np.zeros((0, _N_COEFFS))
-    keys = np.ascontiguousarray(coeffs).view(np.dtype((np.void, coeffs.dtype.itemsize * coeffs.shape[1]))).ravel()
-    _, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+    coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
+    bits = coeffs.view(np.uint64)
+    # a 64-bit hash of each row's bits groups the rows; the groups are exact when every row equals its group's first
+    # row bit for bit (else a hash collision: group by the whole rows)
+    key = bits[:, 0].copy()
+    for c in range(1, bits.shape[1]):
+        key *= np.uint64(0x100000001B3)
+        key ^= bits[:, c]
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+    inv = inv.reshape(-1)
+    if not np.array_equal(bits, bits[first[inv]]):
+        keys = coeffs.view(np.dtype((np.void, coeffs.dtype.itemsize * coeffs.shape[1]))).ravel()
+        _, first, inv = np.unique(keys, return_index=True, return_inverse=True)
+        inv = inv.reshape(-1)
     order = np.argsort(first)
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
-    return rank[inv.reshape(-1)] + 1, coeffs[first[order]]
+    return rank[inv] + 1, coeffs[first[order]]
+
+
+def _rows(fmt: str, columns: list) -> str:
+    """``fmt`` (``%``-format of one line, ``%s`` for each float column) applied to each row of ``columns`` (lists
+    of Python ints, or float arrays, written as :func:`_r` does), each line ended by a newline: one formatting call
+    for all rows."""
+    n = len(columns[0])
+    if n == 0:
+        return ""
+    flat = [None] * (n * len(columns))
+    for c, col in enumerate(columns):
+        flat[c::len(columns)] = col if isinstance(col, list) else _reprs(col)
+    return ((fmt + "\n") * n) % tuple(flat)
+
+
+def _reprs(values: np.ndarray) -> list[str]:
+    """``[_r(v) for v in values]``, each distinct value (bit for bit) formatted once."""
+    values = np.asarray(values).astype(np.float64)
+    uniq, inv = np.unique(values.view(np.uint64), return_inverse=True)
+    if 2 * len(uniq) > len(values):
+        return list(map(repr, values.tolist()))
+    return np.array(list(map(repr, uniq.view(np.float64).tolist())), dtype=object)[inv.reshape(-1)].tolist()
 
 
 def _coeff_line(t: int, row) -> str:
@@ -169,16 +203,20 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
              f"{n} atoms", f"{int(atype.max())} atom types", f"{nb} bonds", f"{max(len(table), 1)} bond types", "",
              *(f"{_r(lo[c])} {_r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
              "Atoms # bpm/sphere", ""]
-    lines += [f"{i + 1} 1 {atype[i]} {_r(2.0 * rad[i])} {_r(density)} {_r(pos[i, 0])} {_r(pos[i, 1])} {_r(pos[i, 2])}"
-              for i in range(n)]
+    # the text is what the line-by-line form "\n".join(lines) + "\n" gives (ids, types: %d; floats: repr, i.e. _r),
+    # formatted a whole section at a time
+    parts = ["\n".join(lines) + "\n",
+             _rows(f"%d 1 %d %s {_r(density)} %s %s %s",
+                   [list(range(1, n + 1)), atype.tolist(), 2.0 * rad, *(pos[:, c] for c in range(3))])]
     if coefficients and len(table):
-        lines += ["", "Bond Coeffs # bpm/rotational", ""]
-        lines += [_coeff_line(t, row) for t, row in enumerate(table, start=1)]
+        parts.append("\nBond Coeffs # bpm/rotational\n\n" + _rows("%d" + " %s" * _N_COEFFS, [
+            list(range(1, len(table) + 1)), *np.asarray(table, np.float64).T]))
     if nb:
         rb, bm = np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
-        lines += ["", "Bonds", ""]
-        lines += [f"{k + 1} {btype[k]} {b[k, 0] + 1} {b[k, 1] + 1} # {_r(rb[k])} {bm[k]}" for k in range(nb)]
-    body = "\n".join(lines) + "\n"
+        parts.append("\nBonds\n\n" + _rows("%d %d %d %d # %s %d", [
+            list(range(1, nb + 1)), btype.tolist(), (b[:, 0].astype(np.int64) + 1).tolist(),
+            (b[:, 1].astype(np.int64) + 1).tolist(), rb, bm.astype(np.int64).tolist()]))
+    body = "".join(parts)
     head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
                      f"jaxbpm {__version__}")
     text = f"{head} crc32={_crc32(body)}\n{body}"
@@ -245,37 +283,141 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     """
     path = pathlib.Path(path)
     text = _read_text(path)
-    raw = text.splitlines()
-    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
-    crc = _checksums(raw[0], f"{path}:1", ("crc32",))["crc32"] if raw and "crc32=" in raw[0] else None
-    meta = None
-    for no, line in enumerate(raw[:6], start=1):
-        meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
-    # header
+    from jaxbpm.interop._lammps_fast import parse_fast
+
+    got = parse_fast(path, text, atom_style)
+    crc, body, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table = \
+        got if got is not None else _parse_lines(path, text, atom_style)
+    nb = len(bonds)
+    if crc is not None:  # the file read well: is it the one jaxbpm wrote?
+        _verify(body, "crc32", crc, path, "line 1", f"delete 'crc32={crc}' from line 1 of {path.name}")
+    if coeffs is not None:
+        if isinstance(coeffs, (str, pathlib.Path)):
+            extra_table, extra_norm = read_lammps_coeffs(coeffs)
+            if normalize is None:
+                normalize = extra_norm
+        else:
+            extra_table = {}
+            for t, v in coeffs.items():
+                _, extra_table[int(t)] = _coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
+        extra_keys, extra_rows = _table_arrays(extra_table)
+        table = _last_wins(np.concatenate([table[0], extra_keys]), np.concatenate([table[1], extra_rows]))
+    if normalize is None:
+        normalize = bool(meta.get("normalize", False)) if meta else False
+    kw = dict(sample_kw)
+    if meta is not None:
+        kw.setdefault("particle_material", meta["particle_material"])
+        kw.setdefault("bond_contact", meta["bond_contact"])
+        kw.setdefault("domain", _domain(meta))
+    pm = kw.pop("particle_material", None) or {}
+    if isinstance(pm, ParticleMaterial):
+        pm = {f.name: getattr(pm, f.name) for f in dataclasses.fields(ParticleMaterial)}
+    pm = dict(pm)
+    pm["density"] = float(dens[0])
+    radii = dia / 2.0
+    if bond_radius_ratio is not None or materials is not None:
+        if bond_radius_ratio is None:
+            raise SampleError("read_lammps_data: materials= also needs bond_radius_ratio= (geometry only)")
+        return Sample.from_arrays(pos, radii, bonds, bond_radius_ratio=bond_radius_ratio, materials=materials,
+                                  particle_material=pm, **kw)
+    if nb == 0:
+        mats = meta["materials"] if meta else None
+        return Sample.from_arrays(pos, radii, bonds, np.zeros(0), materials=mats, particle_material=pm, **kw)
+    tkeys, tvals = table
+    missing = np.setdiff1d(np.unique(btype), tkeys).tolist()
+    if missing:
+        raise SampleFileError(f"{path}: no bpm/rotational coefficients for bond types {missing[:10]} (no Bond Coeffs "
+                              f"section or coeffs= file); give coeffs=, or bond_radius_ratio= and materials=")
+    coef = tvals[np.searchsorted(tkeys, btype)]
+    length = np.linalg.norm(pos[bonds[:, 1]] - pos[bonds[:, 0]], axis=1)
+    if meta is not None and not np.isnan(rb_c).any() and (mat_c >= 0).all():
+        mats = meta["materials"]
+        try:
+            trial = Sample.from_arrays(pos, radii, bonds, rb_c, bond_material=mat_c, materials=mats,
+                                       particle_material=pm, **kw)
+        except SampleError:
+            trial = None
+        if trial is not None:
+            mine = lammps_coefficients(trial, normalize=normalize)
+            same = np.allclose(mine[:, :8], coef[:, :8], rtol=1e-9, atol=0)
+            if same:
+                return trial
+            warnings.warn(f"{path}: jaxbpm's comments disagree with the bond coefficients; the coefficients (what "
+                          f"LAMMPS uses) are translated instead", conventions.InexactTranslationWarning, stacklevel=2)
+    if np.any(coef[:, 8:] != 0):
+        t = int(btype[np.flatnonzero(np.any(coef[:, 8:] != 0, axis=1))[0]])
+        warnings.warn(f"{path}: bond type {t} has bond damping (gamma) coefficients; jaxbpm's bonds are undamped and "
+                      f"ignores them", conventions.InexactTranslationWarning, stacklevel=2)
+    limits = np.where(coef[:, 4:8] >= 0.999 * _BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
+    p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
+                                        normalize=normalize)
+    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
+    mats, bm = _materials_from_bonds(bond)
+    return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
+                              particle_material=pm, **kw)
+
+
+def _table_arrays(table: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """``{type: 12 coefficients}`` as sorted types and their rows (types outside int64 name no bond: dropped)."""
+    keys = [t for t in table if -2 ** 63 <= t < 2 ** 63]
+    return (np.array(keys, np.int64).reshape(-1),
+            np.array([table[t] for t in keys], np.float64).reshape(-1, _N_COEFFS))
+
+
+def _last_wins(keys: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct ``keys`` and, for each, the row of its last occurrence (as a dict filled in order keeps)."""
+    u, idx = np.unique(keys[::-1], return_index=True)
+    return u, rows[::-1][idx]
+
+
+def _header(path, numbered) -> tuple[dict[str, int], int]:
+    """The counts of the header lines ``numbered`` (``(line number, text)`` from line 2 on) and the index of the
+    line of the first section."""
     counts: dict[str, int] = {}
-    lines = [_Line(i + 1, *_split(s)) for i, s in enumerate(raw)]
     body_start = None
-    for ln in lines[1:]:
-        if not ln.words:
+    for no, s in numbered:
+        words = _split(s)[0]
+        if not words:
             continue
-        name = " ".join(ln.words)
+        name = " ".join(words)
         if name in _SECTIONS:
-            body_start = ln.no - 1
+            body_start = no - 1
             break
-        m = _HEADER.match(" ".join(ln.words))
+        m = _HEADER.match(name)
         if not m:
-            raise SampleFileError(f"{path}:{ln.no}: cannot read header line {raw[ln.no - 1].strip()!r}")
+            raise SampleFileError(f"{path}:{no}: cannot read header line {s.strip()!r}")
         key = m.group(4)
         if m.group(2) is None:
             try:
                 counts[key] = int(m.group(1))
             except ValueError:
-                raise SampleFileError(f"{path}:{ln.no}: the count of {key!r} must be a whole number") from None
+                raise SampleFileError(f"{path}:{no}: the count of {key!r} must be a whole number") from None
     if body_start is None:
         raise SampleFileError(f"{path}: no Atoms section")
     for key in ("atoms",):
         if key not in counts:
             raise SampleFileError(f"{path}: header lacks the '{key}' count")
+    return counts, body_start
+
+
+def _head_meta(path, first: list[str]):
+    """The checksum of the title line and the jaxbpm metadata of the first (up to 6) lines ``first``."""
+    crc = _checksums(first[0], f"{path}:1", ("crc32",))["crc32"] if first and "crc32=" in first[0] else None
+    meta = None
+    for no, line in enumerate(first[:6], start=1):
+        meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
+    return crc, meta
+
+
+def _parse_lines(path, text: str, atom_style):
+    """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
+    rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
+    raw = text.splitlines()
+    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
+    crc, meta = _head_meta(path, raw[:6])
+    # header
+    counts, body_start = _header(path, enumerate(raw[1:], start=2))
+    lines = [_Line(i + 1, *_split(s)) for i, s in enumerate(raw)]
     sections: dict[str, tuple[_Line, list[_Line]]] = {}
     i = body_start
     while i < len(lines):
@@ -381,80 +523,18 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
                 rb_c[k], mat_c[k] = np.nan, -1
     # coefficients
     table: dict[int, np.ndarray] = {}
-    table_line: dict[int, int] = {}
     if "Bond Coeffs" in sections:
         head, crows = sections["Bond Coeffs"]
-        if head.comment.strip() and head.comment.strip() != "bpm/rotational":
-            raise SampleFileError(f"{path}:{head.no}: Bond Coeffs are for {head.comment.strip()!r}; jaxbpm reads "
-                                  f"bpm/rotational")
+        _coeffs_head(path, head.no, head.comment)
         for ln in crows:
             t, row = _coeff_row(ln.words, f"{path}:{ln.no}")
-            table[t], table_line[t] = row, ln.no
-    if crc is not None:  # the file read well: is it the one jaxbpm wrote?
-        _verify(_without_line(text, 0), "crc32", crc, path, "line 1",
-                f"delete 'crc32={crc}' from line 1 of {path.name}")
-    if coeffs is not None:
-        if isinstance(coeffs, (str, pathlib.Path)):
-            extra_table, extra_norm = read_lammps_coeffs(coeffs)
-            if normalize is None:
-                normalize = extra_norm
-        else:
-            extra_table = {}
-            for t, v in coeffs.items():
-                _, extra_table[int(t)] = _coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
-        table.update(extra_table)
-    if normalize is None:
-        normalize = bool(meta.get("normalize", False)) if meta else False
-    kw = dict(sample_kw)
-    if meta is not None:
-        kw.setdefault("particle_material", meta["particle_material"])
-        kw.setdefault("bond_contact", meta["bond_contact"])
-        kw.setdefault("domain", _domain(meta))
-    pm = kw.pop("particle_material", None) or {}
-    if isinstance(pm, ParticleMaterial):
-        pm = {f.name: getattr(pm, f.name) for f in dataclasses.fields(ParticleMaterial)}
-    pm = dict(pm)
-    pm["density"] = float(dens[0])
-    radii = dia / 2.0
-    if bond_radius_ratio is not None or materials is not None:
-        if bond_radius_ratio is None:
-            raise SampleError("read_lammps_data: materials= also needs bond_radius_ratio= (geometry only)")
-        return Sample.from_arrays(pos, radii, bonds, bond_radius_ratio=bond_radius_ratio, materials=materials,
-                                  particle_material=pm, **kw)
-    if nb == 0:
-        mats = meta["materials"] if meta else None
-        return Sample.from_arrays(pos, radii, bonds, np.zeros(0), materials=mats, particle_material=pm, **kw)
-    missing = sorted(set(btype.tolist()) - set(table))
-    if missing:
-        raise SampleFileError(f"{path}: no bpm/rotational coefficients for bond types {missing[:10]} (no Bond Coeffs "
-                              f"section or coeffs= file); give coeffs=, or bond_radius_ratio= and materials=")
-    coef = np.stack([table[t] for t in btype])
-    length = np.linalg.norm(pos[bonds[:, 1]] - pos[bonds[:, 0]], axis=1)
-    if meta is not None and not np.isnan(rb_c).any() and (mat_c >= 0).all():
-        mats = meta["materials"]
-        try:
-            trial = Sample.from_arrays(pos, radii, bonds, rb_c, bond_material=mat_c, materials=mats,
-                                       particle_material=pm, **kw)
-        except SampleError:
-            trial = None
-        if trial is not None:
-            mine = lammps_coefficients(trial, normalize=normalize)
-            same = np.allclose(mine[:, :8], coef[:, :8], rtol=1e-9, atol=0)
-            if same:
-                return trial
-            warnings.warn(f"{path}: jaxbpm's comments disagree with the bond coefficients; the coefficients (what "
-                          f"LAMMPS uses) are translated instead", conventions.InexactTranslationWarning, stacklevel=2)
-    if np.any(coef[:, 8:] != 0):
-        t = int(btype[np.flatnonzero(np.any(coef[:, 8:] != 0, axis=1))[0]])
-        warnings.warn(f"{path}: bond type {t} has bond damping (gamma) coefficients; jaxbpm's bonds are undamped and "
-                      f"ignores them", conventions.InexactTranslationWarning, stacklevel=2)
-    limits = np.where(coef[:, 4:8] >= 0.999 * _BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
-    p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
-                                        normalize=normalize)
-    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
-    mats, bm = _materials_from_bonds(bond)
-    return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
-                              particle_material=pm, **kw)
+            table[t] = row
+    return (crc, _without_line(text, 0), meta, pos, dia, dens, bonds, btype, rb_c, mat_c, _table_arrays(table))
+
+
+def _coeffs_head(path, no: int, comment: str) -> None:
+    if comment.strip() and comment.strip() != "bpm/rotational":
+        raise SampleFileError(f"{path}:{no}: Bond Coeffs are for {comment.strip()!r}; jaxbpm reads bpm/rotational")
 
 
 def _split(s: str) -> tuple[list[str], str]:
