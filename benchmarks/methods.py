@@ -88,8 +88,6 @@ def case_samples(case, n, seeds, variants):
 
 
 def run_sample(sample, case, strain, newton_maxiter=6):
-    import numpy as np
-
     import jaxbpm
     from jaxbpm.scenes import UniaxialCompression
 

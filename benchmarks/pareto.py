@@ -372,7 +372,7 @@ def main(argv=None) -> int:
         print(f"  {case}: reference {d['reference']['label']} K={d['reference']['K']:.7g}; check "
               f"{d['reference_check']['label']}: {100 * (d['reference_check']['signed_error'] or float('nan')):+.4f} %"
               + (f"; contacts add {100 * d['contact_share']:.1f} % to K" if "contact_share" in d else ""))
-        print(f"    front: " + " -> ".join(f"{f['label']} ({f['run_s']:.3g} s, {100 * f['abs_error']:.3g} %)"
+        print("    front: " + " -> ".join(f"{f['label']} ({f['run_s']:.3g} s, {100 * f['abs_error']:.3g} %)"
                                            for f in d["front"]))
     total = time.perf_counter() - t0
     print(f"total {total:.1f} s.")
