@@ -431,3 +431,18 @@ def test_base_params_reads_particle_and_cohesive_entries():
         cal.base_params(s, ["cohesion_max"], UniaxialCompression(strain=0.01))
     with pytest.raises(CalibrationError, match="no parameter entry 'bond_colour'"):
         cal.base_params(s, ["bond_colour"])
+
+
+def test_run_set_shows_a_progress_bar_only_when_asked(capsys):
+    from jaxbpm.calibrate.surrogate import run_set
+
+    s = jaxbpm.generate.lattice("sc", (3, 3, 4), 1e-3, materials={"E": 1e9, "nu": 0.25})
+    problem = cal.Problem(cal.forward_model(s, UniaxialCompression(strain=0.002), model="ste"),
+                          [cal.Target("stiffness", 1.0)],
+                          cal.ParameterSpace([cal.Parameter("bond_E", index=0)], cal.base_params(s)))
+    quiet = run_set(problem, 6, chunk=4)
+    assert capsys.readouterr().err == ""
+    shown = run_set(problem, 6, chunk=4, progress=True)
+    err = capsys.readouterr().err
+    assert "run set" in err and "6/6" in err  # a bar of the runs, on stderr
+    np.testing.assert_array_equal(shown.Y, quiet.Y)

@@ -335,12 +335,13 @@ class Problem:
         return tvals, tscale, wel
 
     # -------------------------------------------------------------- evaluation
-    def outputs(self, values_batch, *, chunk: int | None = None) -> np.ndarray:
+    def outputs(self, values_batch, *, chunk: int | None = None, progress: bool = False) -> np.ndarray:
         """Model values of all target elements ``[B, m]`` for parameter values ``[B, n]`` (vmap when pure).
 
         chunk: for a pure model, solve at most this many sets in one ``vmap`` (bounds the memory of large batches:
         each vmapped solve holds its own operator and workspace); the last chunk is padded so that every chunk
-        shares one compilation. ``None``: all at once."""
+        shares one compilation. ``None``: all at once. progress: a bar of the sets solved (:mod:`jaxbpm.progress`)
+        where they are solved in parts (chunks, or one at a time)."""
         vb = np.atleast_2d(np.asarray(values_batch, dtype=np.float64))
         if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
             raise CalibrationError(f"chunk must be a whole number >= 1, got {chunk!r}")
@@ -358,15 +359,21 @@ class Problem:
                     self._sweep_fn = lambda v: vector(v, space_base)  # one function: sweep compiles it once
                 y = np.asarray(sweep(self._sweep_fn, jnp.asarray(vb), chunk=chunk))
             elif chunk is not None and len(vb) > chunk > 1:
-                fn, parts = self._compiled("batch"), []
+                fn, parts, shown = self._compiled("batch"), [], _bar(progress, len(vb))
                 for a in range(0, len(vb), chunk):
                     part = vb[a:a + chunk]
                     pad = np.concatenate([part, np.repeat(part[-1:], chunk - len(part), axis=0)])
                     parts.append(np.asarray(fn(jnp.asarray(pad), base))[:len(part)])
+                    shown.update(len(part))
+                shown.close()
                 y = np.concatenate(parts)
             elif chunk == 1 and len(vb) > 1:
-                fn = self._compiled("vector")
-                y = np.stack([np.asarray(fn(jnp.asarray(v), base)) for v in vb])
+                fn, shown, rows = self._compiled("vector"), _bar(progress, len(vb)), []
+                for v in vb:
+                    rows.append(np.asarray(fn(jnp.asarray(v), base)))
+                    shown.update(1)
+                shown.close()
+                y = np.stack(rows)
             elif len(vb) > 1:
                 # small batches are padded to a power of two (repeating the last set): the batch sizes of n-point
                 # finite differences (n + 1, 2n) then share compilations
@@ -376,10 +383,12 @@ class Problem:
             else:  # one set: not jitted here (the solvers run their own compiled programs)
                 y = np.asarray(self._vector()(jnp.asarray(vb[0]), base))[None]
         else:
-            rows = []
+            rows, shown = [], _bar(progress and len(vb) > 1, len(vb))
             for v in vb:
                 obs = self.forward.evaluate(self.space.to_params(jnp.asarray(v)))
                 rows.append(np.concatenate([np.reshape(np.asarray(t.extract(obs)), (-1,)) for t in self.targets]))
+                shown.update(1)
+            shown.close()
             y = np.stack(rows)
         self.evaluations += len(vb) * self.n_scenes
         self.solve_time += time.perf_counter() - t0
@@ -438,3 +447,20 @@ class Problem:
         e = np.asarray(e)
         return np.array([float(e[s][0]) if t.size == 1 else float(np.max(np.abs(e[s])))
                          for t, s in zip(self.targets, self.slices)])
+
+
+class _NoBar:
+    def update(self, n=1):
+        pass
+
+    def close(self):
+        pass
+
+
+def _bar(progress, total):
+    """A bar of parameter sets solved (:mod:`jaxbpm.progress`), or one that shows nothing."""
+    if not progress:
+        return _NoBar()
+    from jaxbpm.progress import bar
+
+    return bar("run set", total=total, unit="run")

@@ -111,10 +111,10 @@ class RunSet:
 
 
 def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None,
-            chunk: int | None = None) -> RunSet:
+            chunk: int | None = None, progress: bool = False) -> RunSet:
     """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` (within its bounds, or ``lower``/``upper``)
     in batches of ``chunk`` (``None``: one batch; see :meth:`Problem.outputs`) and record the outputs its targets
-    need."""
+    need. progress: a bar of the runs solved (where they are solved in parts)."""
     n_runs = _common.check_count("n_runs", n_runs, 2)
     space = problem.space
     lower = space.lower if lower is None else np.asarray(lower, dtype=np.float64)
@@ -124,7 +124,7 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     t0 = time.perf_counter()
     evals0 = problem.evaluations
     X = latin_hypercube(n_runs, lower, upper, seed=seed)
-    Y = problem.outputs(X, chunk=chunk)
+    Y = problem.outputs(X, chunk=chunk, progress=progress)
     return RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
                   output_sizes=[t.size for t in problem.targets], Y=np.asarray(Y), model=problem.forward.name,
                   info={"seed": seed, "chunk": chunk, "wall_time": time.perf_counter() - t0,
@@ -251,12 +251,13 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
         raise CalibrationError(f"max_features must be a fraction in (0, 1], got {max_features!r}")
     if regressor is not None:
         _check_regressor(regressor)
+    show_runs = progress is True  # (a bar of the run set; iterations as lines)
     progress = _common.progress_fn(progress)
     evals0 = problem.evaluations
     notes = []
     space = problem.space
     if runs is None:
-        runs = run_set(problem, n_runs, seed=seed, chunk=chunk)
+        runs = run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs)
     else:
         if not isinstance(runs, RunSet):
             raise CalibrationError(f"runs must be a RunSet, got {type(runs).__name__}")
@@ -284,7 +285,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
                 sub = space.subspace([n for n, a in zip(space.names, active) if a], fixed)
                 sub_problem = Problem(problem.forward, problem.targets, sub)
                 sub_problem.evaluations = problem.evaluations
-                sub_runs = run_set(sub_problem, resample_runs, seed=seed + 1, chunk=chunk,
+                sub_runs = run_set(sub_problem, resample_runs, seed=seed + 1, chunk=chunk, progress=show_runs,
                                    lower=runs.lower[active],
                                    upper=runs.upper[active])
                 problem.evaluations = sub_problem.evaluations
