@@ -77,6 +77,7 @@ _MATERIALS = [("E", "Pa"), ("nu", "1"), ("tensile_strength", "Pa"), ("shear_stre
 _PARTICLE_MATERIAL = [("density", "kg/m^3"), ("E", "Pa"), ("nu", "1"), ("friction", "1"), ("restitution", "1")]
 _DERIVED = [("mass", "kg"), ("inertia", "kg m^2"), ("bond_length", "m"), ("bond_area", "m^2"), ("bond_I", "m^4"),
             ("bond_J", "m^4")]
+_DERIVED_ALL = _DERIVED + [("coordination", "1")]  # what /derived holds
 
 _VTK_FORMATS = {".vtu": "vtu", ".vtk": "vtk"}
 
@@ -244,9 +245,15 @@ def _write_derived(f, sample: Sample) -> None:
     g = f.create_group("derived")
     g.attrs["description"] = "computed from the other fields; jaxbpm recomputes these on load"
     g.attrs["inputs_crc32"] = np.int64(_inputs_crc32(sample))
-    for name, units in _DERIVED:
-        _dataset(g, name, np.asarray(getattr(sample, name), dtype=np.float64), units)
-    _dataset(g, "coordination", np.asarray(sample.coordination(), dtype=np.int32), "1")
+    for name, units in _DERIVED_ALL:
+        _dataset(g, name, _derived_value(sample, name), units)
+
+
+def _derived_value(sample: Sample, name: str) -> np.ndarray:
+    """The derived quantity ``name`` of :data:`_DERIVED_ALL` as the file stores it."""
+    if name == "coordination":
+        return np.asarray(sample.coordination(), dtype=np.int32)
+    return np.asarray(getattr(sample, name), dtype=np.float64)
 
 
 def save_sample(path, sample: Sample) -> pathlib.Path:
@@ -408,7 +415,7 @@ def _read_derived(f, path: pathlib.Path, limit: int) -> dict | None:
     g = f["derived"]
     if not hasattr(g, "keys"):
         raise SampleFileError(f"{path}: '/derived' is not a group")
-    out = {name: _read(g, name, path, limit) for name, _ in _DERIVED + [("coordination", "1")] if name in g}
+    out = {name: _read(g, name, path, limit) for name, _ in _DERIVED_ALL if name in g}
     if "inputs_crc32" in g.attrs:
         crc = np.asarray(g.attrs["inputs_crc32"])
         if crc.shape != () or not np.issubdtype(crc.dtype, np.integer):
@@ -467,11 +474,11 @@ def _check_derived(stored_all: dict, path: pathlib.Path, sample: Sample) -> None
     """The file's ``/derived`` quantities against the same ones recomputed from its inputs, and its
     ``inputs_crc32`` against the sample loaded: a mismatch means the inputs changed after the file was written (an
     edit, or damage the Fletcher-32 checksums cannot see)."""
-    for name, _ in _DERIVED + [("coordination", "1")]:
+    for name, _ in _DERIVED_ALL:
         if name not in stored_all:
             continue
         stored = stored_all[name]
-        fresh = np.asarray(sample.coordination() if name == "coordination" else getattr(sample, name))
+        fresh = _derived_value(sample, name)
         if stored.shape != fresh.shape:
             raise SampleFileError(f"{path}: /derived/{name} has shape {stored.shape}, the sample's inputs give "
                                   f"{fresh.shape}: {_EDITED}")

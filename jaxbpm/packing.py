@@ -192,7 +192,7 @@ def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, p
         packer = _packer(cell_box, float(cutoff), walls.cylinder)
         report = _reporter(progress, phi)
         run = _relax(packer, x0, radii, walls, _target(tol, cell_box), max_steps, _CHUNK, _jammed, report)
-        getattr(report, "close", lambda: None)()
+        report.close()
     if not run.packed:
         raise SampleError(_not_converged(run, max_steps, tol, phi))
     return run.x
@@ -216,7 +216,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
             report = _reporter(progress, phi)
             run = _relax(packer, start(wall), radii, wall, target, max_steps, _CHUNK if last else _AUTO_CHUNK,
                          give_up, report, nbrs)
-            getattr(report, "close", lambda: None)()
+            report.close()
             if run.packed:
                 return run.x, k
             if last:
@@ -340,11 +340,14 @@ def _not_converged(run: _Attempt, max_steps: int, tol: float, phi: float) -> str
 
 def _reporter(progress, phi: float) -> Callable[[int, float, float, bool], None]:
     """Progress of one attempt: a callable gets every chunk; ``True`` shows a bar of FIRE steps with the largest
-    overlap (:mod:`jaxbpm.progress`), and a last line when the attempt packed."""
-    if callable(progress):
-        return lambda step, worst, elapsed, packed: progress(step, worst, elapsed)
-    if not progress:
-        return lambda step, worst, elapsed, packed: None
+    overlap (:mod:`jaxbpm.progress`), and a last line when the attempt packed. ``close()`` ends its display."""
+    if callable(progress) or not progress:
+        def report(step, worst, elapsed, packed):
+            if callable(progress):
+                progress(step, worst, elapsed)
+
+        report.close = lambda: None  # (every reporter is closed after its attempt)
+        return report
     from jaxbpm.progress import bar
 
     shown = bar(f"random_packing: packing fraction {phi:g}", unit=" FIRE step", leave=False)

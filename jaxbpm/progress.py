@@ -22,11 +22,12 @@ def _tqdm():
     return tqdm
 
 
-def bar(desc: str, total: int | None = None, unit: str = "step", leave: bool = True):
+def bar(desc: str, total: int | None = None, unit: str = "step", leave: bool = True, disable: bool = False):
     """A progress bar on stderr (``total=None``: a counter with its rate); update it with ``.update(n)``, set
-    ``.set_postfix_str(...)`` for the quantity that tells how far the work is, and ``.close()`` it."""
+    ``.set_postfix_str(...)`` for the quantity that tells how far the work is, and ``.close()`` it. ``disable``:
+    a bar that shows nothing (the same calls, no output)."""
     return _tqdm()(total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave, dynamic_ncols=True,
-                   mininterval=0.5, smoothing=0.1)
+                   mininterval=0.5, smoothing=0.1, disable=disable)
 
 
 def say(message: str) -> None:

@@ -65,16 +65,17 @@ def _scalar(v):
     return None
 
 
-def _plain(v):
-    """A NumPy scalar as the Python number it holds (messages show ``0.7``, not ``np.float64(0.7)``)."""
-    return v.item() if isinstance(v, np.generic) else v
-
-
 # the attributes that say two runs are the same run (a record of it may be replaced by running it again)
 SAME_RUN = ("method", "scene", "dt", "speed", "gauge_length", "area", "target_displacement", "damping")
 # and the ones a resumed run must share besides (the chunks, the sample and the padding)
 RESUME_SAME = ("chunk", "steps_planned", "particles", "bonds", "sample_digest", "padded_particles", "padded_bonds",
                "breakage", "contact_law")
+
+
+def _differing(stored: Mapping[str, Any], attrs: Mapping[str, Any], keys) -> list[str]:
+    """The ``keys`` whose scalar value in the run's ``attrs`` is not the one a record file ``stored``."""
+    return [k for k in keys if k in attrs and _scalar(attrs[k]) is not None
+            and (k not in stored or stored[k] != _scalar(attrs[k]))]
 
 
 def _same_run(path: pathlib.Path, attrs: Mapping[str, Any]) -> bool:
@@ -83,9 +84,7 @@ def _same_run(path: pathlib.Path, attrs: Mapping[str, Any]) -> bool:
 
     try:
         with h5py.File(path, "r") as f:
-            if f.attrs.get("format") != FORMAT:
-                return False
-            return all(k in f.attrs and _scalar(attrs[k]) == f.attrs[k] for k in SAME_RUN if k in attrs)
+            return f.attrs.get("format") == FORMAT and not _differing(f.attrs, attrs, SAME_RUN)
     except (OSError, KeyError, ValueError):
         return False
 
@@ -151,8 +150,10 @@ class RecordFile:
         records, stored = read_records(path)
         self = cls.__new__(cls)
         self.path, self.steps = pathlib.Path(path), int(stored["steps"])
-        differ = [f"{k} (file {_plain(stored.get(k))!r}, this run {_plain(attrs[k])!r})" for k in SAME_RUN + RESUME_SAME
-                  if k in attrs and _scalar(attrs[k]) is not None and (k not in stored or stored[k] != _scalar(attrs[k]))]
+        from jaxbpm.sample import _shown
+
+        differ = [f"{k} (file {_shown(stored.get(k))}, this run {_shown(attrs[k])})"
+                  for k in _differing(stored, attrs, SAME_RUN + RESUME_SAME)]
         if differ:
             raise SampleFileError(f"{path}: not a record of this run, cannot resume it: " + "; ".join(differ))
         status = stored.get("status")

@@ -322,13 +322,18 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
     return finish(unpadded(state), rec, stats, False)
 
 
-_STATE_FIELDS = ("positions", "velocities", "orientations", "omegas", "force", "moment", "intact", "spring", "time",
-                 "broken", "broken_time", "cohesion")
+def _state_fields() -> list[str]:
+    """The array fields of a DEM state (all but the neighbour list, which a resumed run rebuilds)."""
+    import dataclasses
+
+    from jaxbpm.dem import DEMState
+
+    return [f.name for f in dataclasses.fields(DEMState) if f.name != "nbrs"]
 
 
 def _state_arrays(state) -> dict:
     """The arrays of a DEM state (and its neighbour list's pairs), as a record file's checkpoint holds them."""
-    out = {k: np.asarray(getattr(state, k)) for k in _STATE_FIELDS if getattr(state, k) is not None}
+    out = {k: np.asarray(getattr(state, k)) for k in _state_fields() if getattr(state, k) is not None}
     if state.nbrs is not None:
         out["nbrs_idx"] = np.asarray(state.nbrs.idx)
     return out
@@ -342,7 +347,7 @@ def _restore_state(arrays):
     from jaxbpm._compile import put
     from jaxbpm.dem import DEMState
 
-    fields = {k: put(arrays[k]) if k in arrays else None for k in _STATE_FIELDS}
+    fields = {k: put(arrays[k]) if k in arrays else None for k in _state_fields()}
     nbrs = types.SimpleNamespace(idx=put(arrays["nbrs_idx"])) if "nbrs_idx" in arrays else None
     return DEMState(nbrs=nbrs, **fields)
 

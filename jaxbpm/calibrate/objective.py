@@ -449,18 +449,9 @@ class Problem:
                          for t, s in zip(self.targets, self.slices)])
 
 
-class _NoBar:
-    def update(self, n=1):
-        pass
-
-    def close(self):
-        pass
-
 
 def _bar(progress, total):
-    """A bar of parameter sets solved (:mod:`jaxbpm.progress`), or one that shows nothing."""
-    if not progress:
-        return _NoBar()
+    """A bar of parameter sets solved (:mod:`jaxbpm.progress`), showing nothing unless ``progress``."""
     from jaxbpm.progress import bar
 
-    return bar("run set", total=total, unit="run")
+    return bar("run set", total=total, unit="run", disable=not progress)
