@@ -33,7 +33,7 @@ _LAZY_NAMES = {
     "Sample": "jaxbpm.sample", "BondMaterials": "jaxbpm.sample", "ParticleMaterial": "jaxbpm.sample",
     "Domain": "jaxbpm.sample", "SampleSummary": "jaxbpm.sample", "solve": "jaxbpm.solving",
     "Result": "jaxbpm.result", "DEM": "jaxbpm.options", "DSM": "jaxbpm.options", "STE": "jaxbpm.options",
-    "count_compilations": "jaxbpm._compile",
+    "count_compilations": "jaxbpm._compile", "solve_batch": "jaxbpm.batched",
 }
 
 

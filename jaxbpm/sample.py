@@ -484,6 +484,27 @@ class Sample:
                                   particle_material=self.particle_material, bond_contact=self.bond_contact,
                                   domain=self.domain)
 
+    def renumbered(self, order=None) -> "Sample":
+        """The same sample with its particles renumbered: particle ``k`` of the result is particle ``order[k]`` of
+        this one (default: along a Morton space-filling curve, :func:`jaxbpm.generate.morton_order`, so that
+        particles close in space are close in memory and the solvers' gathers and scatters stay in cache); bonds
+        follow their particles and are sorted by their first particle. The generators already number their
+        particles this way; samples read from other codes' files keep the files' order unless renumbered."""
+        from jaxbpm.generate import morton_order
+
+        order = morton_order(self.positions) if order is None else np.asarray(order)
+        n = self.n_particles
+        if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
+            raise SampleError(f"renumbered: order must be a permutation of the {n} particle indices")
+        new_index = np.empty(n, np.int64)
+        new_index[order] = np.arange(n)
+        b = np.sort(new_index[np.asarray(self.bonds, np.int64).reshape(-1, 2)], axis=1)
+        by = np.lexsort((b[:, 1], b[:, 0]))
+        return Sample.from_arrays(np.asarray(self.positions)[order], np.asarray(self.radii)[order], b[by],
+                                  np.asarray(self.bond_radius)[by], bond_material=np.asarray(self.bond_material)[by],
+                                  materials=self.materials, particle_material=self.particle_material,
+                                  bond_contact=self.bond_contact, domain=self.domain)
+
     def largest_cluster(self) -> "Sample":
         """The sample without the particles outside its largest bonded cluster (loose particles and fragments)."""
         labels = self.clusters()

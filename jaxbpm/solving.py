@@ -184,10 +184,7 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
         loading_time = transits * _transit_time(sample, model, params, path)
     n_steps = int(np.ceil(loading_time / dt))
     if chunk is None:
-        # a power of two: samples with about the same number of steps share the compiled chunk
-        chunk = 1 << int(np.log2(np.clip(n_steps // 20, 32, 4096)))
-        if snapshots is not None and snapshots > 1:  # at least one chunk per frame after the first
-            chunk = max(1, min(chunk, n_steps // (snapshots - 1)))
+        chunk = _default_chunk(n_steps, snapshots)
     n_steps = -(-n_steps // chunk) * chunk
     # the speed from the steps actually run (whole chunks): the run ends exactly at the target
     speed = target / (n_steps * dt)
@@ -249,15 +246,8 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
                                                                                    ("time", "reaction", "vmax",
                                                                                     "broken") if k in prior}
             stats.update(steps=recorder.steps, resumed_at=len(prior["time"]))
-        disp = speed * rec["time"] if rec else np.zeros(0)
-        force = scene.compressive_force(rec["reaction"]) if rec else np.zeros(0)
-        try:
-            stiffness = scene.fit_stiffness(disp, force, target)
-        except SceneError:
-            if not interrupted and status == "converged":
-                raise
-            stiffness = float("nan")  # the run stopped before the fit range was loaded
-        keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
+        disp, force, stiffness, keep = _dem_curve(scene, rec, speed, target, max_records,
+                                                  strict=not interrupted and status == "converged")
         stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
                      damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks,
                      contact_law=model.contact_law, interrupted=interrupted,
@@ -271,19 +261,8 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
         if snapshots is not None:
             stats["vtu"] = str(series.path)
             stats["vtu_frames"] = len(series.steps)
-        if len(force):
-            peak = int(np.argmax(force))
-            stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]))
-            if hasattr(scene, "strength"):
-                stats["strength"] = float(scene.strength(float(force[peak]), sample))
-            if breaks:
-                counts = rec["broken"]  # [steps, 2]: tensile, shear (cumulative)
-                stats.update(broken_tensile=int(counts[-1, 0]), broken_shear=int(counts[-1, 1]),
-                             broken_curve=counts[keep], broken_at_peak=int(counts[peak].sum()))
-                # the curve points are the loading's; peaks inside the first or last record mean the run stopped
-                # too early
-                stats["past_peak"] = bool(peak < len(force) - 1 and force[-1] < force[peak])
-        modulus = scene.modulus(stiffness, sample) if hasattr(scene, "modulus") else stiffness * length / area
+        stats.update(_dem_peak_stats(scene, sample, rec, disp, force, keep, breaks))
+        modulus = _dem_modulus(scene, sample, stiffness, length, area)
         if recorder is not None:
             wall = time.perf_counter() - t0
             stats.update(wall_time=wall, run_time=wall - setup - compile_time)
@@ -320,6 +299,57 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
             recorder.finish("interrupted")
         raise
     return finish(unpadded(state), rec, stats, False)
+
+
+def _default_chunk(n_steps: int, snapshots=None) -> int:
+    """The default DEM chunk: a power of two (32 to 4096 steps, about 20 chunks a run), so that samples with about
+    the same number of steps share the compiled chunk; with ``snapshots`` at least one chunk per frame after the
+    first."""
+    chunk = 1 << int(np.log2(np.clip(n_steps // 20, 32, 4096)))
+    if snapshots is not None and snapshots > 1:
+        chunk = max(1, min(chunk, n_steps // (snapshots - 1)))
+    return chunk
+
+
+def _dem_curve(scene, rec, speed, target, max_records, strict=True):
+    """The displacement and force of every record, the stiffness fitted over the scene's fit range and the indices
+    of the (at most ``max_records``) records kept in the returned curve. A curve too short for the fit raises
+    :class:`SceneError` when ``strict``, else gives a NaN stiffness (a run stopped before the fit range was
+    loaded)."""
+    disp = speed * rec["time"] if rec else np.zeros(0)
+    force = scene.compressive_force(rec["reaction"]) if rec else np.zeros(0)
+    try:
+        stiffness = scene.fit_stiffness(disp, force, target)
+    except SceneError:
+        if strict:
+            raise
+        stiffness = float("nan")
+    keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
+    return disp, force, stiffness, keep
+
+
+def _dem_peak_stats(scene, sample, rec, disp, force, keep, breaks) -> dict:
+    """The peak force, the displacement there and the scene's strength; with breakage the broken-bond counts (at
+    the end, along the kept curve, at the peak) and whether the run went past the peak. Empty without records."""
+    stats = {}
+    if len(force):
+        peak = int(np.argmax(force))
+        stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]))
+        if hasattr(scene, "strength"):
+            stats["strength"] = float(scene.strength(float(force[peak]), sample))
+        if breaks:
+            counts = rec["broken"]  # [steps, 2]: tensile, shear (cumulative)
+            stats.update(broken_tensile=int(counts[-1, 0]), broken_shear=int(counts[-1, 1]),
+                         broken_curve=counts[keep], broken_at_peak=int(counts[peak].sum()))
+            # the curve points are the loading's; peaks inside the first or last record mean the run stopped
+            # too early
+            stats["past_peak"] = bool(peak < len(force) - 1 and force[-1] < force[peak])
+    return stats
+
+
+def _dem_modulus(scene, sample, stiffness, length, area) -> float:
+    """The scene's modulus of a stiffness (E = K l / A for a scene without its own rule)."""
+    return scene.modulus(stiffness, sample) if hasattr(scene, "modulus") else stiffness * length / area
 
 
 def _state_fields() -> list[str]:

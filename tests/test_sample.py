@@ -124,3 +124,37 @@ def test_validation_errors(change, message):
 def test_unconnected_particles_are_allowed():
     s = Sample.from_arrays(GOOD["positions"], R, np.zeros((0, 2), int), bond_radius=np.zeros(0))
     assert s.n_bonds == 0 and s.summary().n_unbonded == 3
+
+
+def test_renumbered_keeps_the_sample_and_generators_number_along_a_curve():
+    """Renumbering moves particles in memory only: positions, bonds (as pairs of points), bond data, masses and the
+    DSM stiffness are those of the original; random packings come numbered along the Morton curve (bonds join
+    particles close in index)."""
+    import jaxbpm
+
+    s = jaxbpm.generate.box(300, seed=4, mean_radius=R, packing_fraction=0.5,
+                            materials={"E": 1e9, "nu": 0.3}, density=2500.0)
+    b = np.asarray(s.bonds)
+    assert np.median(np.abs(b[:, 1] - b[:, 0])) < s.n_particles / 20  # ~9 on this sample; ~100 in random order
+    rng = np.random.default_rng(0)
+    order = rng.permutation(s.n_particles)
+    t = s.renumbered(order)
+    np.testing.assert_array_equal(t.positions, np.asarray(s.positions)[order])
+    np.testing.assert_array_equal(t.mass, np.asarray(s.mass)[order])
+    tb = np.asarray(t.bonds)
+    assert np.all(tb[:, 0] < tb[:, 1]) and np.all(np.diff(tb[:, 0]) >= 0)
+
+    def pairs(x):  # bonds as sorted pairs of end points, with their radii
+        p = np.asarray(x.positions)[np.asarray(x.bonds)]
+        key = np.concatenate([np.sort(p.reshape(-1, 6), axis=1), np.asarray(x.bond_radius)[:, None]], axis=1)
+        return key[np.lexsort(key.T[::-1])]
+
+    np.testing.assert_array_equal(pairs(t), pairs(s))
+    back = t.renumbered()  # along the curve again: the generator's own order
+    np.testing.assert_array_equal(back.positions, s.positions)
+    np.testing.assert_array_equal(back.bonds, s.bonds)
+    scene = jaxbpm.scenes.UniaxialCompression(strain=1e-3)
+    k0, k1 = (jaxbpm.solve(x, scene, method="dsm").stiffness for x in (s, t))
+    np.testing.assert_allclose(k1, k0, rtol=1e-9)
+    with pytest.raises(SampleError, match="permutation"):
+        s.renumbered(np.zeros(s.n_particles, int))

@@ -58,7 +58,8 @@ def default_parameters(sample) -> list[Parameter]:
 def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm",
               parameters: Sequence[Parameter] | None = None, scaling: str = "log", tol: float = 0.05,
               shortcut: bool = True, levels: Sequence | None = None, check: str | None = None,
-              solve_options: Mapping[str, dict] | None = None, progress=None, **options) -> CalibrationResult:
+              solve_options: Mapping[str, dict] | None = None, progress=None, executor=None,
+              **options) -> CalibrationResult:
     """Calibrate the bond parameters of ``sample`` so that ``scene`` reproduces ``targets``.
 
     Args:
@@ -78,6 +79,9 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
       check: a model (e.g. ``"dem"``) solved once at the answer; its errors go to ``result.info["check"]``.
       solve_options: ``{model: options for jaxbpm.solve}``.
       progress: True to print each iteration (stderr), or a callable ``(row, parameter_names, target_names)``.
+      executor: a :class:`concurrent.futures.Executor` (e.g. Dask's ``Client(...).get_executor()``) for the runs of
+        a model that is not batched (DEM): the perturbed runs of a finite-difference gradient and a surrogate's run
+        set become parallel tasks (:mod:`jaxbpm.parallel`). Batched models (STE, DSM elastic) ignore it.
       **options: passed to the calibrator (:func:`adam`, :func:`surrogate`, :func:`closed_form`; for ``"auto"``
         they are Adam's options).
     """
@@ -87,6 +91,9 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
 
     if method not in METHODS:
         raise CalibrationError(f"unknown calibration method {method!r}; choose one of {METHODS}")
+    from jaxbpm.parallel import check_executor
+
+    check_executor(executor)
     several = isinstance(sample, Mapping)
     for s in (sample.values() if several else [sample]):
         if not isinstance(s, Sample):
@@ -116,7 +123,7 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
         fwd = model if isinstance(model, Forward) else forward_model(sample, scene, model,
                                                                         **solve_options.get(model, {}))
         space = _target_scales(space, targets, options.get("tie"))
-        problem = Problem(fwd, targets, space)
+        problem = Problem(fwd, targets, space, executor=executor)
         if method == "closed-form":
             result = closed_form(problem, tol=tol, progress=progress, **options)
         elif method == "surrogate":

@@ -49,7 +49,24 @@ class Forward:
     scenes: tuple[str, ...] = (DEFAULT_SCENE,)
     pure_observables: tuple[str, ...] | None = None
     homogeneous: bool = False
+    recipe: tuple | None = dataclasses.field(default=None, repr=False, compare=False)
     _compiled: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
+
+    def tasks(self, params) -> list[tuple[str, Any]]:
+        """The runs of one parameter set as independent :class:`jaxbpm.parallel.Task` s, each with the scene it
+        answers (one task per scene). Empty when this model cannot be sent to another process (built by hand from
+        closures)."""
+        from jaxbpm.parallel import Task, worker_settings
+
+        if self.recipe is None:
+            return []
+        values = {k: np.asarray(v) for k, v in params.items()}
+        settings = worker_settings()
+        if self.recipe[0] == "function":
+            return [(DEFAULT_SCENE, Task(_function_task, (self.recipe[1], values), settings))]
+        _, samples, scenes, model, options = self.recipe
+        return [(key, Task(_solve_task, (samples[key], sc, model, values, options, key), settings))
+                for key, sc in scenes.items()]
 
     @classmethod
     def from_function(cls, fn: Callable[[dict], Mapping[str, Any]], *, name: str = "function", pure: bool = True,
@@ -68,7 +85,8 @@ class Forward:
         def pure_fn(params):
             return {DEFAULT_SCENE: dict(jitted(params))}
 
-        return cls(name=name, evaluate=evaluate, pure=pure_fn if pure else None, homogeneous=homogeneous)
+        return cls(name=name, evaluate=evaluate, pure=pure_fn if pure else None, homogeneous=homogeneous,
+                   recipe=None if pure else ("function", fn))
 
 
 STRENGTH_OBSERVABLES = ("strength", "peak_force", "broken_tensile", "broken_shear")
@@ -184,7 +202,7 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
     hit = _FORWARDS.get(cache_key)
     if hit is not None and all(ref() is sample_map[k] for k, ref in hit[0].items()):
         return hit[1]
-    fwd = _forward_model(sample_map, scene_map, model, solve_mod, solve_options)
+    fwd = _forward_model(sample_map, scene_map, model, solve_options)
     if cache_key is not None:
         import weakref
 
@@ -197,7 +215,7 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
     return fwd
 
 
-def _forward_model(sample_map, scene_map, model, solve_mod, solve_options) -> Forward:
+def _forward_model(sample_map, scene_map, model, solve_options) -> Forward:
     from jaxbpm.physics.model import default_params
 
     own = {k: default_params(s) for k, s in sample_map.items()}
@@ -205,8 +223,7 @@ def _forward_model(sample_map, scene_map, model, solve_mod, solve_options) -> Fo
     options = {"throw": False, **solve_options}  # the calibrator reads the status itself
 
     def evaluate(params):
-        return {key: _observations(_checked(solve_mod.solve(sample_map[key], sc, method=model,
-                                                            params={**own[key], **params}, **options), key, params))
+        return {key: _solve_one(sample_map[key], sc, model, {**own[key], **params}, options, key, params)
                 for key, sc in scene_map.items()}
 
     linear = all(_linear_scene(sc) for sc in scene_map.values())
@@ -231,15 +248,44 @@ def _forward_model(sample_map, scene_map, model, solve_mod, solve_options) -> Fo
 
     return Forward(name=model, evaluate=evaluate, pure=pure if fns else None, scenes=tuple(scene_map),
                    pure_observables=ELASTIC_OBSERVABLES if fns else None,
-                   homogeneous=linear and all(s.n_bonds > 0 for s in sample_map.values()))
+                   homogeneous=linear and all(s.n_bonds > 0 for s in sample_map.values()),
+                   recipe=("solve", sample_map, scene_map, model, options))
+
+
+def _solve_one(sample, scene, model, params, options, key, shown):
+    """The observations of one solve (a module-level function: a worker process runs it as a task)."""
+    from jaxbpm.solving import solve
+
+    return _observations(_checked(solve(sample, scene, method=model, params=params, **options), key, shown))
+
+
+def _solve_task(sample, scene, model, params, options, key):
+    """:func:`_solve_one` for a task: the parameter set arrives as NumPy arrays and is completed with the sample's
+    own entries."""
+    from jaxbpm.physics.model import default_params
+
+    return _solve_one(sample, scene, model, {**default_params(sample), **params}, options, key, params)
+
+
+def _function_task(fn, params):
+    return {k: np.asarray(v) for k, v in fn(params).items()}
 
 
 # ---------------------------------------------------------------------------------------------------- problem
 class Problem:
     """Targets, parameters and a model: evaluates the relative errors and the weighted objective (Qu et al. 2020, Eq. 3)
-    and counts the solves (``evaluations``: one parameter set on one scene)."""
+    and counts the solves (``evaluations``: one parameter set on one scene).
 
-    def __init__(self, forward: Forward, targets, space: ParameterSpace):
+    executor: a :class:`concurrent.futures.Executor` (e.g. Dask's ``Client(...).get_executor()``) on which the runs of
+    a model that is not batched (DEM, a plain function with ``pure=False``) are spread: a run set, the perturbed
+    runs of a finite-difference gradient (:mod:`jaxbpm.parallel`). retries: how often a run whose worker died is
+    submitted again.
+    """
+
+    def __init__(self, forward: Forward, targets, space: ParameterSpace, *, executor=None, retries: int = 2):
+        from jaxbpm.parallel import check_executor, check_retries
+
+        self.executor, self.retries = check_executor(executor), check_retries(retries)
         if not isinstance(forward, Forward):
             raise CalibrationError(f"forward must be a Forward, got {type(forward).__name__}")
         if not isinstance(space, ParameterSpace):
@@ -335,13 +381,19 @@ class Problem:
         return tvals, tscale, wel
 
     # -------------------------------------------------------------- evaluation
-    def outputs(self, values_batch, *, chunk: int | None = None, progress: bool = False) -> np.ndarray:
+    def outputs(self, values_batch, *, chunk: int | None = None, progress: bool = False,
+                on_row: Callable[[int, np.ndarray], None] | None = None) -> np.ndarray:
         """Model values of all target elements ``[B, m]`` for parameter values ``[B, n]`` (vmap when pure).
 
         chunk: for a pure model, solve at most this many sets in one ``vmap`` (bounds the memory of large batches:
         each vmapped solve holds its own operator and workspace); the last chunk is padded so that every chunk
         shares one compilation. ``None``: all at once. progress: a bar of the sets solved (:mod:`jaxbpm.progress`)
-        where they are solved in parts (chunks, or one at a time)."""
+        where they are solved in parts (chunks, or one at a time). on_row: called ``(index, row)`` as each set of a
+        model that is not batched finishes (in completion order), e.g. to store it.
+
+        A model that is not batched (DEM, a plain function with ``pure=False``) solves the sets one after another,
+        or, with an ``executor`` (:class:`Problem`), as separate tasks, one per set and scene (see
+        :mod:`jaxbpm.parallel`)."""
         vb = np.atleast_2d(np.asarray(values_batch, dtype=np.float64))
         if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
             raise CalibrationError(f"chunk must be a whole number >= 1, got {chunk!r}")
@@ -383,18 +435,54 @@ class Problem:
             else:  # one set: not jitted here (the solvers run their own compiled programs)
                 y = np.asarray(self._vector()(jnp.asarray(vb[0]), base))[None]
         else:
-            rows, shown = [], _bar(progress and len(vb) > 1, len(vb))
-            for v in vb:
-                obs = self.forward.evaluate(self.space.to_params(jnp.asarray(v)))
-                rows.append(np.concatenate([np.reshape(np.asarray(t.extract(obs)), (-1,)) for t in self.targets]))
-                shown.update(1)
+            shown = _bar(progress and len(vb) > 1, len(vb))
+            if self.executor is not None:
+                y = self._spread(vb, shown, on_row)
+            else:
+                rows = []
+                for i, v in enumerate(vb):
+                    rows.append(self._row(self.forward.evaluate(self.space.to_params(jnp.asarray(v)))))
+                    if on_row is not None:
+                        on_row(i, rows[-1])
+                    shown.update(1)
+                y = np.stack(rows)
             shown.close()
-            y = np.stack(rows)
         self.evaluations += len(vb) * self.n_scenes
         self.solve_time += time.perf_counter() - t0
         if len(vb) == 1:
             self._last = (vb[0].copy(), y[0].copy())
         return y
+
+    def _row(self, obs) -> np.ndarray:
+        return np.concatenate([np.reshape(np.asarray(t.extract(obs)), (-1,)) for t in self.targets])
+
+    def _spread(self, vb, shown, on_row) -> np.ndarray:
+        """The runs of ``vb`` as tasks on ``self.executor`` (one per parameter set and scene), rows in order."""
+        from jaxbpm.parallel import run_tasks
+
+        owner, tasks, scenes = [], [], []
+        for i, v in enumerate(vb):
+            made = self.forward.tasks(self.space.to_params(jnp.asarray(v)))
+            if not made:
+                raise CalibrationError(f"the {self.forward.name} model cannot be sent to other processes (it is not "
+                                       "a solver model nor a plain function): run it without an executor")
+            for key, task in made:
+                owner.append(i), tasks.append(task), scenes.append(key)
+        parts: dict = {}
+        rows: list = [None] * len(vb)
+
+        def arrived(k, value):
+            i = owner[k]
+            got = parts.setdefault(i, {})
+            got[scenes[k]] = value
+            if len(got) == owner.count(i):
+                rows[i] = self._row(got)
+                if on_row is not None:
+                    on_row(i, rows[i])
+                shown.update(1)
+
+        run_tasks(self.executor, tasks, on_result=arrived, retries=self.retries)
+        return np.stack(rows)
 
     def jacobian(self, values) -> tuple[np.ndarray, np.ndarray]:
         """Outputs ``[m]`` and their Jacobian ``[m, n]`` by forward-mode autodiff (pure models only)."""

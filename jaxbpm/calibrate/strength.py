@@ -48,7 +48,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
                        second_estimate: bool = True, initial: Mapping[str, float] | None = None,
                        learning_rate: float = 0.05, fd_step: float = 0.05, loss_scaled: bool = False,
                        weights=(0.5, 0.5), tol: float = 0.05, max_iterations: int = 8, bounds: float = 100.0,
-                       solve_options: Mapping | None = None, progress=None) -> CalibrationResult:
+                       solve_options: Mapping | None = None, progress=None, executor=None) -> CalibrationResult:
     """Calibrate ``sigma_c`` and ``tau_c`` so that the UCS and the flexural strength reach their targets (Qu et al.).
 
     Args:
@@ -68,6 +68,9 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
         (estimates included). bounds: each strength is kept within ``[target / bounds, target * bounds]``.
       solve_options: options of ``jaxbpm.solve`` (default ``{"transits": 30}``).
       progress: True to print each iteration (stderr), or a callable.
+      executor: a :class:`concurrent.futures.Executor` (e.g. Dask's ``Client(...).get_executor()``): the runs of one
+        iteration (the point and its perturbed points, each a UCS and a bending run) go to it as parallel tasks
+        (:mod:`jaxbpm.parallel`); the answer is the same as without it.
 
     Returns a :class:`~jaxbpm.calibrate.CalibrationResult`; ``info["targets"]`` holds the targets and
     ``info["scheme"]`` the scheme; :func:`strength_table` gives its history table.
@@ -107,7 +110,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
         if set(model.scenes) != {UCS, TPB}:
             raise CalibrationError(f"a strength model needs the scenes {UCS!r} and {TPB!r}, got {model.scenes}")
         base = {k: np.asarray([start[k]]) for k in STRENGTH_KEYS}
-        problem = Problem(model, targets, ParameterSpace(parameters, base, scaling="target"))
+        problem = Problem(model, targets, ParameterSpace(parameters, base, scaling="target"), executor=executor)
         result = adam(problem, tol=tol, progress=progress, **options)
     else:
         from jaxbpm.scenes import ThreePointBending, UniaxialCompression
@@ -117,7 +120,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
         opts = {"transits": 30} if solve_options is None else dict(solve_options)
         result = calibrate({UCS: ucs_sample, TPB: tpb_sample}, scenes, targets, method="adam", model=model,
                            parameters=parameters, scaling="target", tol=tol, shortcut=False,
-                           solve_options={model: opts}, progress=progress, **options)
+                           solve_options={model: opts}, progress=progress, executor=executor, **options)
     result.info.update(scheme=scheme, targets={UCS: ucs, TPB: flexural}, parameter_sets=result.evaluations // 2)
     ratio = result.values["bond_tensile_strength"] / result.values["bond_shear_strength"]
     if scheme == "simplified" and ratio >= 0.8:

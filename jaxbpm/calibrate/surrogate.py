@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import pathlib
 import time
 
 import numpy as np
@@ -58,10 +59,15 @@ class RunSet:
     Y: np.ndarray
     model: str = ""
     info: dict = dataclasses.field(default_factory=dict)
+    done: np.ndarray | None = None  # [N] bool: the runs solved so far (None: all); rows of the others are NaN
 
     @property
     def n_runs(self) -> int:
         return int(self.X.shape[0])
+
+    @property
+    def complete(self) -> bool:
+        return self.done is None or bool(np.all(self.done))
 
     def output(self, name: str, size: int) -> np.ndarray:
         if name not in self.output_names:
@@ -90,31 +96,50 @@ class RunSet:
                 f.attrs["info"] = json.dumps(self.info, default=float)
                 for name in ("X", "lower", "upper", "Y"):
                     f.create_dataset(name, data=np.asarray(getattr(self, name), dtype=np.float64))
+                f.attrs["complete"] = self.complete
+                if not self.complete:
+                    f.create_dataset("done", data=np.asarray(self.done, dtype=bool))
 
         return atomic_write(path, write)
 
     @classmethod
-    def load(cls, path) -> "RunSet":
+    def load(cls, path, *, partial: bool = False) -> "RunSet":
+        """Read a run set file. partial: also accept one whose runs are not all solved (an interrupted run set;
+        ``done`` says which are); else such a file is an error that says how to finish it."""
         import h5py
 
         try:
             with h5py.File(path, "r") as f:
                 if f.attrs.get("format") != RUNSET_FORMAT:
                     raise CalibrationError(f"{path}: not a jaxbpm run set file")
-                return cls(parameter_names=json.loads(f.attrs["parameter_names"]), X=np.asarray(f["X"]),
+                runs = cls(parameter_names=json.loads(f.attrs["parameter_names"]), X=np.asarray(f["X"]),
                            lower=np.asarray(f["lower"]), upper=np.asarray(f["upper"]),
                            output_names=json.loads(f.attrs["output_names"]),
                            output_sizes=json.loads(f.attrs["output_sizes"]), Y=np.asarray(f["Y"]),
-                           model=str(f.attrs["model"]), info=json.loads(f.attrs["info"]))
+                           model=str(f.attrs["model"]), info=json.loads(f.attrs["info"]),
+                           done=np.asarray(f["done"], dtype=bool) if "done" in f else None)
         except OSError as exc:
             raise CalibrationError(f"{path}: not a readable run set file ({exc})") from exc
+        if not (partial or runs.complete):
+            raise CalibrationError(f"{path}: an interrupted run set ({int(runs.done.sum())} of {runs.n_runs} runs "
+                                   "solved); finish it with run_set(problem, n_runs, seed=..., path=...) (the runs "
+                                   "already solved are not repeated)")
+        return runs
 
 
 def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None,
-            chunk: int | None = None, progress: bool = False) -> RunSet:
+            chunk: int | None = None, progress: bool = False, path=None) -> RunSet:
     """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` (within its bounds, or ``lower``/``upper``)
     in batches of ``chunk`` (``None``: one batch; see :meth:`Problem.outputs`) and record the outputs its targets
-    need. progress: a bar of the runs solved (where they are solved in parts)."""
+    need. progress: a bar of the runs solved (where they are solved in parts).
+
+    The runs of a model that is not batched (DEM) go one after another, or to the problem's ``executor`` (e.g. a
+    Dask cluster, :mod:`jaxbpm.parallel`). path: an HDF5 file that holds the run set; each finished run is stored
+    as it arrives (the file is replaced atomically), so that a run set interrupted (Ctrl-C, a killed process, a
+    failed run) resumes when called again with the same arguments: runs already in the file are not repeated. A
+    file that holds a different run set (other parameters, ranges, seed or outputs) is an error, never
+    overwritten.
+    """
     n_runs = _common.check_count("n_runs", n_runs, 2)
     space = problem.space
     lower = space.lower if lower is None else np.asarray(lower, dtype=np.float64)
@@ -124,11 +149,49 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     t0 = time.perf_counter()
     evals0 = problem.evaluations
     X = latin_hypercube(n_runs, lower, upper, seed=seed)
-    Y = problem.outputs(X, chunk=chunk, progress=progress)
-    return RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
-                  output_sizes=[t.size for t in problem.targets], Y=np.asarray(Y), model=problem.forward.name,
-                  info={"seed": seed, "chunk": chunk, "wall_time": time.perf_counter() - t0,
-                        "evaluations": problem.evaluations - evals0})
+    sizes = [t.size for t in problem.targets]
+    runs = RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
+                  output_sizes=sizes, Y=np.full((n_runs, int(np.sum(sizes))), np.nan), model=problem.forward.name,
+                  info={"seed": seed, "chunk": chunk}, done=np.zeros(n_runs, bool))
+    if path is not None and pathlib.Path(path).exists():
+        runs = _resumable(path, runs)
+    todo = np.flatnonzero(~runs.done) if runs.done is not None else np.zeros(0, int)
+    resumed = n_runs - len(todo)
+
+    def store(k, row):
+        runs.Y[todo[k]], runs.done[todo[k]] = row, True
+        runs.save(path)
+
+    if len(todo):
+        Y = problem.outputs(X[todo], chunk=chunk, progress=progress, on_row=None if path is None else store)
+        runs.Y[todo] = np.asarray(Y)
+    runs.done = None
+    runs.info.update(wall_time=time.perf_counter() - t0, evaluations=problem.evaluations - evals0,
+                     resumed=resumed)
+    if path is not None and len(todo):
+        runs.save(path)
+    return runs
+
+
+def _resumable(path, planned: RunSet) -> RunSet:
+    """The run set stored at ``path`` if it is ``planned`` (same inputs, ranges, outputs and model), with its solved
+    runs; else an error naming what differs."""
+    stored = RunSet.load(path, partial=True)
+    same = {"parameter names": stored.parameter_names == planned.parameter_names,
+            "output names": stored.output_names == planned.output_names,
+            "output sizes": list(stored.output_sizes) == list(planned.output_sizes),
+            "model": stored.model == planned.model,
+            "ranges": np.array_equal(stored.lower, planned.lower) and np.array_equal(stored.upper, planned.upper),
+            "parameter sets (n_runs or seed)": stored.X.shape == planned.X.shape and np.array_equal(stored.X,
+                                                                                                    planned.X)}
+    differ = [name for name, ok in same.items() if not ok]
+    if differ:
+        raise CalibrationError(f"{path} holds another run set (its {', '.join(differ)} differ); give another path, "
+                               "or delete the file to solve the new run set")
+    stored.info = {**stored.info, **planned.info}
+    if stored.done is None:
+        stored.done = np.ones(stored.n_runs, bool)
+    return stored
 
 
 def _errors(problem: Problem, runs: RunSet, normalize: bool) -> np.ndarray:
@@ -222,7 +285,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
               it_max: int = 50, n_trees: int = 500, max_features: float = 1 / 3, exclude: float = 0.05,
               normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
               seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, chunk: int | None = None,
-              regressor=None, progress=None) -> CalibrationResult:
+              regressor=None, runs_file=None, progress=None) -> CalibrationResult:
     """Calibrate with the random-forest surrogate of Irazabal et al. 2023 (see the module docstring).
 
     runs: a stored :class:`RunSet` to re-use (no new runs); else ``n_runs`` are solved. I_e: initial admissible
@@ -234,7 +297,9 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     importance_threshold: drop parameters whose mean importance is below it; resample_runs: then solve that many new
     runs on the remaining parameters. chunk: solve the runs in batches of this many (bounds the memory of a
     ``vmap`` of large solves; ``None``: one batch). verify: solve once at the answer and report the measured errors
-    (else the surrogate's prediction). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
+    (else the surrogate's prediction). runs_file: an HDF5 file the run set is stored in as its runs finish, and
+    resumed from when called again (see :func:`run_set`; the runs go to the problem's ``executor`` where it has
+    one). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
     ``mean_importance``, ``dropped``, ``narrowing`` (per iteration: admissible count, error bound, ranges), the fitted
     models (``models``) and the run set (``runs``).
     """
@@ -256,8 +321,10 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     evals0 = problem.evaluations
     notes = []
     space = problem.space
+    if runs is not None and runs_file is not None:
+        raise CalibrationError("give runs (a stored run set) or runs_file (where to solve and store one), not both")
     if runs is None:
-        runs = run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs)
+        runs = run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs, path=runs_file)
     else:
         if not isinstance(runs, RunSet):
             raise CalibrationError(f"runs must be a RunSet, got {type(runs).__name__}")
@@ -283,7 +350,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
             notes.append(f"dropped parameters of low importance {dropped} (held at {fixed[~active].tolist()})")
             if resample_runs:
                 sub = space.subspace([n for n, a in zip(space.names, active) if a], fixed)
-                sub_problem = Problem(problem.forward, problem.targets, sub)
+                sub_problem = Problem(problem.forward, problem.targets, sub, executor=problem.executor,
+                                      retries=problem.retries)
                 sub_problem.evaluations = problem.evaluations
                 sub_runs = run_set(sub_problem, resample_runs, seed=seed + 1, chunk=chunk, progress=show_runs,
                                    lower=runs.lower[active],

@@ -1,0 +1,154 @@
+"""Batched DEM runs (``jaxbpm.batched.solve_batch``): every member's result is its single run's, with the batch's
+time step, loading time and chunk; a second batch of the same size compiles nothing; a member that blows up fails
+alone; scenes with contacts are refused."""
+
+import contextlib
+
+import jax
+import numpy as np
+import pytest
+
+import jaxbpm
+from jaxbpm.batched import solve_batch
+from jaxbpm.errors import InstabilityError, SceneError
+from jaxbpm.physics.model import default_params
+from jaxbpm.scenes import ThreePointBending, UniaxialCompression
+
+R = 1e-3
+ELASTIC = UniaxialCompression(strain=0.002)
+FAILURE = UniaxialCompression.to_failure(strain=0.01, contacts=False)
+UNBREAKABLE = UniaxialCompression(strain=0.002, breakage=False)
+
+
+@pytest.fixture(scope="module")
+def rock():
+    return jaxbpm.generate.box(300, seed=0, mean_radius=R, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 5e6,
+                                                                      "shear_strength": 1e7})
+
+
+@contextlib.contextmanager
+def compilations():
+    """The programs traced or compiled inside the block (JAX's monitoring events, as in test_dem_compile)."""
+    seen = []
+
+    def listener(name, duration, **kwargs):
+        if name in ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/backend_compile_duration"):
+            seen.append((name.rsplit("/", 1)[-1], kwargs.get("fun_name")))
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield seen
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def _single(sample, scene, params, batched):
+    """The single run of a member, with the batch's time step, loading time and chunk."""
+    b = batched.stats["batch"]
+    return jaxbpm.solve(sample, scene, method="dem", params=params, dt=b["dt"], loading_time=b["loading_time"],
+                        chunk=b["chunk"])
+
+
+def _assert_same(single, batched):
+    for value in ("stiffness", "youngs_modulus"):
+        np.testing.assert_allclose(getattr(batched, value), getattr(single, value), rtol=1e-9)
+    for key in ("peak_force", "strength", "dt", "dt_crit", "loading_time", "speed", "steps"):
+        np.testing.assert_allclose(batched.stats[key], single.stats[key], rtol=1e-9)
+    np.testing.assert_allclose(batched.displacement, single.displacement, rtol=1e-9)
+    np.testing.assert_allclose(batched.force, single.force, rtol=1e-9, atol=1e-9 * np.max(np.abs(single.force)))
+    np.testing.assert_allclose(np.asarray(batched.state.positions), np.asarray(single.state.positions), rtol=1e-9,
+                               atol=1e-15)
+    assert batched.status == single.status == "converged"
+
+
+def test_elastic_members_equal_their_single_runs(rock):
+    p0 = default_params(rock)
+    members = [dict(p0, bond_E=np.array([e]), bond_nu=np.array([nu])) for e, nu in ((1e9, 0.25), (1.3e9, 0.2),
+                                                                                     (0.8e9, 0.3))]
+    out = solve_batch(rock, ELASTIC, members, transits=10)
+    assert len(out) == 3 and [r.stats["batch"]["index"] for r in out] == [0, 1, 2]
+    # the shared time step is the smallest member's; the loading time the softest member's transits
+    assert out[0].stats["dt"] == pytest.approx(0.5 * min(r.stats["dt_crit"] for r in out), rel=1e-12)
+    assert out[1].stats["dt_crit"] < out[0].stats["dt_crit"] < out[2].stats["dt_crit"]
+    for p, r in zip(members, out):
+        _assert_same(_single(rock, ELASTIC, p, r), r)
+    assert out[1].stiffness > out[0].stiffness > out[2].stiffness
+
+
+def test_breaking_members_equal_their_single_runs(rock):
+    """A dict of arrays with a leading batch axis: strengths perturbed as a finite-difference calibration does."""
+    batch = {"bond_E": np.array([[1e9], [1e9], [1.3e9]]), "bond_nu": np.full((3, 1), 0.25),
+             "bond_tensile_strength": np.array([[5e6], [5.5e6], [4e6]]),
+             "bond_shear_strength": np.full((3, 1), 1e7)}
+    out = solve_batch(rock, FAILURE, batch, transits=10)
+    for b, r in enumerate(out):
+        p = {k: v[b] for k, v in batch.items()}
+        single = _single(rock, FAILURE, p, r)
+        _assert_same(single, r)
+        assert r.stats["broken_tensile"] == single.stats["broken_tensile"]
+        assert r.stats["broken_shear"] == single.stats["broken_shear"]
+        np.testing.assert_array_equal(r.stats["broken_curve"], single.stats["broken_curve"])
+    assert sum(r.stats["broken_tensile"] for r in out) > 0
+
+
+def test_second_batch_of_the_same_size_compiles_nothing(rock):
+    p0 = default_params(rock)
+    members = [dict(p0, bond_E=np.array([e])) for e in (1e9, 1.1e9)]
+    first = solve_batch(rock, ELASTIC, members, transits=10)
+    with compilations() as seen:
+        again = solve_batch(rock, ELASTIC, [dict(p0, bond_E=np.array([e])) for e in (1e9, 1.1e9)], transits=10)
+    assert seen == []
+    assert all(r.compile_time == 0.0 for r in again)
+    for a, b in zip(first, again):
+        np.testing.assert_array_equal(a.force, b.force)
+    np.testing.assert_allclose(sum(r.wall_time for r in again), again[0].stats["batch"]["wall_time"], rtol=1e-9)
+
+
+def test_a_member_that_blows_up_fails_alone(rock):
+    p0 = default_params(rock)  # (bonds that cannot break: a breaking one would only shed its stiff bonds)
+    soft, stiff = dict(p0), dict(p0, bond_E=np.array([1e11]))
+    dt = 0.5 * solve_batch(rock, UNBREAKABLE, [soft], transits=2, chunk=8)[0].stats["dt_crit"]
+    with pytest.warns(UserWarning, match="member 1"):
+        out = solve_batch(rock, UNBREAKABLE, [soft, stiff], dt=dt, transits=10, chunk=8, damping=0.0, throw=False)
+    assert [r.status for r in out] == ["converged", "unstable"]
+    assert "unstable" in out[1].stats["failure"] and out[1].stats["steps"] < out[0].stats["steps"]
+    # the failing member's result is its single run's
+    with pytest.warns(UserWarning, match="above the critical"):
+        single = jaxbpm.solve(rock, UNBREAKABLE, params=stiff, dt=dt, chunk=8, damping=0.0, throw=False,
+                              loading_time=out[1].stats["batch"]["loading_time"])
+    assert single.status == "unstable" and single.stats["steps"] == out[1].stats["steps"]
+    np.testing.assert_array_equal(single.force, out[1].force)
+    assert np.isfinite(out[0].stiffness) and np.all(np.isfinite(np.asarray(out[1].state.positions)))
+    with pytest.warns(UserWarning), pytest.raises(InstabilityError) as err:
+        solve_batch(rock, UNBREAKABLE, [soft, stiff], dt=dt, transits=10, chunk=8, damping=0.0)
+    assert err.value.result.status == "unstable" and [r.status for r in err.value.results] == ["converged",
+                                                                                               "unstable"]
+
+
+def test_scenes_with_contacts_and_other_methods_are_refused(rock):
+    p0 = default_params(rock)
+    for scene in (UniaxialCompression.to_failure(), ThreePointBending(), UniaxialCompression(contacts=True)):
+        with pytest.raises(SceneError, match="contacts=True.*one by one"):
+            solve_batch(rock, scene, [p0])
+    with pytest.raises(SceneError, match="DEM only"):
+        solve_batch(rock, ELASTIC, [p0], method="dsm")
+    with pytest.raises(SceneError, match="record_to"):
+        solve_batch(rock, ELASTIC, [p0], record_to="run.h5")
+    with pytest.raises(SceneError, match="leading batch axis"):
+        solve_batch(rock, ELASTIC, {"bond_E": np.ones((2, 1)), "bond_nu": np.full((3, 1), 0.25)})
+    with pytest.raises(SceneError, match="bond_E"):
+        solve_batch(rock, ELASTIC, [{"bond_E": [-1.0], "bond_nu": [0.25]}])
+    assert jaxbpm.solve_batch is solve_batch
+
+
+def test_vectorized_batch_agrees_to_the_dems_round_off_sensitivity(rock):
+    """``vectorize=True`` (jax.vmap): XLA's CPU code rounds by an ulp differently, which the local damping
+    amplifies; the stiffness still agrees closely."""
+    p0 = default_params(rock)
+    members = [dict(p0, bond_E=np.array([e])) for e in (1e9, 1.2e9)]
+    exact = solve_batch(rock, ELASTIC, members, transits=10)
+    vec = solve_batch(rock, ELASTIC, members, transits=10, vectorize=True)
+    for a, b in zip(exact, vec):
+        assert b.stats["batch"]["vectorize"] and not a.stats["batch"]["vectorize"]
+        np.testing.assert_allclose(b.stiffness, a.stiffness, rtol=1e-3)
+        np.testing.assert_allclose(b.force, a.force, rtol=0, atol=1e-2 * np.max(np.abs(a.force)))
