@@ -144,7 +144,7 @@ _CHECKS = {
     "ste": {"dofs": _choice(3, 6), "first_neighbour": _flag, "layered": _flag, "contacts": _optional_flag,
             "contact_fraction": lambda n, v: None if v is None else _fraction(n, v),
             "layer_thickness": _optional_positive, "surface_depth": _surface_depth, "volumes": _volumes,
-            "precision": _choice("float64", "float32"), "pad": _flag, "throw": _flag},
+            "precision": _choice("float64", "float32"), "pad": _flag, "throw": _flag, "clamp_layers": _flag},
 }
 
 
@@ -263,7 +263,8 @@ class DSM(SolverOptions):
 
 class STE(SolverOptions):
     """Stiffness tensor estimation options (``dofs``, ``first_neighbour``, ``layered``, ``layer_thickness``,
-    ``contact_fraction``, ``surface_depth``, ``volumes``, ``precision``, ``pad``); see :func:`jaxbpm.solve`."""
+    ``contact_fraction``, ``surface_depth``, ``volumes``, ``precision``, ``pad``, ``clamp_layers``); see
+    :func:`jaxbpm.solve`."""
 
     method = "ste"
     __slots__ = ()

@@ -61,6 +61,65 @@ def test_simple_cubic_interior_tensor_is_exact(lattice, dofs, first_neighbour):
     assert est.skipped == 0
 
 
+def _clamped_lattice(cells):
+    """An SC lattice clamped at its end layers through fixed/driven masks, l = (n_z - 1) d, A = n_x n_y d^2, and
+    its closed-form stiffness: n_x n_y chains of n_z - 1 bonds in parallel."""
+    nx, ny, nz = cells
+    s = jaxbpm.generate.lattice("sc", cells, R, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    z = np.asarray(s.positions)[:, 2]
+    fixed, driven = np.isclose(z, z.min()), np.isclose(z, z.max())
+    scene = UniaxialCompression(strain=0.002, fixed=fixed, driven=driven, gauge_length=(nz - 1) * D,
+                                area=nx * ny * D**2)
+    kn = float(ste.estimator(s).model.stiffness(default_params(s)).kn[0])
+    return s, scene, nx * ny * kn / (nz - 1), kn
+
+
+def test_clamped_simple_cubic_lattice_is_exact():
+    # the affine field is the exact solution: the DSM gives the closed form to round-off, and so does the STE when
+    # the clamped end layers follow the affine field (clamp_layers; default, first-neighbour, 6 DOF and layered forms)
+    s, scene, exact, kn = _clamped_lattice((4, 4, 8))
+    dsm = jaxbpm.solve(s, scene, method="dsm")
+    np.testing.assert_allclose(dsm.stiffness, exact, rtol=1e-12)
+    res = jaxbpm.solve(s, scene, method="ste", clamp_layers=True)
+    np.testing.assert_allclose(res.stiffness, exact, rtol=1e-9)  # measured 1e-16
+    assert res.stats["clamped"] == 32 and res.stats["surface"] == 104 and res.stats["skipped"] == 0
+    np.testing.assert_allclose(res.stats["E_z"], kn / D, rtol=1e-9)
+    for opts in ({"first_neighbour": True}, {"dofs": 6}, {"layered": True}):
+        np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste", clamp_layers=True, **opts).stiffness,
+                                   exact, rtol=1e-9)
+    # without clamp_layers (the paper's form) the end layers relax: 1 - 5 / (13 (n_z - 2)) (see below)
+    np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste").stiffness / exact, 1 - 5 / 78, rtol=1e-12)
+    # every included particle has the interior tensor's C_33 = k_n / d (C_13 = C_23 = 0)
+    est = ste.estimator(s, scene, clamp_layers=True)
+    c = np.asarray(jax.jit(ste.local_tensors)(est, default_params(s)))[np.asarray(est.include)]
+    np.testing.assert_allclose(c[:, 2, 2], kn / D, rtol=1e-12)
+    np.testing.assert_allclose(c[:, :2, 2], 0.0, atol=1e-12 * kn / D)
+
+
+def test_paper_form_on_the_clamped_lattice():
+    # what the other forms give where the affine field is exact (docs/ste.md tabulates them)
+    s, scene, exact, kn = _clamped_lattice((4, 4, 8))
+    p = default_params(s)
+    # every particle averaged: the clamped layers count with whole cells, but the gauge length runs between their
+    # centres: (n_z - 1) / n_z; half a cell for them (their part inside the gauge length) makes it exact
+    every = jaxbpm.solve(s, scene, method="ste", surface_depth=0.0, clamp_layers=True)
+    np.testing.assert_allclose(every.stiffness / exact, 7 / 8, rtol=1e-12)
+    fixed, driven = scene.layers(s)
+    half = np.where(fixed | driven, 0.5, 1.0) * D**3
+    np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste", surface_depth=0.0, volumes=half,
+                                            clamp_layers=True).stiffness, exact, rtol=1e-9)
+
+    def unclamped(**opts):  # nothing clamped (no scene): the end layers relax as one-sided surface particles
+        est = ste.estimator(s, **opts)
+        return float(ste.scene_stiffness(est, p, s, scene)[0]) / exact
+
+    # the default: the layer next to each end inherits the end's relaxation through Eq. 29 and K Gamma^m
+    # and loses 5/26 of its C_33 (k_t = 0.4 k_n); two layers of n_z - 2 averaged: 1 - 5 / (13 (n_z - 2))
+    np.testing.assert_allclose(unclamped(), 1 - 5 / 78, rtol=1e-12)
+    # the paper's form (nothing clamped, every particle averaged): both effects, -27.1 % here (-10.3 % on 10x10x20)
+    assert abs(unclamped(surface_depth=0.0) - (1 - 0.2708)) < 1e-3
+
+
 def test_normal_springs_only_give_full_symmetry_and_poisson_zero(lattice):
     est = ste.estimator(lattice, dofs=3, surface_depth=0.0)
     k = est.model.stiffness(default_params(lattice))
@@ -124,6 +183,7 @@ def test_random_packing_is_isotropic(packing, plain):
     assert abs(res.stats["E_iso"] / e.mean() - 1) < 0.05
     assert 0.0 < res.stats["nu_iso"] < 0.5
     assert res.stats["skipped"] < 0.05 * packing.n_particles and res.stats["surface"] > 0
+    assert res.stats["clamped"] == 0  # the end layers relax (clamp_layers=False)
 
 
 def test_ste_matches_dsm_bonds_only(packing, plain):

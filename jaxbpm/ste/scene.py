@@ -207,7 +207,8 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
     when the stiffness is not finite (``False``: return the result with ``status="not_finite"``).
     ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``, ``E_y``, ``E_z`` [Pa], ``nu`` (3x3),
     ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls), ``skipped`` (singular particles),
-    ``surface`` (surface particles left out of the averages),
+    ``surface`` (surface particles left out of the averages), ``clamped`` (particles of the scene's fixed and driven
+    sets, which follow the affine field),
     ``particles``, ``bonds``, ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``,
     ``k_top`` [N/m], ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
     """
@@ -228,7 +229,7 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
     delta = scene.strain * length
     stats = {"tensor": parts["tensor"].tolist(), "E_x": float(e[0]), "E_y": float(e[1]), "E_z": float(e[2]),
              "nu": nu.tolist(), "E_iso": float(e_iso), "nu_iso": float(nu_iso), "K_body": float(parts["K_body"]),
-             "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface,
+             "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface, "clamped": est.clamped,
              "particles": est.particles, "bonds": est.bonds, "contacts": est.contacts, "dofs": est.dofs,
              "first_neighbour": est.first_neighbour, "layered": bool(layered), "precision": str(est.d.dtype),
              "size_class": [est.n, est.n_bonds, est.n_contacts], "setup_time": setup_time}
