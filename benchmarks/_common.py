@@ -22,9 +22,12 @@ def pin_threads(threads: int | None) -> None:
 
 
 def enable_x64():
+    """float64 (the default of every benchmark); ``JAXBPM_BENCH_X64=0`` leaves JAX in float32 (``benchmarks/gpu.py``
+    runs the cases where single precision makes sense both ways)."""
     import jax
 
-    jax.config.update("jax_enable_x64", True)
+    if os.environ.get("JAXBPM_BENCH_X64", "1") != "0":
+        jax.config.update("jax_enable_x64", True)
     return jax
 
 
@@ -35,7 +38,8 @@ def machine_info() -> dict:
     return {"python": platform.python_version(), "jax": jax.__version__, "platform": dev.platform,
             "device": getattr(dev, "device_kind", str(dev)), "cpu_count": os.cpu_count(),
             "affinity": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
-            "xla_flags": os.environ.get("XLA_FLAGS", "")}
+            "xla_flags": os.environ.get("XLA_FLAGS", ""),
+            "precision": "float64" if jax.config.jax_enable_x64 else "float32"}
 
 
 def write_json(path, data):
