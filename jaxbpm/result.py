@@ -52,6 +52,15 @@ class Result:
     status: str = "converged"
 
     @property
+    def poisson_ratio(self) -> float | None:
+        """Poisson's ratio of the scene, ``-lateral / axial`` strain in the middle third of the sample (DEM: an
+        elastic run's loaded state; DSM: the static solution; see
+        :meth:`~jaxbpm.scenes.UniaxialCompression.lateral_strain`), or the STE's from its tensor (lateral strains
+        per axial strain along the load axis); ``None`` where the solve measures none (failure runs, bending)."""
+        value = self.stats.get("poisson_ratio") if isinstance(self.stats, dict) else None
+        return None if value is None else float(value)
+
+    @property
     def ok(self) -> bool:
         """Whether the solve converged (``status == "converged"``)."""
         return self.status == "converged"

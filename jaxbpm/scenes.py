@@ -17,7 +17,7 @@ import numpy as np
 from jaxbpm.errors import SceneError
 from jaxbpm.sample import Sample
 
-__all__ = ["UniaxialCompression", "ThreePointBending", "sample_breaks"]
+__all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "sample_breaks"]
 
 
 def sample_breaks(sample: Sample, breakage) -> bool:
@@ -26,6 +26,21 @@ def sample_breaks(sample: Sample, breakage) -> bool:
         return bool(breakage)
     m = sample.materials
     return bool(np.isfinite(m.tensile_strength).any() or np.isfinite(m.shear_strength).any())
+
+
+def lateral_stats(scene, sample: Sample, displacement) -> dict:
+    """``scene.lateral_strain(sample, displacement)`` where the scene measures one and the displacements are finite,
+    else ``{}`` (the result then has no Poisson ratio)."""
+    if displacement is None or not hasattr(scene, "lateral_strain"):
+        return {}
+    u = np.asarray(displacement)
+    if u.ndim != 2 or not np.all(np.isfinite(u[:sample.n_particles, :3])):
+        return {}
+    try:
+        out = scene.lateral_strain(sample, u)
+    except SceneError:
+        return {}
+    return out if np.isfinite(out["poisson_ratio"]) else {}
 
 
 def _is_axis(axis) -> bool:
@@ -223,6 +238,40 @@ class UniaxialCompression:
             raise SceneError("too few records in fit_range to fit a stiffness")
         return float(np.polyfit(displacement[sel], force[sel], 1)[0])
 
+    def lateral_strain(self, sample: Sample, displacement) -> dict:
+        """Axial and lateral strain in the middle third of the sample and the Poisson ratio they give.
+
+        displacement: ``[n, >=3]`` particle displacements (a static solution, or a DEM run's positions less the
+        initial ones; extra rows, e.g. a size class's padding, are ignored). Over the particles whose centres lie in
+        the middle third of the sample along the axis (away from the clamped or pressed ends, whose constraint holds
+        the lateral expansion back), least-squares slopes of ``u_axis`` against ``x_axis`` (the axial strain) and of
+        each lateral ``u_k`` against ``x_k`` (two lateral strains; their intercepts take rigid translations).
+        Returns ``{"axial_strain", "lateral_strain" (the mean of the two), "lateral_strains" [2],
+        "poisson_ratio" = -lateral / axial}``. The end layers of ``boundary="layers"`` are clamped laterally too:
+        on stubby samples (length / width below ~2) the middle third still feels them (a lower ratio); frictionless
+        walls (``boundary="walls"``) leave the ends free.
+        """
+        pos = np.asarray(sample.positions, np.float64)
+        n = len(pos)
+        u = np.asarray(displacement, np.float64)[:n, :3]
+        ax = self.axis
+        lateral = [k for k in range(3) if k != ax]
+        z = pos[:, ax]
+        lo, hi = z.min(), z.max()
+        mid = (z >= lo + (hi - lo) / 3.0) & (z <= hi - (hi - lo) / 3.0)
+        if mid.sum() < 4:
+            raise SceneError("too few particles in the middle third of the sample to measure a lateral strain")
+
+        def slope(x, y):
+            x = x - x.mean()
+            return float(np.dot(x, y - y.mean()) / np.dot(x, x))
+
+        axial = slope(pos[mid, ax], u[mid, ax])
+        lat = [slope(pos[mid, k], u[mid, k]) for k in lateral]
+        mean = float(np.mean(lat))
+        return {"axial_strain": axial, "lateral_strain": mean, "lateral_strains": lat,
+                "poisson_ratio": -mean / axial if axial != 0 else float("nan")}
+
 
 @dataclasses.dataclass(frozen=True)
 class ThreePointBending:
@@ -350,3 +399,207 @@ class ThreePointBending:
         """Flexural strength sigma_f = 3 F S / (2 b h^2) [Pa]."""
         span, b, h = self.dimensions(sample)
         return 3.0 * peak_force * span / (2.0 * b * h**2)
+
+
+@dataclasses.dataclass(frozen=True)
+class BrazilianDisc:
+    """Brazilian (diametral compression) test of a bonded disc: a short cylinder squeezed across a diameter until it
+    splits.
+
+    The disc's axis is ``disc_axis`` (default z, the axis of :func:`jaxbpm.generate.cylinder`; a disc is
+    ``generate.cylinder(n, aspect=t / D)``, ISRM: t / D = 0.5); the load acts along ``axis`` (default x, normal to
+    the disc axis). The bottom platen stays, the top one moves against ``axis`` to a displacement of ``strain`` x D.
+    platens: ``"strips"`` (default): two rigid loading strips, the particles of the rim within ``layer_thickness``
+    (default one mean radius) of its lowest (highest) point along ``axis`` and within half of ``strip_width``
+    (default D / 5: a contact arc 2 alpha of about 23 degrees, as the curved ISRM jaws and flattened discs give) of
+    the loaded diameter, clamped and moved rigidly (every DOF prescribed, as the layers of :class:`UniaxialCompression`).
+    ``"walls"``: two flat frictionless plane walls normal to ``axis`` touching the outermost spheres (the walls of
+    ``UniaxialCompression(boundary="walls")``, law ``wall_law``). A flat platen touches a rough rim at a few
+    particles only: on discs of ten or so particles across the rim crushes there first and the force keeps rising
+    (no clean peak), which is why the strips are the default; on the discs measured the strips split the disc along
+    the loaded diameter, tensile breaks only.
+
+    Observables: the load-displacement curve of the platen, the stiffness K = dF/du over ``fit_range`` [N/m] and
+    the Brazilian tensile strength BTS = 2 F_peak / (pi D t) at the peak force (Hondros' solution for a disc under
+    diametral line loads: the tensile stress across the loaded diameter). ``modulus`` is NaN: the platen
+    displacement of a disc is mostly the deformation near the loaded arcs, so K is no measure of Young's modulus.
+    The curve's strain is u / D and its stress F / (D t) (``Result.area`` = D t), so stress x 2 / pi is the
+    tensile stress of Hondros' solution.
+
+    D: ``diameter`` [m], default the diameter of the sample's cylinder domain (a sample without one: the spheres'
+    extent along ``axis``). t: ``thickness`` [m], default the domain's height (the spheres' extent along
+    ``disc_axis``). Give both when the disc is not a generated z-axis cylinder.
+    contacts: Hertz-Mindlin contacts between particles (on: broken bonds fall back to them), or ``contact_law`` /
+    ``cohesive`` as in :class:`UniaxialCompression`. rotations: None = the Model decides.
+    wall_law, wall_stiffness (``platens="walls"``): ``"hertz"`` (the particle material on a rigid plane) or
+    ``"linear"`` with ``wall_stiffness`` [N/m]; see :func:`jaxbpm.physics.model.build_model`.
+    breakage: bonds break when their stresses exceed their strengths (on by default; ``None``: when the sample's
+    material table has a finite strength). The default ``strain`` (2 % of D) goes past the peak of the discs
+    measured (E = 1 GPa bonds of 5 MPa tensile strength peak at about 1.2 %); stronger bonds need more.
+    DEM only: the static solvers (DSM, STE) raise :class:`~jaxbpm.errors.SceneError`.
+    """
+
+    axis: int = 0
+    disc_axis: int = 2
+    strain: float = 0.02
+    diameter: float | None = None
+    thickness: float | None = None
+    contacts: bool = True
+    rotations: bool | None = None
+    wall_law: str = "hertz"
+    wall_stiffness: float | None = None
+    fit_range: tuple[float, float] = (0.05, 0.25)
+    breakage: bool | None = True
+    contact_law: Any = "hertz"
+    cohesive: Any = None
+    platens: str = "strips"
+    strip_width: float | None = None
+    layer_thickness: float | None = None
+
+    fixed = None
+    driven = None
+
+    def __post_init__(self):
+        if not _is_axis(self.axis) or not _is_axis(self.disc_axis) or self.axis == self.disc_axis:
+            raise SceneError(f"axis (the load) and disc_axis must be two different axes of 0, 1, 2, got "
+                             f"{self.axis!r} and {self.disc_axis!r}")
+        if not (isinstance(self.strain, (int, float, np.integer, np.floating)) and 0 < self.strain < 0.5):
+            raise SceneError(f"strain (platen displacement / disc diameter) must lie in (0, 0.5), got {self.strain!r}")
+        for name in ("diameter", "thickness"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, (int, float, np.integer, np.floating)) and np.isfinite(v)
+                                      and v > 0):
+                raise SceneError(f"{name} must be a positive length [m], got {v!r}")
+        if self.wall_law not in ("hertz", "linear"):
+            raise SceneError(f"wall_law must be 'hertz' or 'linear', got {self.wall_law!r}")
+        if self.wall_law == "linear" and self.wall_stiffness is None:
+            raise SceneError("wall_law='linear' needs wall_stiffness [N/m]")
+        if self.wall_stiffness is not None and not self.wall_stiffness > 0:
+            raise SceneError(f"wall_stiffness must be positive, got {self.wall_stiffness!r}")
+        lo, hi = self.fit_range
+        if not (0 <= lo < hi <= 1):
+            raise SceneError(f"fit_range must satisfy 0 <= lo < hi <= 1, got {self.fit_range!r}")
+        if self.cohesive_law is not None and not self.contacts:
+            raise SceneError("contact_law='cohesive' needs contacts=True")
+        if self.platens not in ("walls", "strips"):
+            raise SceneError(f"platens must be 'walls' or 'strips', got {self.platens!r}")
+        for name in ("strip_width", "layer_thickness"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, (int, float, np.integer, np.floating)) and v > 0):
+                raise SceneError(f"{name} must be a positive length [m], got {v!r}")
+
+    @property
+    def boundary(self) -> str:
+        """``"walls"`` (flat platens) or ``"layers"`` (clamped strips), as :class:`UniaxialCompression` says it."""
+        return "walls" if self.platens == "walls" else "layers"
+
+    @property
+    def cohesive_law(self):
+        """The :class:`~jaxbpm.physics.cohesive.CohesiveLaw` of the scene, or ``None`` (Hertz contacts)."""
+        from jaxbpm.physics.cohesive import resolve_contact_law
+
+        return resolve_contact_law(self.contact_law, self.cohesive)
+
+    @property
+    def uses_walls(self) -> bool:
+        """Whether the platens are plane walls (``platens="walls"``)."""
+        return self.platens == "walls"
+
+    def layers(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
+        """``platens="strips"``: boolean masks ``(fixed, driven)`` of the bottom and the top strip's particles."""
+        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+        d = self.dimensions(sample)[0]
+        lo, hi = self._extent(sample)
+        lat = 3 - self.axis - self.disc_axis
+        centre = 0.5 * (lo[lat] + hi[lat])
+        width = self.strip_width if self.strip_width is not None else 0.2 * d
+        t = self.layer_thickness if self.layer_thickness is not None else float(np.mean(rad))
+        x = pos[:, self.axis]
+        inside = np.abs(pos[:, lat] - centre) <= 0.5 * width
+        fixed = inside & (x - rad <= lo[self.axis] + t)
+        driven = inside & (x + rad >= hi[self.axis] - t)
+        if not fixed.any() or not driven.any():
+            raise SceneError("Brazilian disc: no particle found in a loading strip; widen strip_width or "
+                             "layer_thickness")
+        if (fixed & driven).any():
+            raise SceneError("Brazilian disc: a particle lies in both loading strips; use a thinner layer_thickness")
+        return fixed, driven
+
+    def _extent(self, sample: Sample):
+        pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
+        return (pos - rad[:, None]).min(axis=0), (pos + rad[:, None]).max(axis=0)
+
+    def dimensions(self, sample: Sample) -> tuple[float, float]:
+        """Disc diameter D and thickness t [m]."""
+        domain = sample.domain
+        cylinder = domain is not None and domain.kind == "cylinder"
+        if cylinder and self.disc_axis != 2 and (self.diameter is None or self.thickness is None):
+            raise SceneError(f"the sample's domain is a cylinder along z, but disc_axis is {self.disc_axis}: give "
+                             "disc_axis=2 (or diameter and thickness)")
+        lo, hi = self._extent(sample)
+        size = np.subtract(domain.hi, domain.lo) if cylinder else hi - lo
+        d = float(self.diameter) if self.diameter is not None else float(size[self.axis])
+        t = float(self.thickness) if self.thickness is not None else float(size[self.disc_axis])
+        if not (d > 0 and t > 0):
+            raise SceneError(f"disc diameter ({d:.4g} m) and thickness ({t:.4g} m) must be positive")
+        return d, t
+
+    def geometry(self, sample: Sample) -> tuple[float, float]:
+        """The diameter D (the displacement scale: strain = u / D) and the diametral section D t [m^2]."""
+        d, t = self.dimensions(sample)
+        return d, d * t
+
+    def transit_length(self, sample: Sample) -> float:
+        """The diameter: the DEM's default loading time counts elastic-wave transits across it."""
+        return self.dimensions(sample)[0]
+
+    #: the solvers that model this scene: a disc between platens is a contact problem loaded to failure, which the
+    #: static solvers (DSM, STE) do not model
+    methods = ("dem",)
+
+    def model(self, sample: Sample, **overrides):
+        """The :class:`~jaxbpm.physics.model.Model` this scene needs (the DEM's: :attr:`methods`)."""
+        from jaxbpm.physics.model import build_model
+
+        kw = dict(contacts=self.contacts, walls=self.wall_law if self.uses_walls else None, rotations=self.rotations,
+                  wall_stiffness=self.wall_stiffness)
+        law = self.cohesive_law
+        if law is not None and overrides.get("contacts", True):
+            kw["contact_law"] = law
+        kw.update(overrides)
+        return build_model(sample, **kw)
+
+    def loading(self, sample: Sample, speed: float):
+        """DEM boundary conditions: the platens touch the rim; the top one moves at ``speed`` [m/s] against
+        ``axis``."""
+        n, ax = sample.n_particles, self.axis
+        e = np.zeros(3)
+        e[ax] = 1.0
+        if not self.uses_walls:
+            fixed, driven = self.layers(sample)
+            vel = np.zeros((n, 3))
+            vel[driven] = -speed * e
+            return _loading(fixed | driven, vel)
+        lo, hi = self._extent(sample)
+        return _loading(np.zeros(n, bool), np.zeros((n, 3)), np.stack([lo[ax] * e, hi[ax] * e]), np.stack([e, -e]),
+                        np.stack([0 * e, -speed * e]))
+
+    def compressive_force(self, reaction: np.ndarray) -> np.ndarray:
+        """Platen force [N] per record from the DEM reactions ``[steps, W+2, 3]`` (mean of both platens)."""
+        ax = self.axis
+        if self.uses_walls:
+            return 0.5 * (reaction[:, 1, ax] - reaction[:, 0, ax])
+        return 0.5 * (reaction[:, 0, ax] - reaction[:, 1, ax])
+
+    def fit_stiffness(self, displacement, force, target) -> float:
+        """Least-squares slope dF/du [N/m] over ``fit_range`` of the target displacement."""
+        return UniaxialCompression.fit_stiffness(self, displacement, force, target)
+
+    def modulus(self, stiffness: float, sample: Sample) -> float:
+        """NaN: the platen stiffness of a disc is mostly its contact flattening, not a measure of E."""
+        return float("nan")
+
+    def strength(self, peak_force: float, sample: Sample) -> float:
+        """Brazilian tensile strength BTS = 2 F / (pi D t) [Pa]."""
+        d, t = self.dimensions(sample)
+        return 2.0 * peak_force / (np.pi * d * t)

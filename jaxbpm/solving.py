@@ -104,6 +104,11 @@ def _solve(sample, scene, method, params, options) -> Result:
     method, options = options_for(method, options)
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    allowed = getattr(scene, "methods", None)
+    if allowed is not None and method not in allowed:
+        raise SceneError(f"{type(scene).__name__} needs method={allowed[0]!r}"
+                         f"{'' if len(allowed) == 1 else f' (or one of {allowed[1:]})'}: the {method.upper()} does "
+                         "not model it")
     if method != "dem" and getattr(scene, "contacts", False) and getattr(scene, "cohesive_law", None) is not None:
         raise SceneError(f"the cohesive contact law depends on the loading history: it needs method='dem', not "
                          f"{method!r}")
@@ -149,7 +154,7 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
     from jaxbpm.errors import SimulationInterrupted
     from jaxbpm.physics.model import default_params
 
-    from jaxbpm.scenes import sample_breaks
+    from jaxbpm.scenes import lateral_stats, sample_breaks
 
     breaks = sample_breaks(sample, getattr(scene, "breakage", False))
     # bonds only (no contacts, no walls): the model is padded to the sample's size class, so that the next sample of
@@ -262,6 +267,10 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
             stats["vtu"] = str(series.path)
             stats["vtu_frames"] = len(series.steps)
         stats.update(_dem_peak_stats(scene, sample, rec, disp, force, keep, breaks))
+        if not (interrupted or breaks) and status == "converged" and state is not None:
+            # the lateral strain of the loaded state (an elastic run: a broken sample's would mean nothing)
+            stats.update(lateral_stats(scene, sample, np.asarray(state.positions)[:sample.n_particles]
+                                       - np.asarray(sample.positions)))
         modulus = _dem_modulus(scene, sample, stiffness, length, area)
         if recorder is not None:
             wall = time.perf_counter() - t0

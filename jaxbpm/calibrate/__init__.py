@@ -11,6 +11,9 @@
   (:mod:`~jaxbpm.calibrate.surrogate`).
 * ``method="closed-form"``: the closed form, or an error saying why it does not apply.
 
+Young's modulus and Poisson's ratio together: :func:`calibrate_elastic` (a secant on the bond Poisson ratio, the
+bond modulus in closed form; 2-4 solves, :mod:`~jaxbpm.calibrate.elastic`).
+
 Strengths: :func:`calibrate_strength` calibrates the bond tensile and shear strengths against the UCS and the
 flexural strength (Qu et al.'s original and simplified schemes, :mod:`~jaxbpm.calibrate.strength`); it is
 ``calibrate`` with ``Target("strength", ..., scene="ucs"/"tpb")`` on DEM failure runs.
@@ -28,6 +31,7 @@ import numpy as np
 from jaxbpm.calibrate import _common
 from jaxbpm.calibrate.adam import GRADIENTS, adam, loss_and_gradient
 from jaxbpm.calibrate.closed_form import closed_form
+from jaxbpm.calibrate.elastic import calibrate_elastic
 from jaxbpm.calibrate.multifidelity import calibrate_level, default_levels, multifidelity
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem, Target,
                                         as_targets, base_params, forward_model)
@@ -41,7 +45,7 @@ __all__ = [
     "forward_model", "default_parameters", "adam", "GRADIENTS", "loss_and_gradient", "closed_form", "surrogate",
     "RunSet", "run_set", "multifidelity", "default_levels", "calibrate_level", "CalibrationResult", "History",
     "plot_history", "load_history", "base_params", "calibrate_strength", "strength_table", "STRENGTH_KEYS",
-    "STRENGTH_SCHEMES", "format_strength_table",
+    "STRENGTH_SCHEMES", "format_strength_table", "calibrate_elastic",
 ]
 
 METHODS = ("auto", "adam", "surrogate", "closed-form")

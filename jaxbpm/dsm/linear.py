@@ -100,6 +100,7 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
     one compiled program (per size class), one run."""
     from jaxbpm.physics.model import default_params
     from jaxbpm.result import Result, settle
+    from jaxbpm.scenes import lateral_stats
 
     params = default_params(sample) if params is None else params
     n_materials = int(jnp.shape(params["bond_E"])[0])
@@ -128,6 +129,7 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
              "size_class": [setup.model.n, int(setup.model.bonds.shape[0])],
              "bond_forces": jax.tree_util.tree_map(lambda a: np.asarray(a)[:nb], bond_forces)}
     _report_convergence(stats, converged, res, linear_tol)
+    stats.update(lateral_stats(scene, sample, u))
     length, area = scene.geometry(sample)
     stiffness = reaction / delta
     wall = time.perf_counter() - t0

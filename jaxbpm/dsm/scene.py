@@ -21,6 +21,7 @@ from jaxbpm.dsm.linear import (
 from jaxbpm.dsm.newton import _newton
 from jaxbpm.dsm.preconditioner import _coarse_for, bond_geometry
 from jaxbpm.errors import SceneError
+from jaxbpm.scenes import lateral_stats
 
 
 def boundary_inputs(sample, scene, rotations=None):
@@ -190,6 +191,7 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         stiffness = reaction / delta
         disps, forces = np.array([0.0, delta]), np.array([0.0, reaction])
     stats.update(bond_forces=_bond_forces_at(dataclasses.replace(model, walls=None), params, u))
+    stats.update(lateral_stats(scene, sample, u))
     wall = time.perf_counter() - t0
     # everything but the solver's compilation and run (model, candidates, geometry, Newton's host loop) is setup
     return settle(Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area,

@@ -233,6 +233,9 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
              "particles": est.particles, "bonds": est.bonds, "contacts": est.contacts, "dofs": est.dofs,
              "first_neighbour": est.first_neighbour, "layered": bool(layered), "precision": str(est.d.dtype),
              "size_class": [est.n, est.n_bonds, est.n_contacts], "setup_time": setup_time}
+    lateral = [k for k in range(3) if k != scene.axis]
+    # the uniaxial test's Poisson ratio: lateral strain per axial strain under stress along the load axis
+    stats["poisson_ratio"] = float(np.mean([nu[scene.axis, k] for k in lateral]))
     for name in ("k_bottom", "k_top", "n_bottom", "n_top"):
         if name in parts:
             stats[name] = float(parts[name]) if name.startswith("k") else int(parts[name])
