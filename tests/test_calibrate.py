@@ -398,8 +398,8 @@ def test_clear_errors(one, dsm_forward):
     with pytest.raises(CalibrationError, match="both set"):
         ParameterSpace([Parameter("bond_E"), Parameter("bond_E", 0)], p)
     space = ParameterSpace([Parameter("bond_E")], p)
-    with pytest.raises(CalibrationError, match="does not report 'poisson_ratio'"):
-        Problem(dsm_forward, [Target("poisson_ratio", 0.2)], space).outputs([[1e9]])
+    with pytest.raises(CalibrationError, match="does not report 'strength'"):
+        Problem(dsm_forward, [Target("strength", 1e6)], space).outputs([[1e9]])
     pb = Problem(dsm_forward, [Target("youngs_modulus", 1e8)], space)
     with pytest.raises(CalibrationError, match="unknown gradient"):
         cal.adam(pb, gradient="fd-backward")

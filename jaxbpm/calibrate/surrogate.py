@@ -281,14 +281,250 @@ def _predict(models, X) -> np.ndarray:
     return np.concatenate([np.reshape(f.predict(X), (len(X), -1)) for f in models], axis=1)
 
 
+# ---------------------------------------------------------------------------------------------------- default ranges
+_START_FACTOR = 2.0  # default ranges start at (c / 2, 2 c) around the estimate c
+_WIDEN_FACTOR = 4.0  # each widening round moves one side by this factor (capped at the parameter's bounds)
+
+
+def _defaulted(space) -> np.ndarray:
+    """``[n]`` bool: the parameters whose bounds were not given (``Parameter.bounds is None``: the space's default
+    ``(initial / 100, initial * 100)``, positive)."""
+    return np.array([p.bounds is None for p in space.parameters], dtype=bool)
+
+
+def _log_mask(space) -> np.ndarray:
+    """``[n]`` bool: the parameters sampled uniformly in log space (defaulted bounds and log scaling)."""
+    return _defaulted(space) & (space.scaling == "log")
+
+
+def _to_u(v, logm):
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(logm, np.log(np.where(logm, v, 1.0)), v)
+
+
+def _from_u(u, logm):
+    u = np.asarray(u, dtype=np.float64)
+    return np.where(logm, np.exp(np.where(logm, u, 0.0)), u)
+
+
+def _lhs(n, lo, hi, logm, *, seed, optimize=True) -> np.ndarray:
+    """A Latin hypercube in ``[lo, hi]``, uniform in log space for the parameters of ``logm``."""
+    return _from_u(latin_hypercube(n, _to_u(lo, logm), _to_u(hi, logm), seed=seed, optimize=optimize), logm)
+
+
+def _trim(lo, hi, logm, exclude):
+    """``[lo, hi]`` with the outer ``exclude`` of each range cut off (in log space for ``logm``)."""
+    ul, uh = _to_u(lo, logm), _to_u(hi, logm)
+    w = uh - ul
+    return _from_u(ul + exclude * w, logm), _from_u(uh - exclude * w, logm)
+
+
+def _estimate(problem: Problem):
+    """A cheap first answer to centre the default ranges on: the closed form where it applies (bonds-only
+    elasticity; one solve for one free scale), else the initial values. Returns ``(values, what)``."""
+    space = problem.space
+    ok, _ = problem.closed_form_applies()
+    if ok and sum(t.size for t in problem.targets) >= space.n:
+        from jaxbpm.calibrate.closed_form import closed_form
+
+        try:
+            res = closed_form(problem)
+        except CalibrationError:
+            pass
+        else:
+            values = np.array([res.values[n] for n in space.names])
+            if np.all(np.isfinite(values)) and np.all(values > 0):
+                return space.clip(values), "the closed-form estimate"
+    return space.clip(space.initial), "the initial values"
+
+
+def _reach(problem: Problem, runs: RunSet, rows=None) -> list[dict]:
+    """Per target element: the range of the runs' outputs (over ``rows``; default all) and whether the target lies
+    within it."""
+    out = []
+    for t in problem.targets:
+        y = runs.output(t.name, t.size)
+        if rows is not None and np.any(rows):
+            y = y[rows]
+        tv = np.reshape(t.value, -1)
+        for k in range(t.size):
+            lo, hi = float(np.nanmin(y[:, k])), float(np.nanmax(y[:, k]))
+            out.append({"target": t.name if t.size == 1 else f"{t.name}[{k}]", "value": float(tv[k]),
+                        "min": lo, "max": hi, "inside": bool(lo <= tv[k] <= hi), "column": len(out)})
+    return out
+
+
+def _describe_reach(reach) -> str:
+    return "; ".join(f"{r['target']}: the runs reach [{r['min']:.4g}, {r['max']:.4g}], the target is "
+                     f"{r['value']:.4g}" + ("" if r["inside"] else " (outside)") for r in reach)
+
+
+def _in_box(X, lo, hi) -> np.ndarray:
+    return np.all((X >= lo) & (X <= hi), axis=1)
+
+
+def _widenings(problem, runs, reach, auto, logm, lo, hi, bounds_lo, bounds_hi):
+    """``[(parameter index, side +1/-1)]`` that move the run set's outputs towards the targets it does not reach:
+    per target element outside, each defaulted parameter that correlates with it (``|r|`` at least half the
+    strongest), on the side that raises (or lowers) the output; all defaulted parameters, both sides, when none
+    correlates."""
+    U = _to_u(runs.X, logm)
+    Yall = np.concatenate([runs.output(t.name, t.size) for t in problem.targets], axis=1)
+    moves = set()
+    for r in reach:
+        if r["inside"]:
+            continue
+        y = Yall[:, r["column"]]
+        need = 1.0 if r["value"] > r["max"] else -1.0
+        corr = np.zeros(len(auto))
+        for i in np.flatnonzero(auto):
+            if np.std(U[:, i]) > 0 and np.std(y) > 0:
+                corr[i] = np.corrcoef(U[:, i], y)[0, 1]
+        strongest = np.max(np.abs(corr)) if auto.any() else 0.0
+        if strongest < 0.1:
+            cand = [(i, s) for i in np.flatnonzero(auto) for s in (1, -1)]
+        else:
+            cand = [(i, int(np.sign(corr[i] * need))) for i in np.flatnonzero(auto)
+                    if abs(corr[i]) >= 0.5 * strongest]
+        for i, side in cand:
+            if (side > 0 and hi[i] < bounds_hi[i]) or (side < 0 and lo[i] > bounds_lo[i]):
+                moves.add((int(i), side))
+    return sorted(moves)
+
+
+def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, path, info, previous=None) -> RunSet:
+    """Solve the parameter sets ``X`` whose leading rows may be solved already: those of ``previous`` (a run set)
+    and those in ``path``'s run set (same leading rows) are not solved again; each finished row is stored there as
+    it arrives, like :func:`run_set`."""
+    space = problem.space
+    sizes = [t.size for t in problem.targets]
+    n = len(X)
+    runs = RunSet(parameter_names=space.names, X=X, lower=np.asarray(lower, dtype=np.float64),
+                  upper=np.asarray(upper, dtype=np.float64), output_names=problem.target_names, output_sizes=sizes,
+                  Y=np.full((n, int(np.sum(sizes))), np.nan), model=problem.forward.name,
+                  info={"seed": seed, "chunk": chunk, **info}, done=np.zeros(n, bool))
+    stored_rows = from_file = 0
+    if path is not None and pathlib.Path(path).exists():
+        stored = RunSet.load(path, partial=True)
+        k = min(stored.n_runs, n)
+        same = (stored.parameter_names == runs.parameter_names and stored.output_names == runs.output_names
+                and list(stored.output_sizes) == sizes and stored.model == runs.model
+                and np.array_equal(stored.X[:k], X[:k]))
+        if not same:
+            raise CalibrationError(f"{path} holds another run set (its parameters, outputs, model or parameter sets "
+                                   "differ); give another path, or delete the file to solve the new run set")
+        done = np.ones(stored.n_runs, bool) if stored.done is None else stored.done
+        runs.Y[:k], runs.done[:k] = stored.Y[:k], done[:k]
+        stored_rows, from_file = stored.n_runs, int(np.sum(done[:k]))
+    if previous is not None:
+        k = previous.n_runs
+        runs.Y[:k], runs.done[:k] = previous.Y, True
+    todo = np.flatnonzero(~runs.done)
+    t0 = time.perf_counter()
+    evals0 = problem.evaluations
+
+    def store(k, row):
+        runs.Y[todo[k]], runs.done[todo[k]] = row, True
+        runs.save(path)
+
+    if len(todo):
+        Y = problem.outputs(X[todo], chunk=chunk, progress=progress, on_row=None if path is None else store)
+        runs.Y[todo] = np.asarray(Y)
+    runs.done = None
+    runs.info.update(wall_time=time.perf_counter() - t0, evaluations=problem.evaluations - evals0,
+                     resumed=from_file)
+    if path is not None and len(todo) and n >= stored_rows:
+        runs.save(path)
+    return runs
+
+
+def _default_run_set(problem: Problem, n_runs, *, seed, chunk, progress, path, widen, exclude, notes):
+    """The run set of a problem with defaulted parameter ranges: centred on a cheap estimate, a factor
+    ``_START_FACTOR`` either side (in log space), then widened by ``_WIDEN_FACTOR`` on the side of each target the
+    runs do not reach, with new runs there (all runs kept), ``widen`` rounds at most. Returns ``(runs, ranges)``."""
+    space = problem.space
+    auto, logm = _defaulted(space), _log_mask(space)
+    centre, what = _estimate(problem)
+    lo, hi = space.lower.copy(), space.upper.copy()
+    lo[auto] = np.maximum(centre[auto] / _START_FACTOR, space.lower[auto])
+    hi[auto] = np.minimum(centre[auto] * _START_FACTOR, space.upper[auto])
+    names = [n for n, a in zip(space.names, auto) if a]
+    notes.append(f"default ranges of {names}: a factor {_START_FACTOR:g} either side of {what} "
+                 f"({', '.join(f'{n} in [{lo[i]:.4g}, {hi[i]:.4g}]' for i, n in enumerate(space.names) if auto[i])})"
+                 + (", sampled in log space" if logm.any() else ""))
+    X = _lhs(n_runs, lo, hi, logm, seed=seed)
+    info = {"ranges": "default", "centre": centre.tolist()}
+    runs = _solve_runs(problem, X, lo, hi, seed=seed, chunk=chunk, progress=progress, path=path, info=info)
+    ranges = [{"round": 0, "lower": lo.tolist(), "upper": hi.tolist(), "runs": n_runs, "centre": centre.tolist(),
+               "from": what, "widened": []}]
+    n_new = max(n_runs // 2, 2)
+    for rnd in range(1, widen + 1):
+        tl, th = _trim(lo, hi, logm, exclude)
+        reach = _reach(problem, runs, _in_box(runs.X, tl, th))
+        ranges[-1]["reach"] = reach
+        if all(r["inside"] for r in reach):
+            break
+        moves = _widenings(problem, runs, reach, auto, logm, lo, hi, space.lower, space.upper)
+        if not moves:
+            ranges[-1]["at_bounds"] = True
+            notes.append(f"the runs do not reach every target and the default ranges are at the parameters' bounds "
+                         f"({_describe_reach(reach)})")
+            break
+        new_lo, new_hi = lo.copy(), hi.copy()
+        for i, side in moves:
+            if side > 0:
+                new_hi[i] = min(hi[i] * _WIDEN_FACTOR, space.upper[i])
+            else:
+                new_lo[i] = max(lo[i] / _WIDEN_FACTOR, space.lower[i])
+        parts = []
+        for k, (i, side) in enumerate(moves):
+            sl, sh = new_lo.copy(), new_hi.copy()
+            if side > 0:
+                sl[i] = hi[i]
+            else:
+                sh[i] = lo[i]
+            parts.append(_lhs(n_new, sl, sh, logm, seed=seed + 100 * rnd + k))
+        said = [f"{space.names[i]} {'up' if side > 0 else 'down'} to "
+                f"{new_hi[i] if side > 0 else new_lo[i]:.4g}" for i, side in moves]
+        missed = "; ".join(f"{r['target']} {r['value']:.4g} outside the runs' [{r['min']:.4g}, {r['max']:.4g}]"
+                           for r in reach if not r["inside"])
+        notes.append(f"widening round {rnd}: {missed}; widened {', '.join(said)} (+{n_new * len(moves)} runs)")
+        lo, hi = new_lo, new_hi
+        runs = _solve_runs(problem, np.concatenate([runs.X] + parts), lo, hi, seed=seed, chunk=chunk,
+                           progress=progress, path=path, info=info, previous=runs)
+        ranges.append({"round": rnd, "lower": lo.tolist(), "upper": hi.tolist(), "runs": runs.n_runs,
+                       "widened": [(space.names[i], "upper" if side > 0 else "lower") for i, side in moves]})
+    else:  # every round used: say whether the targets are reached now
+        tl, th = _trim(lo, hi, logm, exclude)
+        reach = ranges[-1]["reach"] = _reach(problem, runs, _in_box(runs.X, tl, th))
+        if not all(r["inside"] for r in reach):
+            at_bounds = not _widenings(problem, runs, reach, auto, logm, lo, hi, space.lower, space.upper)
+            ranges[-1]["at_bounds"] = at_bounds
+            notes.append(f"the runs do not reach every target after {widen} widening round(s)"
+                         + (" (the default ranges are at the parameters' bounds)" if at_bounds else "")
+                         + f": {_describe_reach(reach)}")
+    runs.info["ranges"] = "default"
+    return runs, ranges
+
+
 def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100, I_e: float = 0.2, L_s: int = 1000,
               it_max: int = 50, n_trees: int = 500, max_features: float = 1 / 3, exclude: float = 0.05,
               normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
               seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, chunk: int | None = None,
-              regressor=None, runs_file=None, progress=None) -> CalibrationResult:
+              regressor=None, runs_file=None, progress=None, widen: int = 3) -> CalibrationResult:
     """Calibrate with the random-forest surrogate of Irazabal et al. 2023 (see the module docstring).
 
-    runs: a stored :class:`RunSet` to re-use (no new runs); else ``n_runs`` are solved. I_e: initial admissible
+    runs: a stored :class:`RunSet` to re-use (no new runs); else ``n_runs`` are solved.
+
+    Ranges: a parameter with explicit ``bounds`` is sampled within them. A parameter without (the space's default
+    ``(initial / 100, initial * 100)``) starts within a factor 2 either side of a cheap estimate -- the closed form
+    where it applies (bonds-only elasticity: one solve), else its initial value -- sampled uniformly in log space
+    (log scaling); where the runs' outputs do not reach a target, its range is widened by a factor 4 on the side
+    that moves the output towards the target and ``n_runs // 2`` runs are added there (all runs are kept), at most
+    ``widen`` rounds and never past the default bounds. The ranges of each round are in ``info["ranges"]`` and
+    each widening is stated in the notes.
+
+    I_e: initial admissible
     error (relative to each target's scale when ``normalize``, else in the output's units); L_s: combinations per
     iteration; it_max: iterations at most. n_trees, max_features: the forests (Irazabal et al. 2023: 500 and 1/3).
     regressor: a scikit-learn regressor instance (e.g. ``ExtraTreesRegressor(n_estimators=200)``,
@@ -301,7 +537,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     resumed from when called again (see :func:`run_set`; the runs go to the problem's ``executor`` where it has
     one). The result's ``info`` holds ``oob_r2 [m]``, ``importance [m, n]``,
     ``mean_importance``, ``dropped``, ``narrowing`` (per iteration: admissible count, error bound, ranges), the fitted
-    models (``models``) and the run set (``runs``).
+    models (``models``), the run set (``runs``) and, for default ranges, the rounds of ``ranges`` (per round: lower,
+    upper, runs so far, the parameters widened and the outputs the runs reach per target element).
     """
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)
@@ -316,6 +553,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
         raise CalibrationError(f"max_features must be a fraction in (0, 1], got {max_features!r}")
     if regressor is not None:
         _check_regressor(regressor)
+    widen = _common.check_count("widen", widen, 0)
     show_runs = progress is True  # (a bar of the run set; iterations as lines)
     progress = _common.progress_fn(progress)
     evals0 = problem.evaluations
@@ -323,7 +561,12 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     space = problem.space
     if runs is not None and runs_file is not None:
         raise CalibrationError("give runs (a stored run set) or runs_file (where to solve and store one), not both")
-    if runs is None:
+    ranges = None
+    if runs is None and _defaulted(space).any():
+        n_runs = _common.check_count("n_runs", n_runs, 2)
+        runs, ranges = _default_run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs, path=runs_file,
+                                        widen=widen, exclude=exclude, notes=notes)
+    elif runs is None:
         runs = run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs, path=runs_file)
     else:
         if not isinstance(runs, RunSet):
@@ -379,16 +622,15 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
         full[:, active] = Xa
         return _predict(forests, full)
 
-    lo, hi = runs.lower[active], runs.upper[active]
-    width = hi - lo
-    lo, hi = lo + exclude * width, hi - exclude * width
+    logm = _log_mask(space)[active]  # default ranges narrow in log space; explicit bounds linearly
+    lo, hi = _trim(runs.lower[active], runs.upper[active], logm, exclude)
     history = History(space.names, problem.target_names)
     narrowing = []
     kept = None
     stop = "it_max reached"
     for it in range(1, it_max + 1):
         t0 = time.perf_counter()
-        Xp = latin_hypercube(L_s, lo, hi, seed=seed + 1000 + it, optimize=False)
+        Xp = _lhs(L_s, lo, hi, logm, seed=seed + 1000 + it, optimize=False)
         P = predict(Xp)
         bound = I_e / it
         adm = np.all(np.abs(P) <= bound, axis=1)
@@ -396,8 +638,14 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
                           "lower": lo.tolist(), "upper": hi.tolist()})
         if not adm.any():
             if kept is None:
-                raise CalibrationError(f"no parameter combination is admissible at the initial error I_e={I_e:g}; "
-                                       "widen the ranges or raise I_e")
+                reached = _describe_reach(_reach(problem, runs))
+                hint = "widen the ranges or raise I_e"
+                if ranges is not None:
+                    hint = (f"default ranges after {len(ranges) - 1} widening round(s)"
+                            + (", at the parameters' default bounds" if ranges[-1].get("at_bounds") else "")
+                            + "; give Parameter bounds, raise n_runs or widen, or raise I_e")
+                raise CalibrationError(f"no parameter combination is admissible at the initial error I_e={I_e:g} "
+                                       f"({reached}); {hint}")
             stop = f"no admissible combination at iteration {it} (bound {bound:.4g})"
             break
         kept = Xp[adm]
@@ -432,6 +680,8 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     info = {"oob_r2": r2, "importance": imp, "mean_importance": imp.mean(axis=0), "dropped": dropped,
             "narrowing": narrowing, "models": forests, "runs": runs, "n_runs": runs.n_runs, "stop": stop,
             "normalize": normalize}
+    if ranges is not None:
+        info["ranges"] = ranges
     return _common.make_result(problem, history, values, e, method="surrogate", tol=tol,
                                wall_time=time.perf_counter() - t_start, evaluations=problem.evaluations - evals0,
                                notes=notes, info=info, band=band)
