@@ -101,7 +101,7 @@ def _run_part(args, part, path=None, cache=None) -> dict:
 
 def _killed_halfway(args, path: str) -> int:
     """Start the serial run set with a file and SIGKILL it once half its runs are stored; the runs stored."""
-    from jaxbpm.calibrate.surrogate import RunSet
+    from jaxbpm.calibrate.runs import RunSet
 
     cmd = [sys.executable, __file__, "--part", "serial", "--runs", str(args.runs), "--particles",
            str(args.particles), "--cache", tempfile.mkdtemp(prefix="jaxbpm-bench-xla-"), "--path", path]

@@ -434,7 +434,7 @@ def test_base_params_reads_particle_and_cohesive_entries():
 
 
 def test_run_set_shows_a_progress_bar_only_when_asked(capsys):
-    from jaxbpm.calibrate.surrogate import run_set
+    from jaxbpm.calibrate.runs import run_set
 
     s = jaxbpm.generate.lattice("sc", (3, 3, 4), 1e-3, materials={"E": 1e9, "nu": 0.25})
     problem = cal.Problem(cal.forward_model(s, UniaxialCompression(strain=0.002), model="ste"),

@@ -12,7 +12,7 @@ import pytest
 import jaxbpm
 from jaxbpm.calibrate import CalibrationError, Forward, Parameter, ParameterSpace, Problem, Target, run_set
 from jaxbpm.calibrate.objective import forward_model
-from jaxbpm.calibrate.surrogate import RunSet
+from jaxbpm.calibrate.runs import RunSet
 from jaxbpm.parallel import WorkerLost, check_executor
 
 pytestmark = pytest.mark.xdist_group("parallel")  # one xdist worker: the clusters' processes need the cores

@@ -38,7 +38,8 @@ from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, Pa
 from jaxbpm.calibrate.result import CalibrationResult, History, load_history, plot_history
 from jaxbpm.calibrate.strength import (STRENGTH_KEYS, STRENGTH_SCHEMES, calibrate_strength, format_strength_table,
                                        strength_table)
-from jaxbpm.calibrate.surrogate import RunSet, run_set, surrogate
+from jaxbpm.calibrate.runs import RunSet, run_set
+from jaxbpm.calibrate.surrogate import surrogate
 
 __all__ = [
     "calibrate", "METHODS", "CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward", "Problem",
