@@ -23,7 +23,10 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     method: ``"dem"``, ``"dsm"`` or ``"ste"`` with keyword options, or an options object -- ``jaxbpm.DEM(...)``,
     ``jaxbpm.DSM(...)``, ``jaxbpm.STE(...)`` (:mod:`jaxbpm.options`: checked when built, hashable) -- whose options
     keywords given here override. An unknown option raises :class:`~jaxbpm.errors.SceneError` with the closest
-    names.
+    names. ``method="auto"`` (options ``tol``, the relative stiffness error allowed against the DEM, default 0.01;
+    ``throw``; ``progress``) runs the cheapest method expected to meet ``tol`` on this scene (:mod:`jaxbpm.auto`;
+    on a scene with contacts after a linear pass that measures their share of the stiffness) and says which and
+    why in ``stats["method_choice"]``.
 
     Failure is data: ``Result.status`` is ``"converged"``, ``"max_iterations"`` (an iterative solve stopped above its
     tolerance), ``"unstable"`` (the DEM blew up), ``"interrupted"`` or ``"not_finite"`` (the stiffness is NaN or
@@ -101,6 +104,10 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 def _solve(sample, scene, method, params, options) -> Result:
     from jaxbpm.options import options_for
 
+    if isinstance(method, str) and method == "auto":  # the cheapest method expected to meet tol: jaxbpm.auto
+        from jaxbpm.auto import solve_auto
+
+        return solve_auto(sample, scene, params, options)
     method, options = options_for(method, options)
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
@@ -267,8 +274,9 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
             stats["vtu"] = str(series.path)
             stats["vtu_frames"] = len(series.steps)
         stats.update(_dem_peak_stats(scene, sample, rec, disp, force, keep, breaks))
-        if not (interrupted or breaks) and status == "converged" and state is not None:
-            # the lateral strain of the loaded state (an elastic run: a broken sample's would mean nothing)
+        intact = not breaks or stats.get("broken_tensile", 0) + stats.get("broken_shear", 0) == 0
+        if intact and not interrupted and status == "converged" and state is not None:
+            # the lateral strain of the loaded state (no bond broke: a broken sample's would mean nothing)
             stats.update(lateral_stats(scene, sample, np.asarray(state.positions)[:sample.n_particles]
                                        - np.asarray(sample.positions)))
         modulus = _dem_modulus(scene, sample, stiffness, length, area)

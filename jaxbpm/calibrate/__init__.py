@@ -14,6 +14,9 @@
 Young's modulus and Poisson's ratio together: :func:`calibrate_elastic` (a secant on the bond Poisson ratio, the
 bond modulus in closed form; 2-4 solves, :mod:`~jaxbpm.calibrate.elastic`).
 
+What a laboratory measures (E, nu, UCS, BTS, flexural strength) in one staged workflow: :func:`lab`
+(:mod:`~jaxbpm.calibrate.lab`).
+
 Strengths: :func:`calibrate_strength` calibrates the bond tensile and shear strengths against the UCS and the
 flexural strength (Qu et al.'s original and simplified schemes, :mod:`~jaxbpm.calibrate.strength`); it is
 ``calibrate`` with ``Target("strength", ..., scene="ucs"/"tpb")`` on DEM failure runs.
@@ -32,6 +35,7 @@ from jaxbpm.calibrate import _common
 from jaxbpm.calibrate.adam import GRADIENTS, adam, loss_and_gradient
 from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.elastic import calibrate_elastic
+from jaxbpm.calibrate.lab import LAB_TARGETS, LabResult, lab
 from jaxbpm.calibrate.multifidelity import calibrate_level, default_levels, multifidelity
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem, Target,
                                         as_targets, base_params, forward_model)
@@ -46,7 +50,8 @@ __all__ = [
     "forward_model", "default_parameters", "adam", "GRADIENTS", "loss_and_gradient", "closed_form", "surrogate",
     "RunSet", "run_set", "multifidelity", "default_levels", "calibrate_level", "CalibrationResult", "History",
     "plot_history", "load_history", "base_params", "calibrate_strength", "strength_table", "STRENGTH_KEYS",
-    "STRENGTH_SCHEMES", "format_strength_table", "calibrate_elastic",
+    "STRENGTH_SCHEMES", "format_strength_table", "calibrate_elastic", "lab", "LabResult",
+    "LAB_TARGETS",
 ]
 
 METHODS = ("auto", "adam", "surrogate", "closed-form")

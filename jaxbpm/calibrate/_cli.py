@@ -53,7 +53,7 @@ def _config(path: pathlib.Path) -> dict:
         raise CalibrationError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(cfg, dict):
         raise CalibrationError(f"{path}: the config must be a JSON object")
-    unknown = set(cfg) - {"targets", "parameters", "options", "method", "model", "tol"}
+    unknown = set(cfg) - {"targets", "parameters", "options", "method", "model", "tol", "lab"}
     if unknown:
         raise CalibrationError(f"{path}: unknown config keys {sorted(unknown)}")
     return cfg
@@ -65,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
     from jaxbpm.scenes import UniaxialCompression
 
     cfg = _config(args.config) if args.config is not None else {}
+    if "lab" in cfg:
+        return _run_lab(args, cfg)
     targets = []
     if args.target_E is not None:
         targets.append(Target("youngs_modulus", args.target_E))
@@ -108,4 +110,48 @@ def run(args: argparse.Namespace) -> int:
         print(f"check with {c['model']}: largest error {100 * c['max_error']:.3f} % ({c['wall_time']:.2f} s)")
     if args.history is not None:
         print(f"wrote {result.save(args.history)}")
+    return 0 if result.converged else 1
+
+
+def _run_lab(args: argparse.Namespace, cfg: dict) -> int:
+    """``--config`` with a ``"lab"`` object: the staged laboratory calibration (:func:`jaxbpm.calibrate.lab`)::
+
+        {"lab": {"targets": {"E": 2.1e11, "nu": 0.17, "ucs": 2e9, "bts": 2.5e8, "flexural": 7.8e8},
+                 "samples": {"ucs": "cylinder.h5", "bts": "disc.h5", "flexural": "beam.h5"},
+                 "options": {"tol": 0.05}, "report": "lab.md"}}
+
+    The positional sample serves every test that ``samples`` does not name."""
+    from jaxbpm.calibrate import CalibrationError, lab
+    from jaxbpm.io import load_sample
+
+    spec = cfg["lab"]
+    extra = set(cfg) - {"lab"}
+    if extra:
+        raise CalibrationError(f"a lab config holds only the 'lab' object, not {sorted(extra)}")
+    if not isinstance(spec, dict) or not isinstance(spec.get("targets"), dict):
+        raise CalibrationError('config "lab" must be an object with "targets": {"E": ..., "ucs": ..., ...}')
+    unknown = set(spec) - {"targets", "samples", "options", "report"}
+    if unknown:
+        raise CalibrationError(f"unknown keys in config 'lab': {sorted(unknown)}")
+    paths = spec.get("samples", {})
+    if not isinstance(paths, dict):
+        raise CalibrationError('config lab "samples" must map tests to sample files')
+    default = load_sample(args.sample)
+    samples = {k: load_sample(pathlib.Path(args.config).parent / v) for k, v in paths.items()}
+    for key in ("ucs", "bts", "flexural"):
+        samples.setdefault(key, default)
+    samples.setdefault("elastic", samples["ucs"])
+    options = spec.get("options", {})
+    if not isinstance(options, dict):
+        raise CalibrationError('config lab "options" must be an object')
+    try:
+        result = lab(samples, spec["targets"], progress=not args.quiet, **options)
+    except TypeError as exc:
+        raise CalibrationError(f"bad lab option: {exc}") from None
+    print()
+    print(result.table())
+    for key, why in result.unreached.items():
+        print(f"not reached: {key}: {why}")
+    if spec.get("report"):
+        print(f"wrote {result.report(pathlib.Path(args.config).parent / spec['report'])}")
     return 0 if result.converged else 1

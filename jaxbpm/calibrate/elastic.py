@@ -19,6 +19,7 @@ ratios in (-0.5, 0.5)): a target outside it is reported with the range the sampl
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Mapping
 
@@ -70,12 +71,15 @@ def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None
     base_e = default_parameters(sample)[0]
     mats = sample.materials
     nu0 = float(np.mean(np.asarray(mats.nu, dtype=np.float64)))
-    parameters = [base_e, Parameter("bond_nu", index=None, bounds=_NU_BOUNDS,
-                                    initial=float(np.clip(nu0, *_NU_BOUNDS)),
-                                    ratio=None if np.size(mats.nu) == 1 else tuple(np.ones(np.size(mats.nu))))]
+    parameters = [base_e]
+    if nu is not None:  # (without a nu target the bond nu stays as it is)
+        parameters.append(Parameter("bond_nu", index=None, bounds=_NU_BOUNDS, initial=float(np.clip(nu0, *_NU_BOUNDS)),
+                                    ratio=None if np.size(mats.nu) == 1 else tuple(np.ones(np.size(mats.nu)))))
     from jaxbpm.calibrate.objective import base_params
 
     base = base_params(sample)
+    if dataclasses.is_dataclass(scene) and getattr(scene, "breakage", None) is not True:
+        scene = dataclasses.replace(scene, breakage=False)  # elastic properties: no bond may break on the way
     space = ParameterSpace(parameters, base, scaling="log" if nu is None else "target")
     fwd = forward_model(sample, scene, model, **dict(solve_options or {}))
     problem = Problem(fwd, targets, space)
