@@ -42,10 +42,24 @@ def machine_info() -> dict:
             "precision": "float64" if jax.config.jax_enable_x64 else "float32"}
 
 
+def peak_rss_gib() -> float | None:
+    """This process's peak resident set so far [GiB] (the high-water mark: cases run in one process in increasing
+    size report what the largest so far needed); ``None`` where the platform does not say."""
+    try:
+        import resource
+    except ImportError:  # Windows
+        return None
+    kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kib / 2**20 if sys.platform != "darwin" else kib / 2**30  # Linux: KiB, macOS: bytes
+
+
 def write_json(path, data):
-    """Write ``data`` as JSON atomically (temporary file, then rename): never a half-written result."""
+    """Write ``data`` as JSON atomically (temporary file, then rename): never a half-written result. Adds the
+    process's peak resident set (``peak_rss_gib``) where ``data`` is a dict without one."""
     from jaxbpm.io import write_json as _write
 
+    if isinstance(data, dict) and "peak_rss_gib" not in data:
+        data = {**data, "peak_rss_gib": peak_rss_gib()}
     return _write(path, data)
 
 

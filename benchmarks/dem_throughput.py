@@ -14,7 +14,7 @@ import json
 import sys
 import time
 
-from _common import enable_x64, machine_info, pin_threads, table, write_json
+from _common import enable_x64, machine_info, peak_rss_gib, pin_threads, table, write_json
 
 
 def main(argv=None) -> int:
@@ -61,12 +61,13 @@ def main(argv=None) -> int:
                    "rotations": model.rotations, "compile_s": stats["compile_time"], "steps": stats["steps"],
                    "steps_per_s": sps, "bond_steps_per_s": sps * sample.n_bonds,
                    "particle_steps_per_s": sps * sample.n_particles, "contact_capacity": stats["contact_capacity"],
-                   "reallocations": stats["reallocations"], "generate_s": gen_time}
+                   "reallocations": stats["reallocations"], "generate_s": gen_time,
+                   "peak_rss_gib": peak_rss_gib()}
             rows.append(row)
             print(f"n={sample.n_particles} nb={sample.n_bonds} {physics}: {row['bond_steps_per_s']:.3g} bond-steps/s,"
                   f" compile {row['compile_s']:.2f} s", file=sys.stderr, flush=True)
     table(rows, ["particles", "bonds", "physics", "compile_s", "steps_per_s", "bond_steps_per_s",
-                 "particle_steps_per_s"])
+                 "particle_steps_per_s", "peak_rss_gib"])
     out = {"benchmark": "dem_throughput", "machine": machine_info(), "threads": args.threads, "results": rows}
     print(json.dumps(out, indent=2, default=float))
     path = write_json(args.out, out)

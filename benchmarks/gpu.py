@@ -21,7 +21,6 @@ figures, labelled with the device they ran on).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys

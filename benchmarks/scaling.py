@@ -62,7 +62,7 @@ import sys
 import time
 import warnings
 
-from _common import enable_x64, machine_info, pin_threads, save_png, table, write_json
+from _common import enable_x64, machine_info, peak_rss_gib, pin_threads, save_png, table, write_json
 
 FULL_SIZES = [1000, 2000, 5000, 10000, 20000, 50000, 100000, 200000]
 QUICK_SIZES = [1000, 2000, 4000, 8000]
@@ -283,8 +283,9 @@ def main(argv=None) -> int:
                 log(f"  {LABEL[m]}: FAILED {type(exc).__name__}: {exc}")
                 continue
             r = rec[m]
+            r["peak_rss_gib"] = peak_rss_gib()  # the process's high-water mark after this method (sizes increase)
             log(f"  {LABEL[m]}: K={r['K']:.6g}  compile {r['compile_s']:.2f} s  run {r['run_s']:.4g} s  "
-                f"wall {r['wall_s']:.2f} s")
+                f"wall {r['wall_s']:.2f} s  peak RSS {r['peak_rss_gib']:.2f} GiB")
         ref = rec.get("dem", {}).get("K")
         for m in ("dsm", "ste"):
             if ref and rec.get(m, {}).get("K"):
@@ -315,6 +316,8 @@ def main(argv=None) -> int:
             else:
                 row[f"{LABEL[m]}_compile_s"] = ""
                 row[f"{LABEL[m]}_run_s"] = "skipped" if "skipped" in d else ("FAILED" if "error" in d else "")
+        row["peak_rss_GiB"] = max((r[m].get("peak_rss_gib") or 0.0 for m in METHODS if isinstance(r.get(m), dict)),
+                                  default="")
         for m in ("dsm", "ste"):
             d = r.get(m, {})
             row[f"{LABEL[m]}_dK_%"] = 100 * d["dK_vs_DEM"] if "dK_vs_DEM" in d else ""
