@@ -1,0 +1,291 @@
+"""``jaxbpm.solve(sample, scene, method="auto", tol=0.01)``: the cheapest method expected to meet ``tol``.
+
+The rule (:func:`choose`) reads what the project measured (``docs/methods.md``, "Which method when"; the benchmarks
+``stability.py``, ``methods.py``, ``pareto.py``) as an upper envelope of each method's relative stiffness error
+against the DEM, and takes the first method, cheapest first, whose envelope is within ``tol``:
+
+    STE  <  linear DSM, bonds only  <  linear DSM, contacts linearised  <  nonlinear DSM  <  DEM
+
+* **DEM** for anything past elasticity or not measured: a scene that breaks bonds (``sample_breaks``), cohesive
+  contacts, a scene other than :class:`~jaxbpm.scenes.UniaxialCompression` (bending, the Brazilian disc: the
+  static methods were not validated there, or the scene declares ``methods=("dem",)``), and a ``tol`` below every
+  static method's envelope. The DEM is the reference: its own error is taken as 0.
+* **STE** (bonds only): +3 % to +24 % on random packings (``docs/methods.md``: +4 % dense box at bond coordination
+  6, +6 % to +17 % porous cylinders and loose boxes, +24 % porous coordination 6; it grows with the sample size), so
+  only for ``tol >= 0.25``. With contacts never (above 5 % once contacts carry 6.5 % of the stiffness).
+* **Linear DSM, bonds only**: the bonds' geometric nonlinearity over the strain, ``g = 0.6 strain + 0.001``
+  (measured +0.15 % at 0.2 % strain, +1.12 % at 2 %, 400 particles; +0.06 to +0.18 % at 0.2 % on 2k-100k with or
+  without ``stiffness_tol=1e-2``), plus, on a scene with contacts, the contacts' share ``s`` of the stiffness
+  (the bonds-only solve ignores them: its error is ``-s``).
+* **Linear DSM with linearised contacts** (``nonlinear=False``): an envelope ``h(s)`` of the measured errors
+  against ``s``: -0.4 % at 9 %, -1.4 % at 23 %, -2.9 % at 45 %, -4.8 % at 47 % (1 % strain), -2.7 % at 69 %, then
+  +4 % at 82 % (16 % worst on Jarolin & Dosta's Case 2 at 77-93 %), +29 % at 90 %, +78 % at 93 %
+  (:data:`LINEARISED_ENVELOPE`). Up to 70 % the linearisation is soft and the bonds' geometric nonlinearity stiff,
+  so ``max(g, h)`` bounds the sum; beyond, ``g + h``.
+* **Nonlinear DSM** (Hertz contacts sliding at the Coulomb limit; walls): 0.1 % on bonds only (it solves the
+  geometric nonlinearity), 0.3 % with contacts carrying up to 71 %, 1 % up to 90 % where Newton converges (+0.12 %
+  to +0.36 % measured at 82-86 %; the 6 % worst of Jarolin & Dosta's Case 2 in ``methods.py`` was Newton capped and
+  unconverged), 6 % above (:data:`NONLINEAR_ENVELOPE`). It runs with ``throw=False``: a solve that stops above its
+  tolerance is replaced by the DEM (``stats["method_choice"]["fallback"]``).
+
+The contact share ``s = 1 - K_bonds / K_contacts`` comes from one cheap linear pass: the linear DSM on the bonds
+alone and with the contacts linearised (two linear solves, the second of two passes). Where the choice is one of
+those two solves its result is returned (no second solve). On a scene with walls the pass runs between clamped
+layers (the linear DSM has no walls), for the share only, and the walls need the nonlinear DSM or the DEM.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+import time
+
+import numpy as np
+
+from jaxbpm.errors import SceneError, SolveError
+
+__all__ = ["choose", "solve_auto", "DEFAULT_TOL", "ROUTES", "OPTIONS"]
+
+DEFAULT_TOL = 0.01
+OPTIONS = ("tol", "throw", "progress")
+#: the routes, cheapest first
+ROUTES = ("ste", "dsm_bonds", "dsm_linearised", "dsm_nonlinear", "dem")
+
+#: STE on bonds-only random packings: +3 % to +24 % against the DEM / DSM (docs/methods.md)
+STE_BONDS_ERROR = 0.25
+#: the linear bonds-only DSM's geometric nonlinearity: error ~ GEOMETRIC_SLOPE x strain + GEOMETRIC_FLOOR
+GEOMETRIC_SLOPE, GEOMETRIC_FLOOR = 0.6, 0.001
+#: (contact share, |error|) of the linear DSM with linearised contacts, beyond the bonds' own ``g``: an upper
+#: envelope of stability.py (0.4 / 1.4 / 2.9 / 2.7 % at 9 / 23 / 45 / 69 %, +4 / +29 / +78 % at 82 / 90 / 93 %),
+#: pareto.py (4.8 % at 47 %, 1 % strain) and methods.py (Case 2, 77-93 %: 5.2 % mean, 16 % worst)
+LINEARISED_ENVELOPE = ((0.0, 0.005), (0.1, 0.01), (0.25, 0.02), (0.45, 0.05), (0.7, 0.07), (0.77, 0.17),
+                       (0.82, 0.2), (0.9, 0.35), (0.93, 0.8), (1.0, math.inf))
+#: (contact share, |error|) of the nonlinear DSM when Newton converges: -0.1 to +0.3 % up to 71 % (stability.py,
+#: pareto.py); +0.12 % at 82 % (the stability box, E_b = 1e8 Pa) and +0.24 % / +0.36 % on Case 2 (2:1 at 100 %, 1:4
+#: at 40 %; 83 % / 86 %) at 400 particles with the default newton_maxiter (auto_method.py and a check of this
+#: module's); Case 2's 6 % worst (methods.py) was Newton capped at 6 iterations, stopped above its tolerance. No
+#: converged data above 90 %. A nonlinear solve that does not converge falls back to the DEM.
+NONLINEAR_ENVELOPE = ((0.0, 0.003), (0.71, 0.003), (0.77, 0.01), (0.9, 0.01), (0.93, 0.06), (1.0, 0.06))
+#: the nonlinear DSM on bonds only (geometric nonlinearity solved): 0.04-0.06 % against the DEM
+NONLINEAR_BONDS_ERROR = 0.001
+#: stiffness_tol of the linear DSM routes when tol >= LOOSE_TOL: K within 0.2 % of the converged answer (48-216x
+#: the DEM's speed against 21-63x, docs/methods.md); below, the default (K within ~1e-7)
+LOOSE_TOL, LOOSE_STIFFNESS_TOL = 0.01, 1e-2
+
+
+def check_tol(tol) -> float:
+    """``tol`` as a float in (0, 1), else :class:`SceneError` naming it."""
+    if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not (0 < float(tol) < 1):
+        raise SceneError(f"method='auto' takes tol, the relative stiffness error allowed against the DEM, in (0, 1) "
+                         f"(e.g. 0.01 for 1 %), got {tol!r}")
+    return float(tol)
+
+
+def _envelope(table, s) -> float:
+    xs, ys = zip(*table)
+    s = min(max(float(s), 0.0), 1.0)
+    k = int(np.searchsorted(xs, s, side="right")) - 1
+    if k >= len(xs) - 1:
+        return ys[-1]
+    x0, x1, y0, y1 = xs[k], xs[k + 1], ys[k], ys[k + 1]
+    if math.isinf(y1):
+        return y0 if s == x0 else math.inf
+    return y0 + (s - x0) * (y1 - y0) / (x1 - x0)
+
+
+def geometric_error(strain) -> float:
+    """Envelope of the linear DSM's error from the bonds' geometric nonlinearity at ``strain``."""
+    return GEOMETRIC_SLOPE * float(strain) + GEOMETRIC_FLOOR
+
+
+def expected_errors(scene, share) -> dict:
+    """The envelope of each route's relative error against the DEM on ``scene`` with contact share ``share``
+    (``None``: no contacts; ``nan``: unknown, taken as contact-dominated)."""
+    g = geometric_error(scene.strain)
+    walls = bool(getattr(scene, "uses_walls", False))
+    if share is None:
+        return {"ste": math.inf if walls else STE_BONDS_ERROR, "dsm_bonds": math.inf if walls else g,
+                "dsm_linearised": math.inf, "dsm_nonlinear": NONLINEAR_BONDS_ERROR if not walls
+                else NONLINEAR_ENVELOPE[0][1], "dem": 0.0}
+    s = 1.0 if not np.isfinite(share) else max(float(share), 0.0)
+    return {"ste": math.inf, "dsm_bonds": math.inf if walls else g + s,
+            "dsm_linearised": math.inf if walls else _linearised_error(g, s),
+            "dsm_nonlinear": _envelope(NONLINEAR_ENVELOPE, s), "dem": 0.0}
+
+
+def _linearised_error(g, s) -> float:
+    """Envelope of the linear DSM with linearised contacts: up to a 70 % share the linearisation makes it soft
+    (every measured error there is negative) while the bonds' geometric nonlinearity makes it stiff (``g``, positive),
+    so the larger of the two bounds their sum; beyond, where it turns stiff too (+4 % to +78 %), they add."""
+    h = _envelope(LINEARISED_ENVELOPE, s)
+    return max(g, h) if s <= 0.7 else g + h
+
+
+def _dem_only(sample, scene) -> str | None:
+    """Why ``scene`` needs the DEM (``None``: an elastic compression the static methods model)."""
+    from jaxbpm.scenes import UniaxialCompression, sample_breaks
+
+    allowed = getattr(scene, "methods", None)
+    if allowed is not None and not ({"dsm", "ste"} & set(allowed)):
+        return f"{type(scene).__name__} is modelled by the DEM only (methods={tuple(allowed)})"
+    if not isinstance(scene, UniaxialCompression):
+        return (f"the static methods were validated on uniaxial compression only, not on {type(scene).__name__}: "
+                "the DEM")
+    if sample_breaks(sample, getattr(scene, "breakage", None)):
+        return "the scene breaks bonds (breakage, or finite bond strengths): past elasticity, the DEM only"
+    if getattr(scene, "contacts", False) and getattr(scene, "cohesive_law", None) is not None:
+        return "cohesive contacts depend on the loading history: the DEM only"
+    return None
+
+
+def _linear_options(tol) -> dict:
+    return {"stiffness_tol": LOOSE_STIFFNESS_TOL} if tol >= LOOSE_TOL else {}
+
+
+def _probe(sample, scene, params, tol):
+    """The cheap linear pass: ``(share, bonds_result, linearised_result, seconds, note)``."""
+    from jaxbpm.solving import _solve
+
+    layers = scene if not scene.uses_walls else dataclasses.replace(scene, boundary="layers")
+    t = time.perf_counter()
+    res_b = res_c = None
+    note = ""
+    try:
+        res_b = _solve(sample, dataclasses.replace(layers, contacts=False), "dsm", params,
+                       {"nonlinear": False, "throw": False, **_linear_options(tol)})
+        res_c = _solve(sample, layers, "dsm", params, {"nonlinear": False, "throw": False, **_linear_options(tol)})
+    except (SceneError, SolveError) as exc:  # e.g. particles held by contacts only: no bonds-only answer
+        note = f"; the linear pass failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})"
+    seconds = time.perf_counter() - t
+    ok = [r is not None and r.status == "converged" and np.isfinite(r.stiffness) and r.stiffness > 0
+          for r in (res_b, res_c)]
+    if not all(ok):
+        if not note:
+            note = "; the linear pass did not converge"
+        return math.nan, res_b if ok[0] else None, res_c if ok[1] else None, seconds, note
+    return 1.0 - res_b.stiffness / res_c.stiffness, res_b, res_c, seconds, note
+
+
+@dataclasses.dataclass
+class Choice:
+    """What :func:`choose` decided: ``method`` and ``options`` for :func:`jaxbpm.solve` on ``scene`` (the bonds-only
+    route solves the scene without contacts), the ``route`` name, the reason, the contact share and the probe's
+    results (reused when the route is one of them)."""
+
+    method: str
+    options: dict
+    route: str
+    why: str
+    scene: object
+    tol: float
+    contact_share: float | None = None
+    expected: dict | None = None
+    probe_time: float = 0.0
+    probe: dict = dataclasses.field(default_factory=dict)
+
+    def record(self) -> dict:
+        """The ``stats["method_choice"]`` entry."""
+        share = self.contact_share
+        return {"method": self.method, "route": self.route, "options": dict(self.options), "why": self.why,
+                "tol": self.tol, "contact_share": None if share is None or not np.isfinite(share) else float(share),
+                "expected_error": None if self.expected is None else {
+                    k: (None if math.isinf(v) else float(v)) for k, v in self.expected.items()},
+                "probe_time": float(self.probe_time), "reused_probe": self.route in self.probe}
+
+
+_DESCRIBE = {"ste": "the STE", "dsm_bonds": "the linear DSM on the bonds alone",
+             "dsm_linearised": "the linear DSM with the contacts linearised",
+             "dsm_nonlinear": "the nonlinear DSM", "dem": "the DEM"}
+
+
+def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
+    """The cheapest route whose measured error envelope is within ``tol`` (see the module docstring); on a scene
+    with Hertz contacts this runs the linear pass that measures the contacts' share of the stiffness."""
+    tol = check_tol(tol)
+    reason = _dem_only(sample, scene)
+    if reason is not None:
+        return Choice("dem", {}, "dem", reason, scene, tol)
+    contacts = bool(scene.contacts)
+    share, probe, seconds, note = None, {}, 0.0, ""
+    if contacts:
+        share, res_b, res_c, seconds, note = _probe(sample, scene, params, tol)
+        if not scene.uses_walls:
+            probe = {k: r for k, r in (("dsm_bonds", res_b), ("dsm_linearised", res_c)) if r is not None}
+    expected = expected_errors(scene, share)
+    route = next(r for r in ROUTES if expected[r] <= tol)
+    options = {"ste": {}, "dsm_bonds": {"nonlinear": False, **_linear_options(tol)},
+               "dsm_linearised": {"nonlinear": False, **_linear_options(tol)},
+               "dsm_nonlinear": {"nonlinear": True}, "dem": {}}[route]
+    method = {"ste": "ste", "dem": "dem"}.get(route, "dsm")
+    what = ("bonds only" if not contacts else
+            f"contacts carry {100 * share:.1f} % of the stiffness (linear pass)" if np.isfinite(share) else
+            "contact share unknown, taken as contact-dominated")
+    if scene.uses_walls:
+        what += "; walls (the linear DSM has none)"
+    cheaper = [r for r in ROUTES[:ROUTES.index(route)] if np.isfinite(expected[r])]
+    why = f"{what}{note}: {_DESCRIBE[route]} is the cheapest method expected within tol = {tol:g} " \
+          f"(measured error envelope {100 * expected[route]:.2g} %)"
+    if cheaper:
+        why += "; cheaper: " + ", ".join(f"{_DESCRIBE[r][4:]} {100 * expected[r]:.2g} %" for r in cheaper)
+    solve_scene = dataclasses.replace(scene, contacts=False) if route == "dsm_bonds" and contacts else scene
+    return Choice(method, options, route, why, solve_scene, tol, share, expected, seconds, probe)
+
+
+def solve_auto(sample, scene, params, options):
+    """``jaxbpm.solve(..., method="auto", tol=..., throw=..., progress=...)``."""
+    from jaxbpm.result import settle
+    from jaxbpm.sample import Sample
+    from jaxbpm.solving import _solve
+
+    unknown = sorted(set(options) - set(OPTIONS))
+    if unknown:
+        raise SceneError(f"method='auto' takes only {', '.join(OPTIONS)}; got {', '.join(map(repr, unknown))} "
+                         "(choose a method to pass its options)")
+    if not isinstance(sample, Sample):
+        raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    tol = check_tol(options.get("tol", DEFAULT_TOL))
+    throw = options.get("throw", True)
+    if not isinstance(throw, bool):
+        raise SceneError(f"throw must be True or False, got {throw!r}")
+    if params is not None:
+        from jaxbpm.physics.model import check_params
+
+        params = check_params(params, sample)
+    t0 = time.perf_counter()
+    fallback = None
+    choice = choose(sample, scene, tol, params=params)
+    if choice.route in choice.probe:  # the linear pass is the answer: no second solve
+        result = dataclasses.replace(choice.probe[choice.route], stats=dict(choice.probe[choice.route].stats))
+        result = settle(result, throw)
+        total = choice.probe_time
+        compile_time = sum(r.compile_time for r in choice.probe.values())
+    else:
+        opts = dict(choice.options, throw=throw)
+        if choice.method == "dem" and "progress" in options:
+            opts["progress"] = options["progress"]
+        if choice.route == "dsm_nonlinear":  # accepted where Newton converges, else the DEM
+            first = _solve(sample, choice.scene, "dsm", params, dict(choice.options, throw=False))
+            if first.status == "converged":
+                result = first
+            else:
+                fallback = {"status": first.status, "failure": first.stats.get("failure"),
+                            "wall_time": first.wall_time}
+                dem_opts = {"throw": throw, **({"progress": options["progress"]} if "progress" in options else {})}
+                result = _solve(sample, choice.scene, "dem", params, dem_opts)
+        else:
+            result = _solve(sample, choice.scene, choice.method, params, opts)
+        total = time.perf_counter() - t0
+        compile_time = result.compile_time + sum(r.compile_time for r in choice.probe.values())
+    # the wall time covers the choice (the linear pass) and the answer; what is not the answer's own compile or
+    # run counts as setup
+    extra_compile = compile_time - result.compile_time
+    extra_setup = max(total - result.wall_time - extra_compile, 0.0)
+    result.wall_time = result.wall_time + extra_setup + extra_compile
+    result.setup_time = result.setup_time + extra_setup
+    result.compile_time = compile_time
+    result.stats["method_choice"] = record = choice.record()
+    if fallback is not None:
+        record.update(method="dem", route="dem", options={}, fallback=fallback,
+                      why=record["why"] + f"; the nonlinear DSM stopped with status {fallback['status']!r}: the DEM")
+    return result
