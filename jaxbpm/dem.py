@@ -11,6 +11,11 @@ Integration (per step, time step dt)::
     F, M = forces(x, q)                                           (one force evaluation per step)
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
 
+Contacts: jax-md's neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin); inside
+it, the pairs within reach (surfaces closer than ``NEAR_MARGIN`` x skin, bonded pairs left out) are found again when a
+particle has moved half that margin or a bond breaks, and each step runs the contact law on those only (on an 8k
+dense box 1.6x faster per step than testing and packing every candidate each step).
+
 Damping ``F_d`` is local non-viscous damping as in PFC and MUSEN: ``F_d = -alpha |F| sign(v)`` per component
 (and the same for moments). It removes kinetic energy where a particle accelerates, without slowing a uniform
 motion, which is what quasi-static loading needs; ``alpha = 0`` gives undamped, energy-conserving dynamics.
@@ -44,8 +49,8 @@ from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
-from jaxbpm.neighbors import (_contact_pairs, _jax_md_context, _Neighbors, _remap_history, _remap_springs,
-                              NeighborSettings)
+from jaxbpm.neighbors import (_contact_pairs, _jax_md_context, _Near, _Neighbors, _remap_history, _remap_springs,
+                              near_build, near_size, near_springs, near_stale, NeighborSettings, pack)
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
            "potential_energy", "NeighborSettings", "progress_printer", "pad_loading", "unpad_state"]
@@ -116,16 +121,10 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
         return _cohesive_step(model, params, load, state, spring, cohesion, dt, pairs, valid, touching, size)
 
     def evaluate(pairs, valid, spring):
-        dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
-        force, moment, parts = _evaluate(model, params, dataclasses.replace(state, spring=spring), load, dxi, v_rel,
-                                         (pairs, valid))
-        return force, moment, parts["walls"], parts["contacts"].spring, parts["intact"], parts["broken"]
+        return _contact_forces(model, params, load, state, pairs, valid, spring, dt)
 
     def packed():
-        # position of each touching pair in the packed list (associative_scan: XLA's CPU cumsum is slower)
-        slot = jax.lax.associative_scan(jnp.add, touching.astype(jnp.int32)) - 1
-        take = jnp.full(size, capacity, jnp.int32).at[jnp.where(touching, slot, size)].set(
-            jnp.arange(capacity, dtype=jnp.int32), mode="drop")  # the touching slots, then `capacity` (none)
+        take, _ = pack(touching, size)  # the touching slots, then `capacity` (none)
         force, moment, walls, packed_spring, intact, broken = evaluate(
             pairs.at[take].get(mode="fill", fill_value=model.n), take < capacity,
             spring.at[take].get(mode="fill", fill_value=0.0))
@@ -133,6 +132,36 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
                 broken)
 
     return jax.lax.cond(jnp.sum(touching.astype(jnp.int32)) <= size, packed, lambda: evaluate(pairs, valid, spring))
+
+
+def _contact_forces(model: Model, params, load: Loading, state: DEMState, pairs, valid, spring, dt):
+    """Forces and moments, wall reactions, the pairs' new springs, the new intact mask and break modes, with the
+    contact law on ``pairs`` only."""
+    dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
+    force, moment, parts = _evaluate(model, params, dataclasses.replace(state, spring=spring), load, dxi, v_rel,
+                                     (pairs, valid))
+    return force, moment, parts["walls"], parts["contacts"].spring, parts["intact"], parts["broken"]
+
+
+def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMState, near: _Near, rebuilt, dt,
+               margin):
+    """:func:`_contact_step` on the pairs within reach (:class:`jaxbpm.neighbors._Near`), found again when stale
+    (the candidate list was rebuilt, a particle moved more than ``margin / 2``, a bond broke). Returns the step's
+    forces, moments, wall reactions, intact mask and break modes, and the pairs within reach (their ``overflow``
+    set when they did not fit their slots: the chunk is then run again with more)."""
+    capacity = new.nbrs.idx.shape[1]
+
+    def refresh():
+        spring = near_springs(near, capacity)
+        spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, spring, new.nbrs.idx.T, model.n),
+                              lambda: spring)
+        found = near_build(model, new.positions, new.nbrs, new.intact, spring, margin, near.slot.shape[0])
+        return found._replace(overflow=found.overflow | near.overflow)
+
+    near = jax.lax.cond(rebuilt | near_stale(near, new.positions, new.intact, margin), refresh, lambda: near)
+    force, moment, walls, spring, intact, broken = _contact_forces(model, params, load, new, near.pairs,
+                                                                   near.slot < capacity, near.spring, dt)
+    return force, moment, walls, intact, broken, near._replace(spring=spring)
 
 
 def _cohesive_step(model: Model, params, load, state, spring, cohesion, dt, pairs, valid, touching, size):
@@ -149,9 +178,7 @@ def _cohesive_step(model: Model, params, load, state, spring, cohesion, dt, pair
         return force, moment, parts["walls"], cf.spring, parts["intact"], parts["broken"], cf.cohesion
 
     def packed():
-        slot = jax.lax.associative_scan(jnp.add, touching.astype(jnp.int32)) - 1
-        take = jnp.full(size, capacity, jnp.int32).at[jnp.where(touching, slot, size)].set(
-            jnp.arange(capacity, dtype=jnp.int32), mode="drop")
+        take, _ = pack(touching, size)
         force, moment, walls, packed_spring, intact, broken, packed_cohesion = evaluate(
             pairs.at[take].get(mode="fill", fill_value=model.n), take < capacity,
             spring.at[take].get(mode="fill", fill_value=0.0), cohesion.at[take].get(mode="fill", fill_value=0.0))
@@ -223,13 +250,24 @@ def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
     return dataclasses.replace(state, force=force, moment=moment)
 
 
+#: the pairs within reach (see :func:`step`): within this fraction of the neighbour list's skin of touching
+#: (0.02 r_min by default: on a dense random box 24 % more pairs than touch, found again every ~0.01 r_min of motion);
+#: ``None``: every step tests and packs the whole candidate list
+NEAR_MARGIN = 0.04
+
+
 def _damped(f, v, alpha):
     return f - alpha * jnp.abs(f) * jnp.sign(v)
 
 
-def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin):
+def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin, near: _Near | None = None,
+         margin=None):
     """One velocity-Verlet step. Returns ``(new_state, record)``; record holds the reaction forces ``[W+2, 3]``
-    (walls, then the sums of internal forces on the clamped particles moving and at rest) and the largest speed."""
+    (walls, then the sums of internal forces on the clamped particles moving and at rest) and the largest speed.
+
+    With Hertz contacts, ``near`` (the pairs within ``margin`` of touching, :func:`jaxbpm.neighbors.near_build`)
+    makes the step run the contact law on those pairs only; it then returns ``(new_state, record, near)``. Without,
+    every step tests and packs the whole candidate list."""
     clamped = load.clamped[:, None]
     inv_m, inv_i = 1.0 / model.mass[:, None], 1.0 / model.inertia[:, None]
     v = state.velocities + 0.5 * dt * _damped(state.force, state.velocities, alpha) * inv_m
@@ -262,6 +300,10 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
             force, moment, walls, spring, intact, broken, cohesion = _contact_step(model, params, load, new, spring,
                                                                                    dt, cohesion)
             new = dataclasses.replace(new, cohesion=cohesion)
+        elif near is not None:
+            force, moment, walls, intact, broken, near = _near_step(model, params, load, state, new, near, rebuilt,
+                                                                    dt, margin)
+            spring = state.spring  # (the pairs within reach carry the springs; the chunk hands them back at its end)
         else:
             spring = jax.lax.cond(rebuilt,
                                   lambda: _remap_springs(state.nbrs.idx.T, state.spring, nbrs.idx.T, model.n),
@@ -288,7 +330,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
         new = dataclasses.replace(new, intact=intact, broken=mode,
                                   broken_time=jnp.where((broken > 0) & (state.broken == 0), t, state.broken_time))
         record["broken"] = jnp.stack([jnp.sum(mode == 1), jnp.sum(mode == 2)]).astype(jnp.int32)
-    return new, record
+    return (new, record) if near is None else (new, record, near)
 
 
 @jax.jit
@@ -296,16 +338,29 @@ def _precompute(model, params):
     return model.precompute(params)
 
 
-@functools.partial(jax.jit, static_argnames=("n_steps",))
-def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps):
+@functools.partial(jax.jit, static_argnames=("n_steps", "near_slots"))
+def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=None, near_slots=None):
     # ``params`` comes precomputed (stiffnesses and strengths, once per run, not per step): its structure is the
-    # same whatever entries the caller's dict had, so the chunk compiles once per model
+    # same whatever entries the caller's dict had, so the chunk compiles once per model. With Hertz contacts and a
+    # ``margin``, the steps carry the pairs within reach (``near_slots`` of them at most; found at the chunk's
+    # start, again when stale) and hand their springs back to the state at its end.
+    near_overflow = jnp.zeros((), bool)
+    if margin is not None and model.contacts and model.contact_law != "cohesive":
+        def body(carry, _):
+            s, rec, near = step(model, params, load, carry[0], dt, alpha, origin, near=carry[1], margin=margin)
+            return (s, near), rec
 
-    def body(s, _):
-        return step(model, params, load, s, dt, alpha, origin)
+        near = near_build(model, state.positions, state.nbrs, state.intact, state.spring, margin, near_slots)
+        (state, near), records = jax.lax.scan(body, (state, near), None, length=n_steps)
+        state = dataclasses.replace(state, spring=near_springs(near, state.spring.shape[0]))
+        near_overflow = near.overflow
+    else:
+        def body(s, _):
+            return step(model, params, load, s, dt, alpha, origin)
 
-    state, records = jax.lax.scan(body, state, None, length=n_steps)
-    overflow = state.nbrs.did_buffer_overflow if model.contacts else jnp.zeros((), bool)
+        state, records = jax.lax.scan(body, state, None, length=n_steps)
+    overflow = jnp.stack([jnp.asarray(state.nbrs.did_buffer_overflow if model.contacts else False).astype(bool),
+                          near_overflow.astype(bool)])
     finite = jnp.all(jnp.isfinite(state.positions))
     return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0)
 
@@ -472,7 +527,9 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     reading from the persistent cache the programs the run builds, see :func:`jaxbpm._compile.compile_clock`; 0 when
     this process had them all) + ``run_time``
     (the rest: the chunks, the checks between them, records and callbacks); ``kernel_time`` (the chunks alone),
-    steps, steps per second (the median chunk), number of neighbour-list re-allocations.
+    steps, steps per second (the median chunk), number of neighbour-list re-allocations; with contacts the
+    candidate list's capacity (``contact_capacity``) and the slots of the pairs within reach (``contact_slots``,
+    doubled and the chunk run again when they overflow).
     progress: ``True`` prints progress (:func:`progress_printer`); a callable is called as
     ``progress(steps_done, steps_total, elapsed_s)`` after every chunk.
     on_chunk: called as ``on_chunk(steps_done, state, chunk_records)`` after every chunk (records of that chunk
@@ -492,11 +549,15 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     t0 = time.perf_counter()
     dtype = model.positions0.dtype
     r_min = float(np.min(np.asarray(model.radii)))
-    nb_owner, origin = None, jax.device_put(np.zeros(3, dtype))
+    nb_owner, origin, margin, near_slots = None, jax.device_put(np.zeros(3, dtype)), None, None
     clock = {"t0": t0, "compiling": compiling, "kernel": []}
     if model.contacts:
-        nb_owner = _Neighbors(model, neighbors or NeighborSettings(skin=0.5 * r_min), model.positions0)
+        settings = neighbors or NeighborSettings(skin=0.5 * r_min)
+        nb_owner = _Neighbors(model, settings, model.positions0)
         nbrs = nb_owner.allocate(model.positions0 if state is None else state.positions)
+        if NEAR_MARGIN is not None and model.contact_law != "cohesive":
+            margin, near_slots = jnp.asarray(NEAR_MARGIN * settings.skin, dtype), near_size(nbrs.idx.shape[1])
+            clock["contact_slots"] = near_slots
         origin = jnp.asarray(nb_owner.origin, dtype)
         if state is not None and state.nbrs is not None:
             spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion)
@@ -525,7 +586,8 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
         while len(records) < n_chunks:
             _interrupt.check()
             tc, compiled = time.perf_counter(), compiling.seconds
-            new, rec, overflow, finite, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk)
+            new, rec, overflow, finite, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk,
+                                                                 margin, near_slots)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
             rec = jax.device_get(rec)
@@ -537,7 +599,12 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                     f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
                     f"(non-finite or runaway motion, max speed {vmax:.3g} m/s): time step dt = {dt:.4g} s, critical "
                     f"time step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
-            if model.contacts and (bool(overflow) or not nb_owner.inside(pmin, pmax)):
+            overflow, near_overflow = (bool(o) for o in np.asarray(overflow))
+            if near_overflow and not overflow:
+                # more pairs within reach than slots: the chunk again with more (a new size compiles it again)
+                near_slots = clock["contact_slots"] = min(2 * near_slots, state.nbrs.idx.shape[1])
+                continue
+            if model.contacts and (overflow or not nb_owner.inside(pmin, pmax)):
                 # re-allocate from the chunk's start and run it again: no contact is ever dropped
                 reallocs += 1
                 stalled += 1
@@ -547,12 +614,14 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                         f"neighbour list was re-allocated {stalled} times for the same chunk (particles moving too "
                         f"far, too fast: max speed {vmax:.3g} m/s) with time step dt = {dt:.4g} s, critical time "
                         f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
-                extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if bool(overflow) else 0
+                extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if overflow else 0
                 nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra)
                 origin = jnp.asarray(nb_owner.origin, dtype)
                 spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring,
                                                   state.cohesion)
                 state = done = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
+                if near_slots is not None:
+                    near_slots = clock["contact_slots"] = max(near_slots, near_size(nbrs.idx.shape[1]))
                 continue  # (a new buffer size compiles the chunk again)
             clock["kernel"].append(elapsed)
             stalled = 0
@@ -586,7 +655,8 @@ def _collect(model, state, records, chunk, reallocs, clock):
     stats = {"setup_time": setup, "compile_time": compile_time, "run_time": wall - setup - compile_time,
              "wall_time": wall, "kernel_time": float(np.sum(kernel)), "steps": len(records) * chunk,
              "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
-             "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0}
+             "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0,
+             "contact_slots": clock.get("contact_slots", 0)}
     return out, stats
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -119,3 +120,62 @@ def _remap_index(old_pairs, new_pairs, n):
     pos = jnp.clip(jnp.searchsorted(sorted_key, new_key), 0, sorted_key.shape[0] - 1)
     found = (sorted_key[pos] == new_key) & (new_pairs[:, 0] < n)
     return order[pos], found
+
+
+class _Near(NamedTuple):
+    """The pairs within reach: the candidates (bonded pairs with an intact bond left out) whose surfaces are closer
+    than ``margin`` when the list was built. While no particle has moved more than ``margin / 2`` since then and no
+    bond has broken, no other candidate can touch, so each step's contact law runs on these pairs only, without
+    testing and packing the whole candidate list (a second, tighter Verlet list inside jax-md's).
+
+    ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
+    ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``intact`` (intact bonds
+    then), ``overflow`` (more pairs within reach than ``S``: the run needs more slots)."""
+
+    pairs: jnp.ndarray
+    slot: jnp.ndarray
+    spring: jnp.ndarray
+    ref: jnp.ndarray
+    intact: jnp.ndarray
+    overflow: jnp.ndarray
+
+
+def near_size(capacity: int) -> int:
+    """Slots of the pairs within reach at first, for a candidate list of ``capacity`` pairs."""
+    return max(capacity // 3, 1)
+
+
+def pack(mask, size: int):
+    """Indices of the ``True`` entries of ``mask [C]`` in ``size`` slots (``C`` for an empty slot) and whether they
+    did not fit (``associative_scan``: XLA's CPU cumsum is slower)."""
+    capacity = mask.shape[0]
+    slot = jax.lax.associative_scan(jnp.add, mask.astype(jnp.int32)) - 1
+    take = jnp.full(size, capacity, jnp.int32).at[jnp.where(mask, slot, size)].set(
+        jnp.arange(capacity, dtype=jnp.int32), mode="drop")
+    return take, slot[-1] + 1 > size
+
+
+def near_build(model: Model, positions, nbrs, intact, spring, margin, size: int) -> _Near:
+    """The pairs within ``margin`` of touching in ``size`` slots (see :class:`_Near`), with their springs taken from
+    ``spring [C, 3]`` (the candidate list's layout)."""
+    from jaxbpm.physics.contact import pair_vectors
+
+    pairs, valid = _contact_pairs(model, nbrs, intact)
+    i, j, d = pair_vectors(positions, pairs, valid)
+    close = valid & (model.radii[i] + model.radii[j] + margin - jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0)
+    take, overflow = pack(close, size)
+    return _Near(pairs=pairs.at[take].get(mode="fill", fill_value=model.n), slot=take,
+                 spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions,
+                 intact=jnp.sum(intact.astype(jnp.int32)), overflow=overflow)
+
+
+def near_springs(near: _Near, capacity: int):
+    """The springs in the candidate list's layout ``[capacity, 3]`` (every candidate not within reach is apart: no
+    spring)."""
+    return jnp.zeros((capacity, 3), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
+
+
+def near_stale(near: _Near, positions, intact, margin):
+    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2`` or a bond broke."""
+    moved = jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1))
+    return (moved > 0.25 * margin * margin) | (jnp.sum(intact.astype(jnp.int32)) != near.intact)

@@ -197,6 +197,47 @@ def test_neighbor_overflow_is_reallocated_and_matches_big_buffer():
     np.testing.assert_allclose(tight.force, roomy.force, rtol=1e-9, atol=1e-12 * np.max(np.abs(roomy.force)))
 
 
+@pytest.fixture(scope="module")
+def contact_box():
+    """Soft bonds among stiff particles: contacts carry most of the stiffness."""
+    return jaxbpm.generate.box(300, seed=0, materials={"E": 1e8, "nu": 0.25},
+                               particle_material={"E": 1e10, "nu": 0.25, "density": 2500.0, "friction": 0.5,
+                                                  "restitution": 0.5}).largest_cluster()
+
+
+def _with_near(monkeypatch, margin, size=None):
+    monkeypatch.setattr(dem, "NEAR_MARGIN", margin)
+    if size is not None:
+        monkeypatch.setattr(dem, "near_size", size)
+
+
+def test_pairs_within_reach_match_packing_every_step(contact_box, monkeypatch):
+    """The contact law on the pairs within reach (found again as particles move) gives the run of the per-step
+    packing of the whole candidate list, to round-off: the two programs differ from step 28 on by 1e-18 of the force
+    (summation order), which the sliding contacts amplify to 3e-12 by step 400 and ~1e-4 by the end, as they amplify
+    a change of 1e-15 in one coordinate (K then moves by 8e-5)."""
+    scene = jaxbpm.scenes.UniaxialCompression(strain=0.005, contacts=True)
+    near = jaxbpm.solve(contact_box, scene, "dem", transits=20)
+    _with_near(monkeypatch, None)
+    every = jaxbpm.solve(contact_box, scene, "dem", transits=20)
+    scale = np.max(np.abs(every.force))
+    assert len(near.force) == len(every.force) > 1000
+    np.testing.assert_allclose(near.force[:400], every.force[:400], rtol=0, atol=1e-9 * scale)
+    assert abs(near.stiffness / every.stiffness - 1) < 5e-4
+
+
+def test_pairs_within_reach_overflow_runs_the_chunk_again(contact_box, monkeypatch):
+    """Too few slots for the pairs within reach: the chunk runs again with more, and nothing is lost."""
+    scene = jaxbpm.scenes.UniaxialCompression(strain=0.005, contacts=True)
+    roomy = jaxbpm.solve(contact_box, scene, "dem", transits=20)
+    _with_near(monkeypatch, dem.NEAR_MARGIN, lambda capacity: capacity // 12)
+    tight = jaxbpm.solve(contact_box, scene, "dem", transits=20)
+    assert tight.stats["contact_slots"] > tight.stats["contact_capacity"] // 12  # the slots grew
+    assert roomy.stats["contact_slots"] == roomy.stats["contact_capacity"] // 3
+    np.testing.assert_allclose(tight.force[:400], roomy.force[:400], rtol=0, atol=1e-9 * np.max(np.abs(roomy.force)))
+    assert abs(tight.stiffness / roomy.stiffness - 1) < 5e-4
+
+
 def test_second_solve_of_same_size_does_not_recompile():
     s = jaxbpm.generate.lattice("sc", (2, 2, 4), R)
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.002)
