@@ -190,15 +190,17 @@ def test_help_of_the_commands_loaded_on_use(capsys, command, option):
 
 
 def test_help_and_version_import_no_jax():
-    """``jaxbpm --help``, ``--version`` and ``COMMAND --help`` (of commands defined in jaxbpm.cli) answer without
-    importing JAX; ``import jaxbpm`` imports none either and still lists every public name."""
+    """``jaxbpm --help``, ``--version`` and ``COMMAND --help`` (of commands defined in jaxbpm.cli, and of ``convert``
+    and ``params``, defined in jaxbpm.interop.cli) answer without importing JAX; ``import jaxbpm`` imports none either
+    and still lists every public name."""
     code = textwrap.dedent("""
         import contextlib, io, sys
         import jaxbpm, jaxbpm.cli
         assert set(jaxbpm.__all__) <= set(dir(jaxbpm)), set(jaxbpm.__all__) - set(dir(jaxbpm))
         jaxbpm.cli.build_parser().parse_args(["info", "x.h5", "--no-cache"])
         out = io.StringIO()
-        for argv in (["--help"], ["--version"], ["generate", "--help"], ["demo", "--help"], ["info", "--help"]):
+        for argv in (["--help"], ["--version"], ["generate", "--help"], ["demo", "--help"], ["info", "--help"],
+                     ["export-vtk", "--help"], ["convert", "--help"], ["params", "--help"]):
             with contextlib.redirect_stdout(out):
                 try:
                     jaxbpm.cli.main(argv)
@@ -210,6 +212,7 @@ def test_help_and_version_import_no_jax():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=_env())
     assert res.returncode == 0, res.stderr
     assert "usage: jaxbpm" in res.stdout and "jaxbpm 0.1.0" in res.stdout and "--packing-fraction" in res.stdout
+    assert "usage: jaxbpm convert" in res.stdout and ".vtkhdf" in res.stdout and "--radius1" in res.stdout
 
 
 def test_calibrate_options_override_the_config(tmp_path, capsys, monkeypatch):

@@ -1,12 +1,23 @@
 """Interoperability with other DEM codes: their bond parameter conventions (:mod:`~jaxbpm.interop.conventions`:
 PFC, LAMMPS, Yade, MUSEN, translated exactly to and from jaxbpm's bond law), exchange formats
-(:mod:`~jaxbpm.interop.formats`: LAMMPS data and dump files, CSV, VTU series for ParaView) and the ``jaxbpm
-convert`` / ``jaxbpm params`` commands (:mod:`~jaxbpm.interop.cli`).
+(:mod:`~jaxbpm.interop.formats`: LAMMPS data and dump files, CSV, VTU and VTKHDF series for ParaView, LIGGGHTS and
+Yade files) and the ``jaxbpm convert`` / ``jaxbpm params`` commands (:mod:`~jaxbpm.interop.cli`).
 
 ``jaxbpm.formats`` and ``jaxbpm.conventions`` are the old names of the two modules: they still import, with a
 deprecation warning, until the next release.
 """
 
-from jaxbpm.interop import conventions, formats
+import importlib
 
 __all__ = ["conventions", "formats"]
+
+
+def __getattr__(name: str):
+    # the modules import JAX: loaded on first use, so that ``jaxbpm convert --help`` needs none
+    if name in __all__:
+        return importlib.import_module(f"jaxbpm.interop.{name}")
+    raise AttributeError(f"module 'jaxbpm.interop' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

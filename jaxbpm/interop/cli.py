@@ -24,7 +24,7 @@ def _cmd_convert(args: argparse.Namespace) -> int:
         kw["normalize"] = True
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        written = formats.convert(args.input, args.output, sample=args.sample, **kw)
+        written = formats.convert(args.input, args.output, sample=args.sample, format=args.format, **kw)
     for w in caught:
         print(f"warning: {w.message}", file=sys.stderr)
     for path in written[:3]:
@@ -86,9 +86,9 @@ def _cmd_params(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     """Add ``convert`` and ``params`` to the sub-parsers ``sub`` of the ``jaxbpm`` parser."""
-    from jaxbpm.interop import conventions, formats
+    from jaxbpm.interop._registry import CONVENTIONS, FORMATS, READERS  # (no JAX: --help answers at once)
 
-    known = ", ".join(f"{ext} ({what})" for ext, what in formats.FORMATS.items())
+    known = ", ".join(f"{ext} ({what})" for ext, what in FORMATS.items())
     p = sub.add_parser(
         "convert", help="convert a sample between file formats (HDF5, LAMMPS data, CSV, VTU; dump -> VTU series)",
         description=f"Convert IN to OUT, formats by suffix: {known}. LAMMPS data files carry bpm/rotational bond "
@@ -97,12 +97,15 @@ def add_parsers(sub) -> None:
     p.add_argument("output", type=pathlib.Path, help="file to write")
     p.add_argument("--sample", type=pathlib.Path, default=None,
                    help="reference sample (radii, bonds) when IN is a LAMMPS dump")
+    p.add_argument("--format", choices=sorted(READERS), default=None,
+                   help="read IN as this format whatever its suffix: "
+                        + "; ".join(f"{k}: {v}" for k, v in READERS.items()))
     p.add_argument("--normalize", action="store_true",
                    help="LAMMPS output: coefficients for bond_style bpm/rotational normalize yes")
     p.set_defaults(func=_cmd_convert)
 
-    names = sorted(conventions.CONVENTIONS)
-    docs = "; ".join(f"{n}: {conventions.CONVENTIONS[n]['doc']}" for n in names)
+    names = sorted(CONVENTIONS)
+    docs = "; ".join(f"{n}: {CONVENTIONS[n]['doc']}" for n in names)
     p = sub.add_parser(
         "params", help="translate bond parameters between jaxbpm, PFC, LAMMPS, Yade and MUSEN",
         description="Translate one bond's parameters between conventions (exact where possible; warnings state "

@@ -73,6 +73,7 @@ from typing import Any
 import numpy as np
 
 from jaxbpm.errors import ConventionError
+from jaxbpm.interop._registry import CONVENTIONS  # (kept JAX-free for the CLI's help)
 from jaxbpm.physics.bond import BondStiffness, stiffness
 
 __all__ = [
@@ -503,30 +504,6 @@ def failure_index(rule: str, normal, shear, twist, bend, bond: JaxbpmBond):
     if rule == "yade":
         return np.maximum.reduce([u_n, u_b, u_s, u_t])
     raise ConventionError(f"unknown failure rule {rule!r}; expected 'jaxbpm', 'lammps' or 'yade'")
-
-
-# ---------------------------------------------------------------------------------------------- registry
-# name -> (parameter names with defaults (None = required), needs (length, radius1, radius2)?)
-CONVENTIONS: dict[str, dict[str, Any]] = {
-    "jaxbpm": {"params": {"E": None, "nu": None, "bond_radius": None, "bond_radius_ratio": None,
-                          "tensile_strength": np.inf, "shear_strength": np.inf},
-               "doc": "E [Pa], nu, bond_radius [m] (or bond_radius_ratio = r_b / min(R1, R2)), tensile_strength, "
-                      "shear_strength [Pa]"},
-    "pfc": {"params": {"pb_kn": None, "pb_ks": None, "emod": None, "kratio": None, "pb_rmul": 1.0,
-                       "pb_ten": np.inf, "pb_coh": np.inf, "pb_fa": 0.0, "pb_mcf": 1.0},
-            "doc": "pb_kn, pb_ks [Pa/m] or emod [Pa], kratio; pb_rmul; pb_ten, pb_coh [Pa]; pb_fa [deg]; pb_mcf"},
-    "lammps": {"params": {"Kr": None, "Ks": None, "Kt": None, "Kb": None, "Fcr": np.inf, "Fcs": np.inf,
-                          "Tct": np.inf, "Tcb": np.inf, "normalize": 0.0},
-               "doc": "Kr, Ks [N/m] (normalize=1: [N]), Kt, Kb [N m/rad]; Fcr, Fcs [N]; Tct, Tcb [N m]"},
-    "yade": {"params": {"young": None, "poisson": None, "alphaKr": None, "alphaKtw": None,
-                        "normalCohesion": np.inf, "shearCohesion": np.inf, "rollingCohesion": None,
-                        "twistingCohesion": None},
-             "doc": "young [Pa], poisson (= ks/kn), alphaKr, alphaKtw; normalCohesion, shearCohesion, "
-                    "rollingCohesion, twistingCohesion [Pa]"},
-    "musen": {"params": {"diameter": None, "young_modulus": None, "poisson_ratio": None,
-                         "normal_strength": np.inf, "tangential_strength": np.inf},
-              "doc": "diameter [m], young_modulus [Pa], poisson_ratio; normal_strength, tangential_strength [Pa]"},
-}
 
 
 def _to_jaxbpm(name: str, values: dict[str, Any], length, r1, r2) -> JaxbpmBond:

@@ -1,4 +1,5 @@
-"""Exchange formats: LAMMPS data and dump files, CSV particles + bonds, VTU time series for ParaView.
+"""Exchange formats: LAMMPS data and dump files, CSV particles + bonds, VTU and VTKHDF time series for ParaView,
+LIGGGHTS data files and dumps, Yade sphere lists.
 
 All writers are atomic (a temporary file next to the target, renamed onto it when complete). Readers raise
 :class:`~jaxbpm.errors.SampleFileError` naming the file and line of a malformed entry.
@@ -29,6 +30,13 @@ CSV (:func:`write_csv`, :func:`read_csv`)
     material columns (then one component per distinct (E, nu, strengths), defaults 1 GPa, 0.25, unbreakable).
 VTU series (:class:`VTUSeries`, :func:`write_vtu_series`)
     one ``.vtu`` per time (meshio) and a ``.pvd`` collection for ParaView.
+VTKHDF series (:class:`VTKHDFSeries`, :mod:`jaxbpm.interop.vtkhdf`)
+    one ``.vtkhdf`` file (HDF5) for all times, which ParaView >= 5.11 opens: the cells (a vertex per particle, a
+    line per bond) are stored once, each step adds only the points and the data arrays.
+LIGGGHTS (:func:`read_liggghts_data`, :func:`read_liggghts_dump`), Yade (:func:`read_yade_text`, ...)
+    see :mod:`jaxbpm.interop.othercodes`. Their files have no suffix of their own (``.data`` is also LAMMPS',
+    ``.txt`` anything), so :func:`read_sample` and :func:`convert` read them only when told: ``format="liggghts"``
+    or ``format="yade"``.
 """
 
 from __future__ import annotations
@@ -38,38 +46,38 @@ import pathlib
 import numpy as np
 
 from jaxbpm.errors import SampleFileError
+from jaxbpm.interop._registry import FORMATS, READERS  # (kept JAX-free for the CLI's help)
 from jaxbpm.interop.csvfiles import read_csv, write_csv
 from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
 from jaxbpm.interop.lammps import (lammps_coefficients, read_lammps_coeffs, read_lammps_data, write_lammps_coeffs,
                                    write_lammps_data)
+from jaxbpm.interop.othercodes import read_liggghts_data, read_liggghts_dump, read_yade_text, write_yade_text
+from jaxbpm.interop.vtkhdf import VTKHDFSeries
 from jaxbpm.interop.vtu import VTUSeries, write_vtu_series
 from jaxbpm.io import export_vtk, load_sample, save_sample
 from jaxbpm.sample import Sample
 
 __all__ = ["write_lammps_data", "read_lammps_data", "write_lammps_coeffs", "read_lammps_coeffs", "lammps_coefficients",
-           "read_lammps_dump", "DumpFrame", "write_csv", "read_csv", "VTUSeries", "write_vtu_series", "read_sample",
-           "write_sample", "convert", "FORMATS"]
-
-
-
-FORMATS = {".h5": "jaxbpm HDF5 sample", ".hdf5": "jaxbpm HDF5 sample", ".data": "LAMMPS data file",
-           ".lmp": "LAMMPS data file", ".csv": "CSV particles + <stem>_bonds.csv",
-           ".vtu": "VTK XML (write only)", ".vtk": "legacy VTK (write only)",
-           ".pvd": "VTU time series from a LAMMPS dump (write only, needs a sample)",
-           ".dump": "LAMMPS text dump (read only, to .pvd)", ".lammpstrj": "LAMMPS text dump (read only, to .pvd)"}
+           "read_lammps_dump", "DumpFrame", "write_csv", "read_csv", "VTUSeries", "write_vtu_series", "VTKHDFSeries",
+           "read_liggghts_data", "read_liggghts_dump", "read_yade_text", "write_yade_text", "read_sample",
+           "write_sample", "convert", "FORMATS", "READERS"]
 
 
 def _kind(path: pathlib.Path, what: str) -> str:
     ext = path.suffix.lower()
     if ext not in FORMATS:
         raise SampleFileError(f"{path}: cannot tell the format from the suffix {ext!r}; known: "
-                              f"{', '.join(sorted(FORMATS))}")
+                              f"{', '.join(sorted(FORMATS))} (or name the input's format, format= / --format: "
+                              f"{', '.join(READERS)})")
     return ext
 
 
-def read_sample(path, **kw) -> Sample:
-    """Read a sample from any readable format, chosen by suffix (``.h5``, ``.data``/``.lmp``, ``.csv``)."""
+def read_sample(path, *, format: str | None = None, **kw) -> Sample:
+    """Read a sample from any readable format, chosen by suffix (``.h5``, ``.data``/``.lmp``, ``.csv``) or by
+    ``format`` (a key of :data:`READERS`: ``"liggghts"``, ``"yade"``, ...; any suffix)."""
     path = pathlib.Path(path)
+    if format is not None:
+        return _read_as(path, format, **kw)
     ext = _kind(path, "input")
     if ext in (".h5", ".hdf5"):
         return load_sample(path)
@@ -78,6 +86,14 @@ def read_sample(path, **kw) -> Sample:
     if ext == ".csv":
         return read_csv(path, **kw)
     raise SampleFileError(f"{path}: {FORMATS[ext]} is not a sample format that can be read")
+
+
+def _read_as(path: pathlib.Path, format: str, **kw) -> Sample:
+    readers = {"hdf5": load_sample, "lammps": read_lammps_data, "csv": read_csv, "liggghts": read_liggghts_data,
+               "yade": read_yade_text}
+    if format not in readers:
+        raise SampleFileError(f"{path}: unknown format {format!r}; known: {', '.join(READERS)}")
+    return readers[format](path, **kw)
 
 
 def write_sample(path, sample: Sample, **kw) -> list[pathlib.Path]:
@@ -96,28 +112,47 @@ def write_sample(path, sample: Sample, **kw) -> list[pathlib.Path]:
     raise SampleFileError(f"{path}: {FORMATS[ext]} cannot be written from a sample alone")
 
 
-def convert(src, dst, *, sample=None, **kw) -> list[pathlib.Path]:
-    """Convert ``src`` to ``dst``, formats by suffix. A LAMMPS dump (``.dump``/``.lammpstrj``) converts to a
-    ``.pvd`` VTU series and needs ``sample`` (a Sample or a sample file) for radii and bonds; its atom IDs must be
-    particle index + 1 (as :func:`write_lammps_data` numbers them). Returns the files written."""
+def convert(src, dst, *, sample=None, format: str | None = None, **kw) -> list[pathlib.Path]:
+    """Convert ``src`` to ``dst``, formats by suffix (``format``: read ``src`` as that key of :data:`READERS`
+    instead). A LAMMPS dump (``.dump``/``.lammpstrj``) converts to a ``.pvd`` VTU series or a ``.vtkhdf`` series
+    and needs ``sample`` (a Sample or a sample file) for radii and bonds; its atom IDs must be particle index + 1
+    (as :func:`write_lammps_data` numbers them). Returns the files written."""
     src, dst = pathlib.Path(src), pathlib.Path(dst)
+    if format is not None:
+        _kind(dst, "output")
+        if dst.suffix.lower() in _SERIES:
+            raise SampleFileError(f"{dst}: a series is written from a LAMMPS dump (.dump/.lammpstrj) only")
+        return write_sample(dst, read_sample(src, format=format, **kw))
     sext, dext = _kind(src, "input"), _kind(dst, "output")
     if sext in (".dump", ".lammpstrj"):
-        if dext != ".pvd":
-            raise SampleFileError(f"{dst}: a LAMMPS dump converts to a .pvd VTU series only")
-        if sample is None:
-            raise SampleFileError(f"{src}: converting a dump needs the sample (radii and bonds), e.g. --sample")
-        ref = sample if isinstance(sample, Sample) else read_sample(sample)
-        frames = [f for f in read_lammps_dump(src) if f.kind == "atoms"]
-        series = VTUSeries(dst, ref)
-        for f in frames:
-            if len(f.ids) != ref.n_particles or np.any(f.ids != np.arange(1, ref.n_particles + 1)):
-                raise SampleFileError(f"{src}: timestep {f.timestep} has atom IDs that are not 1..{ref.n_particles} "
-                                      f"(the sample's particles)")
-            series.write(f.timestep, positions=f.positions)
-        if not series.steps:
-            raise SampleFileError(f"{src}: no ATOMS frames")
-        return [series.path] + [dst.with_name(name) for _, name in series.steps]
-    if dext == ".pvd":
-        raise SampleFileError(f"{dst}: a .pvd series is written from a LAMMPS dump (.dump/.lammpstrj) only")
+        return _dump_series(src, dst, dext, sample)
+    if dext in _SERIES:
+        raise SampleFileError(f"{dst}: a {dext} series is written from a LAMMPS dump (.dump/.lammpstrj) only")
     return write_sample(dst, read_sample(src, **kw))
+
+
+_SERIES = (".pvd", ".vtkhdf")
+
+
+def _dump_series(src: pathlib.Path, dst: pathlib.Path, dext: str, sample) -> list[pathlib.Path]:
+    if dext not in _SERIES:
+        raise SampleFileError(f"{dst}: a LAMMPS dump converts to a .pvd VTU series or a .vtkhdf series only")
+    if sample is None:
+        raise SampleFileError(f"{src}: converting a dump needs the sample (radii and bonds), e.g. --sample")
+    ref = sample if isinstance(sample, Sample) else read_sample(sample)
+    frames = [f for f in read_lammps_dump(src) if f.kind == "atoms"]
+    if not frames:
+        raise SampleFileError(f"{src}: no ATOMS frames")
+    for f in frames:
+        if len(f.ids) != ref.n_particles or np.any(f.ids != np.arange(1, ref.n_particles + 1)):
+            raise SampleFileError(f"{src}: timestep {f.timestep} has atom IDs that are not 1..{ref.n_particles} "
+                                  f"(the sample's particles)")
+    if dext == ".vtkhdf":
+        with VTKHDFSeries(dst, ref) as series:
+            for f in frames:
+                series.write(f.timestep, positions=f.positions)
+        return [dst]
+    series = VTUSeries(dst, ref)
+    for f in frames:
+        series.write(f.timestep, positions=f.positions)
+    return [series.path] + [dst.with_name(name) for _, name in series.steps]

@@ -42,30 +42,9 @@ class VTUSeries:
 
         s = self.sample
         n, nb = s.n_particles, s.n_bonds
-        ref = np.asarray(s.positions, np.float64)
-        if positions is not None and displacement is not None:
-            raise SampleError("VTUSeries.write: give positions or displacement, not both")
-        if positions is not None:
-            pos = np.asarray(positions, np.float64)
-            if pos.shape != (n, 3):
-                raise SampleError(f"VTUSeries.write: positions must have shape [{n}, 3], got {pos.shape}")
-            disp = pos - ref
-        else:
-            disp = np.zeros((n, 3)) if displacement is None else np.asarray(displacement, np.float64)
-            if disp.shape != (n, 3):
-                raise SampleError(f"VTUSeries.write: displacement must have shape [{n}, 3], got {disp.shape}")
-            pos = ref + disp
-        ok = np.ones(nb, bool) if intact is None else np.asarray(intact, bool).reshape(-1)
-        if ok.shape != (nb,):
-            raise SampleError(f"VTUSeries.write: intact must have shape [{nb}], got {ok.shape}")
+        pos, pdata, bdata = step_arrays(s, "VTUSeries.write", positions, displacement, intact, point_data,
+                                        bond_data)
         b = np.asarray(s.bonds)
-        broken = np.bincount(b[~ok].ravel(), minlength=n).astype(np.int32)
-        pdata = {"radius": np.asarray(s.radii, np.float64), "displacement": disp, "broken_bonds": broken,
-                 "coordination": np.bincount(b[ok].ravel(), minlength=n).astype(np.int32)}
-        pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
-        bdata = {"intact": ok.astype(np.int32), "material": np.asarray(s.bond_material, np.int32)}
-        bdata.update({k: v.astype(np.float64) for k, v in
-                      _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
         cells = [("vertex", np.arange(n, dtype=np.int64)[:, None])]
         if nb:
             cells.append(("line", b.astype(np.int64)))
@@ -91,6 +70,36 @@ class VTUSeries:
         tree = ET.ElementTree(root)
         ET.indent(tree)
         atomic_write(self.path, lambda tmp: tree.write(tmp, encoding="utf-8", xml_declaration=True))
+
+
+def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data, bond_data):
+    """The points ``[n, 3]``, point data and bond data of one step of a series (see :class:`VTUSeries`)."""
+    n, nb = s.n_particles, s.n_bonds
+    ref = np.asarray(s.positions, np.float64)
+    if positions is not None and displacement is not None:
+        raise SampleError(f"{who}: give positions or displacement, not both")
+    if positions is not None:
+        pos = np.asarray(positions, np.float64)
+        if pos.shape != (n, 3):
+            raise SampleError(f"{who}: positions must have shape [{n}, 3], got {pos.shape}")
+        disp = pos - ref
+    else:
+        disp = np.zeros((n, 3)) if displacement is None else np.asarray(displacement, np.float64)
+        if disp.shape != (n, 3):
+            raise SampleError(f"{who}: displacement must have shape [{n}, 3], got {disp.shape}")
+        pos = ref + disp
+    ok = np.ones(nb, bool) if intact is None else np.asarray(intact, bool).reshape(-1)
+    if ok.shape != (nb,):
+        raise SampleError(f"{who}: intact must have shape [{nb}], got {ok.shape}")
+    b = np.asarray(s.bonds)
+    broken = np.bincount(b[~ok].ravel(), minlength=n).astype(np.int32)
+    pdata = {"radius": np.asarray(s.radii, np.float64), "displacement": disp, "broken_bonds": broken,
+             "coordination": np.bincount(b[ok].ravel(), minlength=n).astype(np.int32)}
+    pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
+    bdata = {"intact": ok.astype(np.int32), "material": np.asarray(s.bond_material, np.int32)}
+    bdata.update({k: v.astype(np.float64) for k, v in
+                  _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
+    return pos, pdata, bdata
 
 
 def write_vtu_series(pvd_path, sample: Sample, frames: Iterable[Mapping[str, Any]]) -> pathlib.Path:

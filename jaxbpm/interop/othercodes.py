@@ -1,0 +1,126 @@
+"""Files of two more DEM codes: LIGGGHTS data files and dumps, and Yade's ``export.textExt`` sphere lists.
+
+LIGGGHTS (a LAMMPS derivative) writes LAMMPS data files with ``atom_style granular`` (``Atoms`` lines ``id type
+diameter density x y z``, optionally + 3 image flags: the columns of LAMMPS' ``sphere`` style) and LAMMPS text dumps
+(``dump custom``). :func:`read_liggghts_data` reads the particles and, when the file has one, its ``Bonds``
+section; LIGGGHTS' bond styles have no ``bpm/rotational`` coefficients, so bonded files need
+``bond_radius_ratio=`` (and optionally ``materials=``). :func:`read_liggghts_dump` reads dumps as
+:func:`jaxbpm.interop.dump.read_lammps_dump` does.
+
+Yade's ``yade.export.textExt(filename, format=...)`` writes ``#format NAME`` on the first line, optional ``#``
+comment lines, then one sphere a line, tab-separated: ``x y z r`` (``x_y_z_r``), ``x y z r matId``
+(``x_y_z_r_matId``) or ``x y z r`` and more columns (``x_y_z_r_attrs``); ``yade.ymport.textExt`` reads them back.
+:func:`read_yade_text` reads particles only and bonds every pair closer than a surface gap, as
+:func:`jaxbpm.generate.random_packing` does; :func:`write_yade_text` writes ``x_y_z_r`` with exact decimals.
+
+These files have no suffix of their own (``.data``, ``.txt``), so :func:`jaxbpm.interop.formats.read_sample` does
+not choose them by suffix: call these functions, or pass ``format="liggghts"`` / ``format="yade"`` to
+:func:`~jaxbpm.interop.formats.read_sample` and :func:`~jaxbpm.interop.formats.convert`.
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+
+from jaxbpm.errors import SampleFileError
+from jaxbpm.interop._meta import _names_file, _r
+from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
+from jaxbpm.interop.lammps import _read_text, read_lammps_data
+from jaxbpm.io import atomic_write
+from jaxbpm.sample import Sample
+
+__all__ = ["read_liggghts_data", "read_liggghts_dump", "read_yade_text", "write_yade_text", "YADE_FORMATS"]
+
+YADE_FORMATS = {"x_y_z_r": 4, "x_y_z_r_matId": 5, "x_y_z_r_attrs": None}  # name -> values a line (None: >= 4)
+
+
+def read_liggghts_data(path, *, bond_radius_ratio: float | None = None, materials=None, **sample_kw) -> Sample:
+    """Read a LIGGGHTS data file (``atom_style granular``) into a :class:`Sample`: particles ordered by atom ID;
+    bonds from a ``Bonds`` section (``id type atom1 atom2``) if there is one, with radius ``bond_radius_ratio``
+    times the smaller particle's radius and ``materials`` (default one component, see
+    :meth:`Sample.from_arrays`). ``sample_kw`` go to :meth:`Sample.from_arrays`; errors name the line."""
+    kw = dict(sample_kw)
+    if bond_radius_ratio is not None:
+        kw.update(bond_radius_ratio=bond_radius_ratio, materials=materials)
+    elif materials is not None:
+        kw["materials"] = materials
+    return read_lammps_data(path, atom_style="sphere", **kw)
+
+
+def read_liggghts_dump(path) -> list[DumpFrame]:
+    """All frames of a LIGGGHTS text dump (``dump custom``, e.g. ``id type x y z vx vy vz radius``): a LAMMPS
+    text dump, read by :func:`jaxbpm.interop.dump.read_lammps_dump`; errors name the line."""
+    return read_lammps_dump(path)
+
+
+@_names_file
+def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: float = 0.5, **sample_kw) -> Sample:
+    """Read spheres written by Yade's ``export.textExt`` (formats ``x_y_z_r``, ``x_y_z_r_matId``,
+    ``x_y_z_r_attrs``; a file without a ``#format`` line is ``x_y_z_r``, as in Yade) into a :class:`Sample`.
+
+    Args:
+      path: the text file.
+      bond_gap: bond every pair whose surface gap is below ``bond_gap`` times the mean radius (as
+        :func:`jaxbpm.generate.random_packing` does); ``None``: no bonds.
+      bond_radius_ratio: bond radius over the smaller particle's radius.
+      **sample_kw: more :meth:`Sample.from_arrays` keywords (``materials``, ``particle_material``, ...).
+    """
+    from jaxbpm.generate import bond_pairs
+
+    path = pathlib.Path(path)
+    pos, rad = _yade_rows(path)
+    bonds = np.zeros((0, 2), np.int64)
+    if bond_gap is not None:
+        if not (np.isfinite(bond_gap) and bond_gap >= 0):
+            raise SampleFileError(f"{path}: bond_gap must be finite and >= 0 (or None), got {bond_gap!r}")
+        bonds = bond_pairs(pos, rad, float(bond_gap) * float(rad.mean()))
+    return Sample.from_arrays(pos, rad, bonds, bond_radius_ratio=bond_radius_ratio, **sample_kw)
+
+
+def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
+    """Centres ``[n, 3]`` and radii ``[n]`` of a textExt file; errors name the line."""
+    fmt, rows = "x_y_z_r", []
+    for no, line in enumerate(_read_text(path).splitlines(), start=1):
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == "#format":
+            fmt = words[1] if len(words) > 1 else ""
+            if fmt not in YADE_FORMATS:
+                raise SampleFileError(f"{path}:{no}: Yade text format {fmt!r} is not read by jaxbpm (known: "
+                                      f"{', '.join(YADE_FORMATS)})")
+            continue
+        if words[0].startswith("#"):
+            continue
+        want = YADE_FORMATS[fmt]
+        if (len(words) != want) if want else (len(words) < 4):
+            raise SampleFileError(f"{path}:{no}: {len(words)} values, expected {want or 'at least 4'} ({fmt}: "
+                                  f"x y z r{' matId' if fmt.endswith('matId') else ''}...)")
+        try:
+            row = [float(w) for w in words[:4]]
+        except ValueError:
+            raise SampleFileError(f"{path}:{no}: x y z r must be numbers, got {line.strip()!r}") from None
+        if not (np.all(np.isfinite(row)) and row[3] > 0):
+            raise SampleFileError(f"{path}:{no}: a sphere needs a finite centre and radius > 0, got "
+                                  f"{line.strip()!r}")
+        rows.append(row)
+    if not rows:
+        raise SampleFileError(f"{path}: no spheres (not a Yade textExt file?)")
+    arr = np.array(rows, np.float64)
+    return arr[:, :3], arr[:, 3]
+
+
+def write_yade_text(path, sample: Sample, *, comment: str | None = None) -> pathlib.Path:
+    """Write the particles of ``sample`` as Yade's ``export.textExt`` ``x_y_z_r`` layout (tab-separated, exact
+    decimals), atomically; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')``. Bonds are not written
+    (Yade makes its cohesive bonds from contacts)."""
+    if not isinstance(sample, Sample):
+        raise TypeError(f"write_yade_text expects a jaxbpm Sample, got {type(sample).__name__}")
+    if comment is not None and (comment.splitlines() != [comment]):
+        raise SampleFileError(f"{path}: comment must be one line of text, got {comment!r}")
+    pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
+    head = "#format x_y_z_r\n" + (f"# {comment}\n" if comment else "")
+    body = "".join(f"{_r(x)}\t{_r(y)}\t{_r(z)}\t{_r(r)}\n" for (x, y, z), r in zip(pos.tolist(), rad.tolist()))
+    return atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(head + body, encoding="utf-8"))

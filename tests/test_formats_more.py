@@ -1,0 +1,219 @@
+"""VTKHDF series, LIGGGHTS and Yade files (jaxbpm.interop.vtkhdf, jaxbpm.interop.othercodes)."""
+
+import shutil
+import textwrap
+
+import h5py
+import numpy as np
+import pytest
+
+from jaxbpm import generate
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.interop import formats
+from jaxbpm.sample import Sample
+
+
+def _lattice():
+    return generate.lattice("sc", (4, 3, 2), 1e-3)
+
+
+# ============================================================================================== VTKHDF series
+def test_vtkhdf_series_stores_the_topology_once(tmp_path):
+    sample = _lattice()
+    n, nb = sample.n_particles, sample.n_bonds
+    rng = np.random.default_rng(0)
+    steps = []
+    with formats.VTKHDFSeries(tmp_path / "run.vtkhdf", sample) as series:
+        for k in range(3):
+            intact = np.ones(nb, bool)
+            intact[:k] = False
+            pos = np.asarray(sample.positions) + 1e-4 * k * rng.standard_normal((n, 3))
+            steps.append((0.5 * k, pos, intact, rng.standard_normal(nb)))
+            assert series.write(0.5 * k, positions=pos, intact=intact, bond_data={"force": steps[-1][3]}) == k
+    with h5py.File(tmp_path / "run.vtkhdf", "r") as f:
+        root = f["VTKHDF"]
+        assert list(root.attrs["Version"]) == [2, 1] and root.attrs["Type"] == b"UnstructuredGrid"
+        # one topology: a vertex per particle, then a line per bond
+        assert root["Connectivity"].shape == (n + 2 * nb,)
+        np.testing.assert_array_equal(root["Connectivity"][n:].reshape(-1, 2), sample.bonds)
+        np.testing.assert_array_equal(root["Types"][:], [1] * n + [3] * nb)
+        assert root["Offsets"].shape == (n + nb + 1,) and root["Offsets"][-1] == n + 2 * nb
+        assert list(root["NumberOfPoints"]) == [n] and list(root["NumberOfCells"]) == [n + nb]
+        st = root["Steps"]
+        assert st.attrs["NSteps"] == 3
+        np.testing.assert_array_equal(st["Values"][:], [0.0, 0.5, 1.0])
+        np.testing.assert_array_equal(st["PointOffsets"][:], [0, n, 2 * n])
+        for name in ("CellOffsets", "ConnectivityIdOffsets", "PartOffsets"):
+            np.testing.assert_array_equal(st[name][:], [0, 0, 0])
+        np.testing.assert_array_equal(st["NumberOfParts"][:], [1, 1, 1])
+        np.testing.assert_array_equal(st["PointDataOffsets/radius"][:], [0, 0, 0])  # stored once
+        assert root["PointData/radius"].shape == (n,)
+        for k, (_, pos, intact, force) in enumerate(steps):
+            at = st["PointOffsets"][k]
+            np.testing.assert_array_equal(root["Points"][at:at + n], pos)
+            c = st["CellDataOffsets/intact"][k]
+            np.testing.assert_array_equal(root["CellData/intact"][c + n:c + n + nb], intact)
+            assert np.all(root["CellData/intact"][c:c + n] == -1)
+            c = st["CellDataOffsets/force"][k]
+            np.testing.assert_array_equal(root["CellData/force"][c + n:c + n + nb], force)
+            d = st["PointDataOffsets/displacement"][k]
+            np.testing.assert_allclose(root["PointData/displacement"][d:d + n], pos - np.asarray(sample.positions))
+
+
+def test_vtkhdf_series_errors(tmp_path):
+    sample = _lattice()
+    (tmp_path / "old.vtkhdf").write_bytes(b"keep me")
+    with pytest.raises(SampleFileError, match="exists"):
+        formats.VTKHDFSeries(tmp_path / "old.vtkhdf", sample)
+    assert (tmp_path / "old.vtkhdf").read_bytes() == b"keep me"
+    with pytest.raises(SampleFileError, match=".vtkhdf"):
+        formats.VTKHDFSeries(tmp_path / "run.vtu", sample)
+    series = formats.VTKHDFSeries(tmp_path / "run.vtkhdf", sample)
+    series.write(0.0, point_data={"v": np.zeros((sample.n_particles, 3))})
+    with pytest.raises(SampleError, match="same arrays"):
+        series.write(1.0)
+    with pytest.raises(SampleError, match="shape"):
+        series.write(1.0, positions=np.zeros((2, 3)), point_data={"v": np.zeros((sample.n_particles, 3))})
+    # the file on disk holds the steps written so far (flushed after each): what a run that stops leaves
+    shutil.copyfile(tmp_path / "run.vtkhdf", tmp_path / "stopped.vtkhdf")
+    with h5py.File(tmp_path / "stopped.vtkhdf", "r") as f:
+        assert f["VTKHDF/Steps"].attrs["NSteps"] == 1 and f["VTKHDF/Points"].shape == (sample.n_particles, 3)
+    series.close()
+    with pytest.raises(SampleFileError, match="closed"):
+        series.write(2.0)
+
+
+def test_convert_dump_to_vtkhdf(tmp_path):
+    sample = _lattice()
+    n = sample.n_particles
+    pos = np.asarray(sample.positions)
+    lines = []
+    for step in (0, 10):
+        lines += ["ITEM: TIMESTEP", str(step), "ITEM: NUMBER OF ATOMS", str(n), "ITEM: BOX BOUNDS pp pp pp",
+                  "-1 1", "-1 1", "-1 1", "ITEM: ATOMS id x y z"]
+        lines += [f"{i + 1} {x + 1e-5 * step!r} {y!r} {z!r}" for i, (x, y, z) in enumerate(pos.tolist())]
+    (tmp_path / "run.dump").write_text("\n".join(lines) + "\n")
+    written = formats.convert(tmp_path / "run.dump", tmp_path / "run.vtkhdf", sample=sample)
+    assert written == [tmp_path / "run.vtkhdf"]
+    with h5py.File(written[0], "r") as f:
+        assert list(f["VTKHDF/Steps/Values"]) == [0.0, 10.0]
+        np.testing.assert_allclose(f["VTKHDF/Points"][n:, 0], pos[:, 0] + 1e-4)
+
+
+# ============================================================================================== LIGGGHTS
+LIGGGHTS_DATA = """\
+LIGGGHTS data file from restart file: timestep = 0, procs = 1
+
+4 atoms
+1 atom types
+3 bonds
+1 bond types
+
+-0.01 0.01 xlo xhi
+-0.01 0.01 ylo yhi
+-0.01 0.01 zlo zhi
+
+Atoms # granular
+
+1 1 0.002 2500 0 0 0 0 0 0
+3 1 0.002 2500 0.004 0 0 0 0 0
+2 1 0.002 2500 0.002 0 0 0 0 0
+4 1 0.0025 2500 0.004 0.00225 0 0 0 0
+
+Velocities
+
+1 0 0 0 0 0 0
+2 0 0 0 0 0 0
+3 0 0 0 0 0 0
+4 0 0 0 0 0 0
+
+Bonds
+
+1 1 1 2
+2 1 2 3
+3 1 3 4
+"""
+
+
+def test_read_liggghts_data(tmp_path):
+    path = tmp_path / "in.data"
+    path.write_text(LIGGGHTS_DATA)
+    s = formats.read_liggghts_data(path, bond_radius_ratio=0.5)
+    np.testing.assert_array_equal(s.radii, [0.001, 0.001, 0.001, 0.00125])
+    np.testing.assert_array_equal(np.asarray(s.positions)[:, 0], [0, 0.002, 0.004, 0.004])  # ordered by ID
+    np.testing.assert_array_equal(s.bonds, [[0, 1], [1, 2], [2, 3]])
+    assert float(s.particle_material.density) == 2500.0
+    assert s.n_bonds == 3 and np.allclose(s.bond_radius, 0.5e-3)
+    same = formats.read_sample(path, format="liggghts", bond_radius_ratio=0.5)
+    np.testing.assert_array_equal(same.positions, s.positions)
+    # particles only
+    no_bonds = LIGGGHTS_DATA.replace("3 bonds\n1 bond types\n", "").split("\nBonds")[0]
+    path.write_text(no_bonds)
+    assert formats.read_liggghts_data(path).n_bonds == 0
+    # bonds without a bond radius: the error says what to give
+    path.write_text(LIGGGHTS_DATA)
+    with pytest.raises(SampleFileError, match="bond_radius_ratio"):
+        formats.read_liggghts_data(path)
+    path.write_text(LIGGGHTS_DATA.replace("3 1 0.002 2500 0.004 0 0", "3 1 0.002 2500 0.004 zero 0"))
+    with pytest.raises(SampleFileError, match=r"in.data:15"):
+        formats.read_liggghts_data(path, bond_radius_ratio=0.5)
+
+
+def test_read_liggghts_dump(tmp_path):
+    path = tmp_path / "dump.liggghts"
+    path.write_text(textwrap.dedent("""\
+        ITEM: TIMESTEP
+        1000
+        ITEM: NUMBER OF ATOMS
+        2
+        ITEM: BOX BOUNDS ff ff ff
+        -0.01 0.01
+        -0.01 0.01
+        -0.01 0.01
+        ITEM: ATOMS id type x y z ix iy iz vx vy vz fx fy fz omegax omegay omegaz radius
+        2 1 0.002 0 0 0 0 0 0.1 0 0 0 0 0 0 0 0 0.001
+        1 1 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0 0.001
+        """))
+    (frame,) = formats.read_liggghts_dump(path)
+    assert frame.timestep == 1000 and frame.kind == "atoms"
+    np.testing.assert_array_equal(frame.positions, [[0, 0, 0], [0.002, 0, 0]])
+    np.testing.assert_array_equal(frame.columns["radius"], [0.001, 0.001])
+
+
+# ============================================================================================== Yade
+def test_yade_text_round_trip(tmp_path):
+    sample = generate.lattice("fcc", (2, 2, 1), 1e-3)
+    rng = np.random.default_rng(3)
+    sample = Sample.from_arrays(np.asarray(sample.positions) + 1e-6 * rng.standard_normal((sample.n_particles, 3)),
+                                np.asarray(sample.radii) * (1 + 0.01 * rng.random(sample.n_particles)),
+                                np.zeros((0, 2), int), np.zeros(0))
+    path = formats.write_yade_text(tmp_path / "spheres.txt", sample, comment="from jaxbpm")
+    lines = path.read_text().splitlines()
+    assert lines[0] == "#format x_y_z_r" and lines[1] == "# from jaxbpm" and len(lines[2].split("\t")) == 4
+    back = formats.read_yade_text(path)
+    np.testing.assert_array_equal(back.positions, sample.positions)
+    np.testing.assert_array_equal(back.radii, sample.radii)
+    assert back.n_bonds > 0  # bonded at contacts
+    assert formats.read_yade_text(path, bond_gap=None).n_bonds == 0
+    np.testing.assert_array_equal(formats.read_sample(path, format="yade").bonds, back.bonds)
+
+
+def test_yade_text_formats_and_errors(tmp_path):
+    path = tmp_path / "y.txt"
+    path.write_text("#format x_y_z_r_matId\n# a comment\n0\t0\t0\t1e-3\t2\n2e-3\t0\t0\t1e-3\t2\n")
+    s = formats.read_yade_text(path)
+    assert s.n_particles == 2 and s.n_bonds == 1
+    path.write_text("#format x_y_z_r_attrs\n# x y z r speed\n0 0 0 1e-3 0.5\n2e-3 0 0 1e-3 0.1\n")
+    assert formats.read_yade_text(path).n_particles == 2
+    path.write_text("0 0 0 1e-3\n2e-3 0 0 1e-3\n")  # no #format line: x_y_z_r, as in Yade
+    assert formats.read_yade_text(path).n_particles == 2
+    for text, message in (("#format x_y_z_r\n0 0 0 1e-3 7\n", r"y.txt:2: 5 values, expected 4"),
+                          ("#format x_y_z_r\n0 0 0 -1\n", r"y.txt:2: .*radius > 0"),
+                          ("#format x_y_z_r\n0 0 zero 1\n", r"y.txt:2: x y z r must be numbers"),
+                          ("#format x_y_z_r_color\n0 0 0 1\n", r"y.txt:1: .*'x_y_z_r_color'"),
+                          ("#format x_y_z_r\n", "no spheres")):
+        path.write_text(text)
+        with pytest.raises(SampleFileError, match=message):
+            formats.read_yade_text(path)
+    with pytest.raises(SampleFileError, match="unknown format"):
+        formats.read_sample(path, format="pfc")
