@@ -353,7 +353,7 @@ _LAZY_COMMANDS = {
     "calibrate": "calibrate the bond moduli of a sample to measured targets",
 }
 _LAZY_LOADERS = {"convert": ("jaxbpm.interop.cli", "add_parsers"), "params": ("jaxbpm.interop.cli", "add_parsers"),
-                 "calibrate": ("jaxbpm.calibrate._cli", "add_parser")}
+                 "calibrate": ("jaxbpm._calibrate_cli", "add_parser")}
 
 
 class _CommandParser(argparse.ArgumentParser):

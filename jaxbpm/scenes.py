@@ -181,15 +181,7 @@ class UniaxialCompression:
 
     def model(self, sample: Sample, **overrides):
         """The :class:`~jaxbpm.physics.model.Model` this scene needs."""
-        from jaxbpm.physics.model import build_model
-
-        kw = dict(contacts=self.contacts, walls=self.wall_law if self.uses_walls else None, rotations=self.rotations,
-                  wall_stiffness=self.wall_stiffness)
-        law = self.cohesive_law
-        if law is not None and overrides.get("contacts", True):
-            kw["contact_law"] = law
-        kw.update(overrides)
-        return build_model(sample, **kw)
+        return _build_model(self, sample, overrides)
 
     @property
     def uses_walls(self) -> bool:
@@ -559,15 +551,7 @@ class BrazilianDisc:
 
     def model(self, sample: Sample, **overrides):
         """The :class:`~jaxbpm.physics.model.Model` this scene needs (the DEM's: :attr:`methods`)."""
-        from jaxbpm.physics.model import build_model
-
-        kw = dict(contacts=self.contacts, walls=self.wall_law if self.uses_walls else None, rotations=self.rotations,
-                  wall_stiffness=self.wall_stiffness)
-        law = self.cohesive_law
-        if law is not None and overrides.get("contacts", True):
-            kw["contact_law"] = law
-        kw.update(overrides)
-        return build_model(sample, **kw)
+        return _build_model(self, sample, overrides)
 
     def loading(self, sample: Sample, speed: float):
         """DEM boundary conditions: the platens touch the rim; the top one moves at ``speed`` [m/s] against
@@ -603,3 +587,17 @@ class BrazilianDisc:
         """Brazilian tensile strength BTS = 2 F / (pi D t) [Pa]."""
         d, t = self.dimensions(sample)
         return 2.0 * peak_force / (np.pi * d * t)
+
+
+def _build_model(scene, sample: Sample, overrides: dict):
+    """The :class:`~jaxbpm.physics.model.Model` of ``sample`` that ``scene`` needs (its contacts, walls, rotations,
+    contact law), with ``overrides`` passed on to :func:`~jaxbpm.physics.model.build_model`."""
+    from jaxbpm.physics.model import build_model
+
+    kw = dict(contacts=scene.contacts, walls=scene.wall_law if scene.uses_walls else None, rotations=scene.rotations,
+              wall_stiffness=scene.wall_stiffness)
+    law = scene.cohesive_law
+    if law is not None and overrides.get("contacts", True):
+        kw["contact_law"] = law
+    kw.update(overrides)
+    return build_model(sample, **kw)

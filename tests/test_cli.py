@@ -191,7 +191,7 @@ def test_help_of_the_commands_loaded_on_use(capsys, command, option):
 
 def test_help_and_version_import_no_jax():
     """``jaxbpm --help``, ``--version`` and ``COMMAND --help`` (of commands defined in jaxbpm.cli, and of ``convert``
-    and ``params``, defined in jaxbpm.interop.cli) answer without importing JAX; ``import jaxbpm`` imports none either
+    and ``params``, defined in jaxbpm.interop.cli, and ``calibrate``) answer without importing JAX; ``import jaxbpm`` imports none either
     and still lists every public name."""
     code = textwrap.dedent("""
         import contextlib, io, sys
@@ -200,7 +200,7 @@ def test_help_and_version_import_no_jax():
         jaxbpm.cli.build_parser().parse_args(["info", "x.h5", "--no-cache"])
         out = io.StringIO()
         for argv in (["--help"], ["--version"], ["generate", "--help"], ["demo", "--help"], ["info", "--help"],
-                     ["export-vtk", "--help"], ["convert", "--help"], ["params", "--help"]):
+                     ["export-vtk", "--help"], ["convert", "--help"], ["params", "--help"], ["calibrate", "--help"]):
             with contextlib.redirect_stdout(out):
                 try:
                     jaxbpm.cli.main(argv)

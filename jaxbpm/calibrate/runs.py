@@ -148,14 +148,7 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     todo = np.flatnonzero(~runs.done) if runs.done is not None else np.zeros(0, int)
     resumed = n_runs - len(todo)
 
-    def store(k, row):
-        runs.Y[todo[k]], runs.done[todo[k]] = row, True
-        runs.save(path)
-
-    if len(todo):
-        Y = problem.outputs(X[todo], chunk=chunk, progress=progress, on_row=None if path is None else store)
-        runs.Y[todo] = np.asarray(Y)
-    runs.done = None
+    run_missing(problem, runs, X, todo, path, chunk, progress)
     runs.info.update(wall_time=time.perf_counter() - t0, evaluations=problem.evaluations - evals0,
                      resumed=resumed)
     if path is not None and len(todo):
@@ -182,3 +175,16 @@ def _resumable(path, planned: RunSet) -> RunSet:
     if stored.done is None:
         stored.done = np.ones(stored.n_runs, bool)
     return stored
+
+
+def run_missing(problem, runs: RunSet, X, todo, path, chunk, progress) -> None:
+    """Run the rows ``todo`` of ``X`` into ``runs.Y``, each stored in ``path`` (when given) as it arrives, so that an
+    interrupted run set resumes without repeating them; ``runs.done`` is cleared at the end."""
+    def store(k, row):
+        runs.Y[todo[k]], runs.done[todo[k]] = row, True
+        runs.save(path)
+
+    if len(todo):
+        Y = problem.outputs(X[todo], chunk=chunk, progress=progress, on_row=None if path is None else store)
+        runs.Y[todo] = np.asarray(Y)
+    runs.done = None

@@ -26,7 +26,7 @@ import numpy as np
 from jaxbpm.calibrate import _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
-from jaxbpm.calibrate.runs import RunSet, latin_hypercube, run_set
+from jaxbpm.calibrate.runs import RunSet, latin_hypercube, run_missing, run_set
 
 __all__ = ["RunSet", "run_set", "fit_forests", "surrogate", "latin_hypercube"]
 
@@ -259,14 +259,7 @@ def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, pat
     t0 = time.perf_counter()
     evals0 = problem.evaluations
 
-    def store(k, row):
-        runs.Y[todo[k]], runs.done[todo[k]] = row, True
-        runs.save(path)
-
-    if len(todo):
-        Y = problem.outputs(X[todo], chunk=chunk, progress=progress, on_row=None if path is None else store)
-        runs.Y[todo] = np.asarray(Y)
-    runs.done = None
+    run_missing(problem, runs, X, todo, path, chunk, progress)
     runs.info.update(wall_time=time.perf_counter() - t0, evaluations=problem.evaluations - evals0,
                      resumed=from_file)
     if path is not None and len(todo) and n >= stored_rows:
