@@ -304,25 +304,35 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
         r = run(x[None], "estimate-2")[0]
         best = min(best, (np.max(np.abs(np.expm1(r))), x, r), key=lambda b: b[0])
     J = None
-    iterations = 0
+    iterations, length, stalled = 0, 1.0, None
     while best[0] > tol and iterations < max_iterations:
         iterations += 1
+        x, r = best[1], best[2]  # every step starts from the best set so far
         if J is None:  # finite differences of log strength against log bond strength, the perturbed sets batched
             step = np.log1p(fd_step)
             rs = run(x[None, :] + step * np.eye(len(x)), "fd")
             J = (rs - r[None, :]).T / step  # [m, n]
-        dx = np.linalg.lstsq(J, -r, rcond=None)[0]
-        dx = np.clip(dx, -1.0, 1.0)  # at most a factor e per step
+        # directions the strengths barely follow (singular values under 5 % of the largest) are left alone
+        dx = np.linalg.lstsq(J, -r, rcond=0.05)[0]
+        dx = length * np.clip(dx, -1.0, 1.0)  # at most a factor e per step, shortened after a step that did worse
+        if np.max(np.abs(dx)) < 0.01:
+            stalled = np.expm1(r + J @ dx)
+            break
         x_new = np.clip(x + dx, lo, hi)
         r_new = run(x_new[None], "newton")[0]
         step_x, step_r = x_new - x, r_new - r
         if np.dot(step_x, step_x) > 0:  # Broyden's update: the Jacobian learns from the step just taken
             J = J + np.outer(step_r - J @ step_x, step_x) / np.dot(step_x, step_x)
-        x, r = x_new, r_new
-        best = min(best, (np.max(np.abs(np.expm1(r))), x, r), key=lambda b: b[0])
+        error = np.max(np.abs(np.expm1(r_new)))
+        length = 1.0 if error < best[0] else 0.5 * length  # a worse set is not kept: the next step is half as long
+        best = min(best, (error, x_new, r_new), key=lambda b: b[0])
     _, x, r = best
-    notes = ["estimates 1 and 2 of Qu et al. 2020 (Eq. 14-15), then Gauss-Newton steps in log space (Jacobian by "
-             "finite differences, Broyden updates)"]
+    notes = ["estimates 1 and 2 of Qu et al. 2020 (Eq. 14-15), then Gauss-Newton steps in log space from the best "
+             "set so far (Jacobian by finite differences, Broyden updates, a step that does worse halves the next)"]
+    if stalled is not None:
+        notes.append("stopped: no step of 1 % or more is left to take from the best set; these targets are not "
+                     "reached together by the bond strengths on these specimens (the linearised model's best: "
+                     + ", ".join(f"{w} {e:+.1%}" for w, e in zip(wanted, stalled)) + ")")
     for j, key in enumerate(keys):
         if J is not None and np.max(np.abs(J[:, j])) < 0.05:
             notes.append(f"{key} is barely determined by these targets (the strengths change by < {5 * fd_step:.0%} "
