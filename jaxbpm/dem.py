@@ -11,10 +11,11 @@ Integration (per step, time step dt)::
     F, M = forces(x, q)                                           (one force evaluation per step)
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
 
-Contacts: jax-md's neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin); inside
-it, the pairs within reach (surfaces closer than ``NEAR_MARGIN`` x skin, bonded pairs left out) are found again when a
-particle has moved half that margin or a bond breaks, and each step runs the contact law on those only (on an 8k
-dense box 1.6x faster per step than testing and packing every candidate each step).
+Contacts: jax-md's neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin);
+inside it, the pairs within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds
+replace contacts) are found again when a particle has moved half that margin or such a bond breaks, and each step
+runs the contact law on those only (on an 8k dense box 1.6x faster per step than testing and packing every
+candidate each step).
 
 Damping ``F_d`` is local non-viscous damping as in PFC and MUSEN: ``F_d = -alpha |F| sign(v)`` per component
 (and the same for moments). It removes kinetic energy where a particle accelerates, without slowing a uniform
@@ -146,7 +147,8 @@ def _contact_forces(model: Model, params, load: Loading, state: DEMState, pairs,
 def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMState, near: _Near, rebuilt, dt,
                margin):
     """:func:`_contact_step` on the pairs within reach (:class:`jaxbpm.neighbors._Near`), found again when stale
-    (the candidate list was rebuilt, a particle moved more than ``margin / 2``, a bond broke). Returns the step's
+    (the candidate list was rebuilt, a particle moved more than ``margin / 2``, a bond broke where bonds replace
+    contacts). Returns the step's
     forces, moments, wall reactions, intact mask and break modes, and the pairs within reach (their ``overflow``
     set when they did not fit their slots: the chunk is then run again with more)."""
     capacity = new.nbrs.idx.shape[1]
@@ -158,7 +160,7 @@ def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMSta
         found = near_build(model, new.positions, new.nbrs, new.intact, spring, margin, near.slot.shape[0])
         return found._replace(overflow=found.overflow | near.overflow)
 
-    near = jax.lax.cond(rebuilt | near_stale(near, new.positions, new.intact, margin), refresh, lambda: near)
+    near = jax.lax.cond(rebuilt | near_stale(model, near, new.positions, new.intact, margin), refresh, lambda: near)
     force, moment, walls, spring, intact, broken = _contact_forces(model, params, load, new, near.pairs,
                                                                    near.slot < capacity, near.spring, dt)
     return force, moment, walls, intact, broken, near._replace(spring=spring)

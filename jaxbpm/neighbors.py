@@ -125,7 +125,7 @@ def _remap_index(old_pairs, new_pairs, n):
 class _Near(NamedTuple):
     """The pairs within reach: the candidates (bonded pairs with an intact bond left out) whose surfaces are closer
     than ``margin`` when the list was built. While no particle has moved more than ``margin / 2`` since then and no
-    bond has broken, no other candidate can touch, so each step's contact law runs on these pairs only, without
+    bond has broken (where bonds replace contacts), no other candidate can touch, so each step's contact law runs on these pairs only, without
     testing and packing the whole candidate list (a second, tighter Verlet list inside jax-md's).
 
     ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
@@ -175,7 +175,10 @@ def near_springs(near: _Near, capacity: int):
     return jnp.zeros((capacity, 3), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
 
 
-def near_stale(near: _Near, positions, intact, margin):
-    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2`` or a bond broke."""
-    moved = jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1))
-    return (moved > 0.25 * margin * margin) | (jnp.sum(intact.astype(jnp.int32)) != near.intact)
+def near_stale(model: Model, near: _Near, positions, intact, margin):
+    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2``, or a bond broke
+    where bonds replace contacts (its pair becomes a candidate; where they superimpose, it always was one)."""
+    moved = jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1)) > 0.25 * margin * margin
+    if model.bond_contact != "replace":
+        return moved
+    return moved | (jnp.sum(intact.astype(jnp.int32)) != near.intact)
