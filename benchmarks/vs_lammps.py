@@ -142,8 +142,8 @@ The contact scene (``--scene ucs-contacts``)
   run-to-run spread. After the first bonds break the run is chaotic: any change in the order of floating-point
   operations (another version of either code) moves the UCS by a few 1e-3 and the broken-bond counts at the peak
   by ~10 %; compare the UCS ratio at that resolution. Measured (``--quick``, 2000 particles, 3200 steps, one core):
-  jaxbpm 3.8e6 bond-steps/s against LAMMPS's 2.5e6 (1.5x; run 5.05 s against 7.56 s), but 29.6 s of wall time
-  against 7.8 s, 21.8 s of it compiling the contact program; bonds only, jaxbpm is 6-10x LAMMPS per core.
+  jaxbpm 4.8e6 bond-steps/s against LAMMPS's 2.4e6 (2.0x; run 4.28 s against 8.24 s), but 27.8 s of wall time
+  against 8.5 s, 20.2 s of it compiling the contact program; bonds only, jaxbpm is 6-10x LAMMPS per core.
 """
 
 from __future__ import annotations
