@@ -498,3 +498,17 @@ def test_materials_by_region(sc5):
         g.materials_by_region(sc5, lambda mid: np.ones(len(mid), dtype=int))  # the table has one component
     with pytest.raises(SampleError, match="callable"):
         g.materials_by_region(sc5, 3)
+
+
+def test_small_samples_pack_with_the_default_fraction():
+    # Boxes of fewer than about 300 spheres jam at 0.55 (the walls loosen them): the automatic mode continues below
+    # it, from the expected jamming fraction, instead of raising (60 spheres, seed 0, once jammed at 0.55).
+    fractions = g._auto_fractions("box", None, 60 * 4.0 / 3.0 * np.pi, 1.05)
+    assert fractions[0] < 0.55 and fractions[-1] < 0.5
+    assert np.all(np.diff(fractions) < 0)
+    big = g._auto_fractions("box", None, 3000 * 4.0 / 3.0 * np.pi, 1.05)
+    assert big == tuple(g.AUTO_PACKING_FRACTIONS)  # large samples try what they always tried
+    s = g.box(60, seed=0)
+    phi = s.packing_fraction()[0]
+    assert phi < 0.55 and min(abs(phi - f) for f in fractions) < 1e-9
+    check_packing(s, phi_min=0.4)
