@@ -40,7 +40,10 @@ def _jax_md_context():
 
 @functools.lru_cache(maxsize=32)
 def _neighbor_fns(box: tuple, cutoff: float, skin: float, capacity_multiplier: float):
-    from jax_md import partition, space  # heavy (seconds): imported by the scenes with contacts only
+    from jaxbpm.packing import _jax_md_neighbors
+
+    # only jax-md's neighbour lists: its package __init__ (rigid bodies, computed at import) costs seconds
+    partition, space = _jax_md_neighbors()
 
     displacement, _ = space.free()
     return partition.neighbor_list(displacement, jnp.asarray(box), r_cutoff=cutoff, dr_threshold=skin,
