@@ -35,13 +35,17 @@ def guard():
     if threading.current_thread() is not threading.main_thread() or _state["active"]:
         yield
         return
-    try:
-        previous = signal.getsignal(signal.SIGINT)
-        if previous in (signal.SIG_IGN, None):  # interrupts are off (or handled outside Python): leave them so
-            yield
-            return
-        signal.signal(signal.SIGINT, _handler(previous))
-    except ValueError:  # not the main interpreter
+    # decide first, then yield outside any ``except``: an error raised in the block (a SceneError is a ValueError)
+    # must leave it, not be taken for a failed signal set-up
+    previous = signal.getsignal(signal.SIGINT)
+    installed = False
+    if previous not in (signal.SIG_IGN, None):  # (off, or handled outside Python: leave them so)
+        try:
+            signal.signal(signal.SIGINT, _handler(previous))
+            installed = True
+        except ValueError:  # not the main interpreter
+            pass
+    if not installed:
         yield
         return
     _state["active"], _state["pending"] = 1, False

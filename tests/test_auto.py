@@ -10,6 +10,10 @@ from jaxbpm import auto
 from jaxbpm.errors import SceneError
 from jaxbpm.scenes import BrazilianDisc, ThreePointBending, UniaxialCompression
 
+# one xdist worker for the module: its tests solve `box` with the same compiled linear solves (bonds, linearised
+# contacts) and DEM runs, which each worker would otherwise compile (and trace) again
+pytestmark = pytest.mark.xdist_group("auto")
+
 PARTICLE = {"E": 1e10, "nu": 0.25, "density": 2500.0, "friction": 0.5, "restitution": 0.5}
 
 

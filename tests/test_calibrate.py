@@ -14,6 +14,9 @@ from jaxbpm.calibrate import CalibrationError, Forward, Parameter, ParameterSpac
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
+# one xdist worker for the module: the tests that calibrate `one` and `two` share their compiled solves and losses
+pytestmark = pytest.mark.xdist_group("calibrate-module")
+
 SCENE = UniaxialCompression(strain=0.002)
 SOLVE = importlib.import_module("jaxbpm.solving")
 

@@ -13,6 +13,10 @@ from jaxbpm._compile import Program, SetupCache, capacity, count_compilations, s
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
+# one xdist worker for the module: `packing` (a 400-particle box, ~10 s to make) is built once, and the tests that
+# solve it share their compiled programs
+pytestmark = pytest.mark.xdist_group("compile-module")
+
 R = 1e-3
 MATERIALS = {"E": 1e9, "nu": 0.25}
 SCENE = UniaxialCompression(strain=0.002)

@@ -14,6 +14,9 @@ from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
 R = 1e-3
+# one xdist worker for the tests that solve `packing` (or a sample of its size class) with contacts: they share the
+# compiled nonlinear solve with contacts, the DEM's run with contacts and the linear solves
+_SHARED = "dsm-packing-contacts"
 KN = 1e9 * np.pi * (0.5 * R) ** 2 / (2 * R)
 
 
@@ -43,10 +46,11 @@ def test_dsm_matches_dem_bonds_only(packing):
     assert abs(a.stiffness / b.stiffness - 1) < 1e-2, (a.stiffness, b.stiffness)
 
 
-@pytest.mark.parametrize("scene", [UniaxialCompression(strain=0.002, contacts=True),
-                                   UniaxialCompression(strain=0.002, boundary="walls"),
-                                   UniaxialCompression(strain=0.002, boundary="walls", contacts=True)],
-                         ids=["contacts", "walls", "contacts+walls"])
+@pytest.mark.parametrize("scene", [
+    # (with contacts alone: the nonlinear solve of the linearised-contacts tests, compiled once on one worker)
+    pytest.param(UniaxialCompression(strain=0.002, contacts=True), marks=pytest.mark.xdist_group(_SHARED)),
+    UniaxialCompression(strain=0.002, boundary="walls"),
+    UniaxialCompression(strain=0.002, boundary="walls", contacts=True)], ids=["contacts", "walls", "contacts+walls"])
 def test_nonlinear_dsm_matches_dem(packing, scene):
     a = jaxbpm.solve(packing, scene, method="dsm")
     b = jaxbpm.solve(packing, scene, method="dem")
@@ -54,6 +58,7 @@ def test_nonlinear_dsm_matches_dem(packing, scene):
     assert abs(a.stiffness / b.stiffness - 1) < 6e-2, (a.stiffness, b.stiffness)
 
 
+@pytest.mark.xdist_group(_SHARED)
 def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
     # stiff particles, soft bonds: contacts carry the load and most of them slide in the DEM (friction 0.5)
     s = jaxbpm.generate.box(200, seed=3, mean_radius=R, packing_fraction=0.5, materials={"E": 1e8, "nu": 0.25},
@@ -76,7 +81,7 @@ def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
     np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-5)
 
 
-@pytest.mark.xdist_group("dsm-linearised-contacts")  # one worker: the second reuses the first's programs
+@pytest.mark.xdist_group(_SHARED)
 def test_linear_dsm_linearises_the_contacts(packing):
     # stiffer particles: the contacts carry ~20 % of the stiffness (the nonlinear DSM is the reference here: it
     # matches the DEM with contacts, test_nonlinear_dsm_matches_dem)
@@ -96,9 +101,10 @@ def test_linear_dsm_linearises_the_contacts(packing):
     with pytest.raises(SceneError, match="contact_passes"):
         jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_passes=0)
     # the candidates of the linear solve reach only as far as the strain can close a gap (0.01 mean radii here):
-    # the pairs left out never touch, so the answer is that of the nonlinear solve's candidates (half a radius)
+    # the pairs left out never touch, so a wider reach gives the same answer (3x: more candidates, the same size
+    # class, so the same compiled solve; test_linearised_contacts_widen_a_short_default_reach reaches half a radius)
     r = float(np.mean(s.radii))
-    wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.5 * r)
+    wide = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=3.0 * lin.stats["contact_skin"])
     assert lin.stats["contact_candidates"] < wide.stats["contact_candidates"]
     assert lin.stats["contacts_touching"] == wide.stats["contacts_touching"] > 0
     assert lin.stats["contact_gap_max"] < 0.5 * lin.stats["contact_skin"] < 0.01 * r
@@ -108,7 +114,7 @@ def test_linear_dsm_linearises_the_contacts(packing):
         jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=0.9 * lin.stats["contact_gap_max"])
 
 
-@pytest.mark.xdist_group("dsm-linearised-contacts")  # one worker: the second reuses the first's programs
+@pytest.mark.xdist_group(_SHARED)
 def test_linearised_contacts_widen_a_short_default_reach(packing, monkeypatch):
     s = packing.replace(particle_material=dataclasses.replace(packing.particle_material, E=5e9))
     scene = UniaxialCompression(strain=0.002, contacts=True)
@@ -172,8 +178,11 @@ def test_gradient_matches_central_differences():
         fd = (f(up) - f(dn)) / (2 * h)
         np.testing.assert_allclose(g[c], fd, rtol=1e-5)
     assert float(g[0]) > 0 and float(g[1]) > 0
-    # forward mode: the tangent solves stop on their residual (the energy test belongs to the primal system)
-    np.testing.assert_allclose(jax.jacfwd(f)(p)["bond_E"], g, rtol=1e-7)
+    # forward mode: the tangent solves stop on their residual (the energy test belongs to the primal system); one
+    # JVP per component (one program, unbatched: cheaper to compile than jacfwd's tangents over every parameter)
+    for c in range(2):
+        tangent = {"bond_E": jnp.zeros_like(p["bond_E"]).at[c].set(1.0), "bond_nu": jnp.zeros_like(p["bond_nu"])}
+        np.testing.assert_allclose(jax.jvp(f, (p,), (tangent,))[1], g[c], rtol=1e-7)
     # vmap over parameter sets: K is linear in a common factor on E
     batch = {"bond_E": p["bond_E"][None, :] * jnp.array([[1.0], [2.0], [3.0]]),
              "bond_nu": jnp.broadcast_to(p["bond_nu"], (3, 2))}
@@ -196,6 +205,7 @@ def test_three_load_cases_share_one_operator(column):
     np.testing.assert_allclose(k - np.diag(np.diag(k)), 0.0, atol=1e-9 * abs(k[2, 2]))
 
 
+@pytest.mark.xdist_group(_SHARED)
 def test_non_convergence_is_reported(packing):
     scene = UniaxialCompression(strain=0.002, contacts=True)
     # failure as data: the status, no warning

@@ -13,6 +13,10 @@ from jaxbpm.calibrate import CalibrationError, Forward, Parameter, ParameterSpac
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
+# one xdist worker for the module: `box` and `E_now` (~20 s to make) are built once, and the calibrations on `box`
+# share their compiled run sets
+pytestmark = pytest.mark.xdist_group("surrogate-ranges-module")
+
 SCENE = UniaxialCompression(strain=1e-3)
 
 
