@@ -256,7 +256,11 @@ class UniaxialCompression:
 
         def slope(x, y):
             x = x - x.mean()
-            return float(np.dot(x, y - y.mean()) / np.dot(x, x))
+            spread = float(np.dot(x, x))
+            if not spread > 0:  # e.g. a column one particle wide: no lateral strain to measure
+                raise SceneError("the particles of the middle third all lie at one coordinate across the load: no "
+                                 "lateral strain to measure")
+            return float(np.dot(x, y - y.mean()) / spread)
 
         axial = slope(pos[mid, ax], u[mid, ax])
         lat = [slope(pos[mid, k], u[mid, k]) for k in lateral]

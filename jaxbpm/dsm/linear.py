@@ -219,7 +219,9 @@ def pad_candidates(lin, sample, axis):
     lin[0] = put(np.concatenate([pairs, np.tile(np.array([[i, j]], pairs.dtype), (cap - c, 1))]), np.int32)
     if lin[3] is not None:
         cb = np.asarray(lin[3].bonds)
-        lin[3] = dataclasses.replace(lin[3], bonds=put(pad_rows(cb, capacity(len(cb) + 1), c), np.int32))
+        # the couplings (a subset of the candidates) padded to the candidates' capacity: their own count would give
+        # candidate lists of one size class several programs
+        lin[3] = dataclasses.replace(lin[3], bonds=put(pad_rows(cb, cap, c), np.int32))
     return lin
 
 
