@@ -134,7 +134,7 @@ def _check_cells(cells) -> tuple[int, int, int]:
 AUTO_PACKING_FRACTIONS = (0.60, 0.58, 0.56, 0.55)
 """Packing fractions tried by :func:`random_packing` when none is given, densest first (smaller samples try
 fewer of the dense ones and continue below 0.55, see there)."""
-_AUTO_ABOVE, _AUTO_STEP, _AUTO_LOWEST = 0.04, 0.02, 0.35
+_AUTO_ABOVE, _AUTO_STEP, _AUTO_LOWEST = 0.0, 0.02, 0.35
 
 
 def random_packing(
@@ -170,31 +170,28 @@ def random_packing(
     (pairs and walls) is below ``overlap_tol * mean_radius``. Finally every pair with surface gap
     ``distance - r_i - r_j < bond_gap * mean_radius`` is bonded.
 
-    **Automatic packing fraction** (``packing_fraction=None``): the fractions of ``AUTO_PACKING_FRACTIONS``
-    (0.60, 0.58, 0.56, 0.55) are tried densest first, each from the insertion an explicit ``packing_fraction`` of
-    that value starts from, and the first that packs is kept. Walls pack loosely, so the fraction at which the
-    spheres jam grows with the sample. An empirical estimate of it, ``0.645 - 0.2 S / V`` (``S / V``: wall area
-    over domain volume, lengths in mean radii; fitted to boxes of 400 to 4000 spheres with 5 % radius spread, and
-    right for a 2000-sphere beam and cylinder too), decides how long a fraction is tried:
+    **Automatic packing fraction** (``packing_fraction=None``): fractions are tried densest first, each from the
+    insertion an explicit ``packing_fraction`` of that value starts from, and the first that packs is kept. Walls
+    pack loosely, so the fraction at which the spheres jam grows with the sample. An empirical estimate of it,
+    ``0.645 - 0.2 S / V`` (``S / V``: wall area over domain volume, lengths in mean radii; fitted to boxes of 400
+    to 4000 spheres with 5 % radius spread, and right for a 2000-sphere beam and cylinder too), chooses them: the
+    values of ``AUTO_PACKING_FRACTIONS`` (0.60, 0.58, 0.56, 0.55) not above the estimate for their domain, and,
+    for samples of fewer than about 300 spheres (whose walls loosen them most), fractions below 0.55 in steps of
+    0.02, to one step below the estimate (a box of 60 spheres packs at 0.47 to 0.49, of 30 at 0.43 to 0.47).
+    A fraction is tried
 
-    * above the estimate, a short trial: the fraction is given up when its largest overlap, extrapolated
-      geometrically from its decay over the second half of the attempt (from step 400 on), would not reach the
-      tolerance within 1500 FIRE steps, and after 1500 steps at the latest (a fraction that packs easily packs in
-      well under 1000 steps; a jammed one is typically given up after 400 to 600);
+    * above the estimate (small samples only), in a short trial: it is given up when its largest overlap,
+      extrapolated geometrically from its decay over the second half of the attempt (from step 400 on), would not
+      reach the tolerance within 1500 FIRE steps, and after 1500 steps at the latest;
     * at or below it, until it packs or stalls: its largest overlap, at its lowest so far, fell by less than 10 %
       over the last 3000 steps (close to the jamming fraction, packing can take 10 000 steps);
-    * the last fraction, 0.55, under the rule of an explicit ``packing_fraction`` (see Raises).
+    * the last one under the rule of an explicit ``packing_fraction`` (see Raises).
 
-    Samples of fewer than about 300 spheres, whose walls loosen them most, skip the dense fractions more than
-    0.04 above the estimate and continue below 0.55 in steps of 0.02, to one step below the estimate (a box of 60
-    spheres packs at 0.47 to 0.49, of 30 at 0.43 to 0.47).
-
-    On the boxes measured (5 % spread) this keeps the fractions that attempts run to the end keep (400 and 700
-    spheres 0.56, 1000 to 2500 0.58, 3000 and more 0.60), and the samples are alike: the overlaps are removed from
-    a random insertion at the fraction kept, so most bonded neighbours touch. A fraction just above the estimate
-    that would pack only after many thousand steps is given up, though (a 300-sphere cylinder, seed 2, packs 0.56
-    after 12 000 steps; here it gets 0.55). All attempts share one compiled program, which is why the result,
-    deterministic for a seed, is not bit for bit the sample of an explicit ``packing_fraction``.
+    Every attempt starts at rest and runs the same FIRE steps whatever was tried before it. On the boxes measured
+    (5 % spread) the first fraction tried is the one kept (400 and 700 spheres 0.56, 1000 to 2500 0.58, 3000 and
+    more 0.60: no attempt wasted), and the samples are alike: the overlaps are removed from a random insertion at
+    the fraction kept, so most bonded neighbours touch. All attempts share one compiled program, which is why the
+    result, deterministic for a seed, is not bit for bit the sample of an explicit ``packing_fraction``.
 
     Args:
       n: number of particles.
@@ -205,7 +202,7 @@ def random_packing(
       packing_fraction: solid fraction of the domain [-]. Too high and the spheres jam: the overlaps cannot be
         removed. Walls pack loosely, so small samples jam earlier: with 5 % spread a box of 400 spheres packs 0.56
         but jams at 0.58, of 1000 packs 0.58 (slowly), of 2000 to 2500 jams at 0.6, of 3000 packs 0.6 (slowly).
-        ``None`` (default): the densest of ``AUTO_PACKING_FRACTIONS`` that packs, see above.
+        ``None`` (default): the densest fraction that packs, see above.
       overlap_tol: largest accepted overlap relative to ``mean_radius`` [-].
       bond_gap: bonding distance (surface gap) relative to ``mean_radius`` [-].
       bond_radius_ratio: bond radius / radius of the smaller particle of the pair.
@@ -292,7 +289,7 @@ def beam(n: int, **kw) -> Sample:
 
 def _auto_fractions(shape: str, aspect, solid: float, r_max: float) -> tuple[float, ...]:
     """The fractions the automatic mode tries, densest first: those of ``AUTO_PACKING_FRACTIONS`` not more than
-    ``_AUTO_ABOVE`` above the expected jamming fraction of their domain, then, while the expected jamming fraction
+    ``_AUTO_ABOVE`` (0: not) above the expected jamming fraction of their domain, then, while the expected jamming fraction
     of the loosest is below it (samples of fewer than about 300 spheres, whose walls loosen the packing more),
     fractions ``_AUTO_STEP`` apart downward, one past the first at or below its expected jamming fraction."""
     def expected(phi: float) -> float:

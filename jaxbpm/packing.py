@@ -215,7 +215,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
             t0 = time.perf_counter()
             report = _reporter(progress, phi)
             run = _relax(packer, start(wall), radii, wall, target, max_steps, _CHUNK if last else _AUTO_CHUNK,
-                         give_up, report, nbrs)
+                         give_up, report, nbrs, at_rest=True)
             report.close()
             if run.packed:
                 return run.x, k
@@ -231,11 +231,13 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
 
 
 def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chunk: int,
-           give_up: Callable[[list[int], list[float]], bool], report, nbrs=None) -> _Attempt:
+           give_up: Callable[[list[int], list[float]], bool], report, nbrs=None, at_rest: bool = False) -> _Attempt:
     """FIRE from ``x0`` (mean-radius units, domain corner at the origin) in chunks of ``chunk`` steps until the
     largest overlap is below ``target``, ``give_up(steps, overlaps)`` says so, or ``max_steps`` run out. ``nbrs``:
     a neighbour list (of earlier positions) to update rather than allocate: its capacity is kept, so the compiled
-    chunk is reused; the attempt's first step then only updates the list and computes the forces."""
+    chunk is reused; the attempt's first step then only updates the list and computes the forces. ``at_rest``: start
+    so without ``nbrs`` too (the automatic mode's attempts: each runs the same steps whether or not others came
+    before it; near jamming, one step's offset decides whether a fraction packs)."""
     from jaxbpm.generate import morton_order
 
     allocate, init, run = packer
@@ -249,10 +251,11 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     r = jnp.asarray(np.asarray(radii)[order], dtype=dtype)
     w = jnp.asarray(np.stack([np.full(3, _MARGIN), size + _MARGIN]), dtype=dtype)
     tol_j = jnp.asarray(target, dtype=dtype)
-    if nbrs is None:
+    if nbrs is None and not at_rest:
         nbrs = allocate(x)
         state = init(x, nbrs, r, w)
-    else:  # at rest, without force: the first step moves nothing, it rebuilds the list and computes the forces
+    else:  # at rest, without force: the first step moves nothing, it updates the list and computes the forces
+        nbrs = allocate(x) if nbrs is None else nbrs
         scalar = functools.partial(np.asarray, dtype=x.dtype)
         zeros, count = np.zeros(x.shape, x.dtype), np.zeros((), np.int32)
         state = jax.tree.map(jnp.asarray, _Fire(x, zeros, zeros, scalar(np.inf), scalar(_DT_START),

@@ -225,18 +225,20 @@ def auto400():
 
 
 def test_auto_fraction_is_as_dense_as_before_and_quick(auto400):
-    # Before, 400 spheres tried 0.60 (8500 steps to jam) and 0.58 (9500), then packed 0.56 (1774 steps): now the
-    # same fraction or denser, and the fractions given up are given up quickly.
+    # Once, 400 spheres tried 0.60 (8500 steps to jam) and 0.58 (9500), then packed 0.56 (1774 steps); later 0.60
+    # and 0.58 were short trials (400 steps each): now the expected jamming fraction (0.561) skips them and the
+    # first attempt packs 0.56
     s, calls, records = auto400
     check_packing(s, phi_min=0.56 - 1e-9)
     phi = s.packing_fraction()[0]
-    assert phi in [pytest.approx(f, rel=1e-12) for f in g.AUTO_PACKING_FRACTIONS]
+    radii = np.asarray(s.radii) / R
+    fractions = g._auto_fractions("box", None, float(np.sum(4.0 / 3.0 * np.pi * radii**3)), float(radii.max()))
+    assert fractions[0] == 0.56 and phi == pytest.approx(fractions[0], rel=1e-12)
     runs = attempts(calls)
-    assert len(runs) == 1 + g.AUTO_PACKING_FRACTIONS.index(round(phi, 2))
-    assert all(run[-1][0] <= 1500 and run[-1][1] >= TOL for run in runs[:-1])
+    assert len(runs) == 1
     assert runs[-1][-1][1] < TOL and sum(run[-1][0] for run in runs) < 4000
     # one compiled FIRE chunk for all the fractions tried
-    assert sum(m.startswith("Compiling jit(run)") for m in records) == 1
+    assert sum(m.startswith("Compiling jit(run)") for m in records) <= 1  # (0: an earlier test compiled it)
     # most bonded neighbours touch, as after an explicit packing_fraction
     b, pos, rad = np.asarray(s.bonds), np.asarray(s.positions), np.asarray(s.radii)
     gaps = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1) - rad[b[:, 0]] - rad[b[:, 1]]
