@@ -134,7 +134,7 @@ def _check_cells(cells) -> tuple[int, int, int]:
 AUTO_PACKING_FRACTIONS = (0.60, 0.58, 0.56, 0.55)
 """Packing fractions tried by :func:`random_packing` when none is given, densest first (smaller samples try
 fewer of the dense ones and continue below 0.55, see there)."""
-_AUTO_ABOVE, _AUTO_STEP, _AUTO_LOWEST = 0.0, 0.02, 0.35
+_AUTO_STEP, _AUTO_LOWEST = 0.02, 0.35
 
 
 def random_packing(
@@ -288,14 +288,14 @@ def beam(n: int, **kw) -> Sample:
 
 
 def _auto_fractions(shape: str, aspect, solid: float, r_max: float) -> tuple[float, ...]:
-    """The fractions the automatic mode tries, densest first: those of ``AUTO_PACKING_FRACTIONS`` not more than
-    ``_AUTO_ABOVE`` (0: not) above the expected jamming fraction of their domain, then, while the expected jamming fraction
-    of the loosest is below it (samples of fewer than about 300 spheres, whose walls loosen the packing more),
-    fractions ``_AUTO_STEP`` apart downward, one past the first at or below its expected jamming fraction."""
+    """The fractions the automatic mode tries, densest first: those of ``AUTO_PACKING_FRACTIONS`` not above the
+    expected jamming fraction of their domain, then, while the expected jamming fraction of the loosest is below it
+    (samples of fewer than about 300 spheres, whose walls loosen the packing more), fractions ``_AUTO_STEP`` apart
+    downward, one past the first at or below its expected jamming fraction."""
     def expected(phi: float) -> float:
         return _jamming_fraction(_walls(shape, aspect, solid / phi, r_max))
 
-    fractions = [float(phi) for phi in AUTO_PACKING_FRACTIONS if phi <= expected(phi) + _AUTO_ABOVE]
+    fractions = [float(phi) for phi in AUTO_PACKING_FRACTIONS if phi <= expected(phi)]
     phi = float(AUTO_PACKING_FRACTIONS[-1])
     if expected(phi) < phi:
         while phi > _AUTO_LOWEST:

@@ -251,11 +251,12 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     r = jnp.asarray(np.asarray(radii)[order], dtype=dtype)
     w = jnp.asarray(np.stack([np.full(3, _MARGIN), size + _MARGIN]), dtype=dtype)
     tol_j = jnp.asarray(target, dtype=dtype)
-    if nbrs is None and not at_rest:
+    fresh = nbrs is None
+    if fresh:
         nbrs = allocate(x)
+    if fresh and not at_rest:
         state = init(x, nbrs, r, w)
     else:  # at rest, without force: the first step moves nothing, it updates the list and computes the forces
-        nbrs = allocate(x) if nbrs is None else nbrs
         scalar = functools.partial(np.asarray, dtype=x.dtype)
         zeros, count = np.zeros(x.shape, x.dtype), np.zeros((), np.int32)
         state = jax.tree.map(jnp.asarray, _Fire(x, zeros, zeros, scalar(np.inf), scalar(_DT_START),
