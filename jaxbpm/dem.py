@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm import _interrupt
-from jaxbpm._compile import compile_clock
+from jaxbpm._compile import compile_clock, setup_jit
 from jaxbpm.errors import InstabilityError, SimulationInterrupted
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import rotation
@@ -222,7 +222,7 @@ def init_state(model: Model, params, load: Loading, nbrs=None) -> DEMState:
     return _start(model, params, load, nbrs)[0]
 
 
-@jax.jit
+@setup_jit
 def _start(model: Model, params, load: Loading, nbrs):
     """The initial state (see :func:`init_state`) and the per-run constants (:meth:`Model.precompute`)."""
     return _initial_state(model, params, load, nbrs), model.precompute(params)
@@ -335,7 +335,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
     return (new, record) if near is None else (new, record, near)
 
 
-@jax.jit
+@setup_jit
 def _precompute(model, params):
     return model.precompute(params)
 
@@ -459,7 +459,7 @@ def _start_vector(n: int, dtype) -> np.ndarray:
     return ((z >> np.uint64(11)).astype(np.float64) * 2.0**-52 - 1.0).reshape(n, 6).astype(dtype)
 
 
-@functools.partial(jax.jit, static_argnames=("iterations",))
+@setup_jit(static_argnames=("iterations",))
 def _bond_omega2(model: Model, params, v0, iterations):
     """The last iterate ``v`` of the power iteration on ``M^-1/2 K M^-1/2`` and ``M^-1/2 K M^-1/2 v``, ``[n, 6]``."""
     from jaxbpm.physics.bond import bond_law

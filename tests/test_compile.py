@@ -88,6 +88,28 @@ def test_program_compiles_once_per_signature():
         prog(np.ones(3), kk=1)
 
 
+def test_setup_programs_compile_quick_when_small(packing, monkeypatch):
+    """A setup program (run once per sample) compiles with XLA's quick settings when its arguments are small, with the
+    full optimisation when they are large or when it is traced inside another program; a DSM solve whose setup
+    programs compiled either way gives the same answer."""
+    prog = _compile.setup_jit(lambda x: 2.0 * x)
+    small, large = np.ones((8, 3)), np.ones((_compile.QUICK_ROWS + 1, 3))
+    assert prog.quick(small) and not prog.quick(large)
+    np.testing.assert_array_equal(prog(small), 2.0)
+    assert (prog._quick._cache_size(), prog._full._cache_size()) == (1, 0)
+    np.testing.assert_array_equal(prog(large), 2.0)
+    assert (prog._quick._cache_size(), prog._full._cache_size()) == (1, 1)
+    inside = []
+    np.testing.assert_array_equal(jax.jit(lambda x: inside.append(prog.quick(x)) or prog(x))(small), 2.0)
+    assert inside == [False]
+    a = jaxbpm.solve(packing, SCENE, method="dsm")
+    dsm.linear._linear_setups.clear()
+    monkeypatch.setattr(_compile, "QUICK_ROWS", 0)  # every setup program fully optimised
+    assert not prog.quick(small)
+    b = jaxbpm.solve(packing, SCENE, method="dsm")
+    np.testing.assert_allclose(b.stiffness, a.stiffness, rtol=1e-12)
+
+
 def test_setup_cache_is_per_object_and_bounded():
     class Owner:
         pass

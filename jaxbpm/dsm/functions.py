@@ -91,8 +91,7 @@ def _load_case_reactions(model, params, free, coarse, geometry, driven, u_p, tol
     precond = build_preconditioner(model, params, free, jac, coarse, geometry)
 
     def one(up):
-        u = cg(full, precond, free, up, tol, None)[0]
-        gen = -full(u)
+        gen = -cg(full, precond, free, up, tol, None)[4]
         # force the machine applies to the driven layer = minus the internal force on it
         return -jnp.sum(jnp.where(driven[:, None], gen[:, :3], 0.0), axis=0)
 

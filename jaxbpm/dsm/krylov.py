@@ -63,7 +63,7 @@ def linear_solve(model: Model, params, free, u_prescribed, *, tol=1e-6, maxiter=
     """
     full, jac = tangent_operator(model, params, operator=operator, walls=walls, geometry=geometry)
     precond = build_preconditioner(model, params, free, jac, coarse, geometry)
-    u, res, iterations, _ = cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol)
+    u, res, iterations, _, _ = cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol)
     return u, {"residual": res, "iterations": iterations}
 
 
@@ -78,16 +78,27 @@ def cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, dela
 
     x0: a first guess of the displacements (``[n, nd]``, its free DOFs are used; ``None``: zero there).
 
-    Returns ``(u, residual, iterations, energy)``. Wrapped in ``lax.custom_linear_solve``: derivatives come from
-    implicit differentiation (an adjoint solve stopped by the residual), not from unrolling the iterations.
+    Returns ``(u, residual, iterations, energy, ku)`` with ``ku = K u`` on all DOFs (the linearised internal forces
+    are ``-ku``). Wrapped in ``lax.custom_linear_solve``: derivatives come from implicit differentiation (an adjoint
+    solve stopped by the residual), not from unrolling the iterations.
+
+    The program holds three applications of ``full`` (one for the prescribed displacements and the guess together,
+    one in the iteration, one for the solution) and one of ``precond`` (in the iteration, which preconditions the
+    residual before it steps): each copy is compiled separately, and they are most of the compile time.
     """
     def matvec(v):
         # identity on the prescribed DOFs keeps the operator regular, so that the adjoint (transpose) solve of
         # reverse-mode differentiation stays consistent whatever cotangent reaches those DOFs
         return jnp.where(free, full(jnp.where(free, v, 0.0)), v)
 
-    rhs = jnp.where(free, -full(u_prescribed), 0.0)
-    energy0 = 0.5 * jnp.vdot(u_prescribed, full(u_prescribed))
+    if x0 is None:
+        k_p, k_0 = full(u_prescribed), None
+    else:  # K u_p and K x0 in one application
+        x0_free = jnp.where(free, jax.lax.stop_gradient(x0), 0.0)
+        k_p, k_0 = jax.vmap(full)(jnp.stack([u_prescribed, x0_free]))
+        k_0 = jnp.where(free, jax.lax.stop_gradient(k_0), 0.0)  # K_ff x0 (the guess is not differentiated)
+    rhs = jnp.where(free, -k_p, 0.0)
+    energy0 = 0.5 * jnp.vdot(u_prescribed, k_p)
     limit = 10 * rhs.size if maxiter is None else maxiter
 
     def run(mv, b, energy_test, guess=True):
@@ -98,10 +109,9 @@ def cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, dela
         x_0, r_0, e_0 = jnp.zeros_like(b), b, energy0
         if guess and x0 is not None:
             # the energy of the guess: E(x) = E(0) - x.b + x.K x / 2 = E(0) - x.(b + r) / 2 with r = b - K x
-            x_0 = jnp.where(free & primal, jax.lax.stop_gradient(x0), 0.0)
-            r_0 = b - mv(x_0)
+            x_0 = jnp.where(primal, x0_free, 0.0)
+            r_0 = b - jnp.where(primal, k_0, 0.0)
             e_0 = energy0 - 0.5 * jnp.vdot(x_0, b + r_0)
-        z0 = precond(r_0)
         window = jnp.zeros(delay, b.dtype)
 
         def done(c):
@@ -112,21 +122,25 @@ def cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, dela
             return small | (k >= limit)
 
         def body(c):
+            # preconditioned CG with the preconditioning at the top of the step: z = M r, then the new direction
+            # (the first step has g = inf and p = 0, so p = z), the step along it
             x, r, g, p, k, energy, win = c
-            ap = mv(p)
-            alpha = g / jnp.vdot(p, ap)
-            x, r = x + alpha * p, r - alpha * ap
             z = precond(r)
             g2 = jnp.vdot(r, z)
-            drop = 0.5 * alpha * g
-            return x, r, g2, z + (g2 / g) * p, k + 1, energy - drop, win.at[k % delay].set(drop)
+            p = z + (g2 / g) * p
+            ap = mv(p)
+            alpha = g2 / jnp.vdot(p, ap)
+            drop = 0.5 * alpha * g2
+            return x + alpha * p, r - alpha * ap, g2, p, k + 1, energy - drop, win.at[k % delay].set(drop)
 
-        init = (x_0, r_0, jnp.vdot(r_0, z0), z0, 0, e_0, window)
+        init = (x_0, r_0, jnp.asarray(jnp.inf, b.dtype), jnp.zeros_like(b), 0, e_0, window)
         x, _, _, _, k, energy, _ = jax.lax.while_loop(lambda c: ~done(c), body, init)
         return x, (k, energy)
 
     v, (iterations, energy) = jax.lax.custom_linear_solve(
         matvec, rhs, lambda mv, b: run(mv, b, stiffness_tol is not None),
         transpose_solve=lambda mv, b: run(mv, b, False, False), symmetric=True, has_aux=True)
-    res = jnp.linalg.norm(matvec(v) - rhs) / jnp.maximum(jnp.linalg.norm(rhs), jnp.finfo(rhs.dtype).tiny)
-    return u_prescribed + v, res, iterations, energy
+    k_v = full(jnp.where(free, v, 0.0))  # v is zero on the prescribed DOFs
+    res = jnp.linalg.norm(jnp.where(free, k_v, v) - rhs) / jnp.maximum(jnp.linalg.norm(rhs),
+                                                                        jnp.finfo(rhs.dtype).tiny)
+    return u_prescribed + v, res, iterations, energy, k_p + k_v

@@ -251,8 +251,8 @@ _PLACING_TOL = 1e-2
 
 
 def _linear_once(free, u_p, tol, maxiter, stiffness_tol, full, precond, x0=None):
-    u, res, iterations, _ = cg(full, precond, free, u_p, tol, maxiter, stiffness_tol, x0=x0)
-    gen = -full(u)  # linearised internal forces
+    u, res, iterations, _, ku = cg(full, precond, free, u_p, tol, maxiter, stiffness_tol, x0=x0)
+    gen = -ku  # linearised internal forces
     delta = jnp.max(jnp.abs(u_p))
     energy_reaction = -jnp.vdot(u, gen) / delta
     clamped = ~jnp.any(free, axis=1)

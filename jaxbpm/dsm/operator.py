@@ -10,6 +10,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from jaxbpm._compile import setup_jit
 from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation, tangent, vec
 from jaxbpm.physics.model import Model
 
@@ -123,7 +124,7 @@ def _shear_factor(nu):
     return bond_mod.stiffness(1.0, nu, 1.0, 1.0, 1.0, 1.0).kt
 
 
-@jax.jit
+@setup_jit
 def _geometry_parts(model: Model):
     dtype = model.positions0.dtype
     zero = jnp.zeros_like(model.bond_length)
@@ -225,7 +226,7 @@ def packed_jacobians(jr) -> jnp.ndarray:
     return jnp.stack(parts)
 
 
-_packed_all = jax.jit(jax.vmap(packed_jacobians))
+_packed_all = setup_jit(jax.vmap(packed_jacobians))
 
 
 def symmetrised(jr) -> jnp.ndarray:

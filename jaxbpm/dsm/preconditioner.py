@@ -6,14 +6,13 @@ space of the rigid modes of particle aggregates (two-level additive Schwarz), an
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import put
+from jaxbpm._compile import put, setup_jit
 from jaxbpm.dsm.operator import (
     _geometry_parts, _packed_all, _uses_geometry, block_diagonal, BondGeometry, full_jacobians, material_weights,
     reduced_jacobians)
@@ -24,7 +23,7 @@ _MAX_PRECOMPUTED_MATERIALS = 8
 _MAX_PRECOMPUTED_BYTES = 2 ** 30  # memory for the preconditioner's parts; above it they are assembled per solve
 
 
-@functools.partial(jax.jit, static_argnames=("n_materials",))
+@setup_jit(static_argnames=("n_materials",))
 def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
     """Block diagonals and coarse matrices per (material, part) of :class:`BondGeometry`."""
     def one(mp):

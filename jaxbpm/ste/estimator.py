@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxbpm._compile import capacity, put, size_class
+from jaxbpm._compile import capacity, put, setup_jit, size_class
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import tangent
 from jaxbpm.physics.model import _contact_params, Model
@@ -331,7 +331,7 @@ def _active_contacts(sample: Sample, model: Model, axis: int, strain: float):
     return pairs[keep], d_lin
 
 
-_unit_jacobians = jax.jit(tangent.bond_unit)
+_unit_jacobians = setup_jit(tangent.bond_unit)
 
 
 def _bond_geometry(model: Model) -> tuple[jnp.ndarray, tuple]:
@@ -358,4 +358,4 @@ def _contact_jacobians(est: Estimator) -> jnp.ndarray:
     return tangent.contact_full(est.contact_d, est.contact_radii, est.contact_params, est.dofs)
 
 
-_contact_jacobians_jit = jax.jit(_contact_jacobians)
+_contact_jacobians_jit = setup_jit(_contact_jacobians)
