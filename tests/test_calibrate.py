@@ -257,6 +257,24 @@ def test_surrogate_drops_unimportant_parameter_and_resamples():
     assert res.values["bond_nu[0]"] == 0.3 and res.info["mean_importance"][2] == 0.0
 
 
+@pytest.mark.parametrize("kind", ["RandomForestRegressor", "ExtraTreesRegressor"])
+@pytest.mark.parametrize("outputs", [1, 2])
+def test_forest_prediction_equals_scikit_learn(kind, outputs):
+    """The surrogate's own loop over a forest's trees gives scikit-learn's ``predict`` to the last bit."""
+    import sklearn.ensemble
+
+    from jaxbpm.calibrate.surrogate import _predict_one
+
+    rng = np.random.default_rng(3)
+    X = rng.random((80, 3))
+    y = np.stack([X @ [1.0, 2.0, 3.0] + 0.1 * rng.random(80), X[:, 0] ** 2], axis=1)[:, :outputs]
+    forest = getattr(sklearn.ensemble, kind)(n_estimators=30, random_state=0).fit(X, y[:, 0] if outputs == 1 else y)
+    Xp = rng.random((500, 3))
+    ours, theirs = _predict_one(forest, Xp), forest.predict(Xp)
+    assert ours.shape == theirs.shape
+    np.testing.assert_array_equal(ours, theirs)
+
+
 def test_surrogate_takes_any_scikit_learn_regressor():
     from sklearn.cluster import KMeans
     from sklearn.ensemble import ExtraTreesRegressor, RandomForestRegressor
