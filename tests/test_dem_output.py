@@ -214,15 +214,19 @@ def test_a_ctrl_c_swallowed_during_setup_still_stops_the_solve(weak, monkeypatch
     gc.callbacks.append(interrupt_once)
     threshold = gc.get_threshold()
     gc.set_threshold(10)  # (a solve whose programs are compiled allocates too little to start a collection)
+    # Python's own handler, as in an interactive session (a suite started with SIGINT ignored, e.g. under nohup,
+    # would never see the signal)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         with pytest.raises(KeyboardInterrupt):
             jaxbpm.solve(weak, SCENE, "dem", transits=10, chunk=20, record_to=tmp_path / "run.h5")
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the solve put it back
     finally:
         gc.callbacks.remove(interrupt_once)
         gc.set_threshold(*threshold)
+        signal.signal(signal.SIGINT, previous)
     assert fired and ignored == [KeyboardInterrupt]  # it was swallowed where it arrived, and raised later
     assert read_records(tmp_path / "run.h5")[1]["status"] == "interrupted"  # the record says so
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_guard_lets_errors_through_when_interrupts_are_ignored():
