@@ -5,6 +5,8 @@ with a neighbour list), the script runs the jitted DEM chunk of a uniaxial compr
 steady-state throughput separately (timed with block_until_ready, median over chunks).
 
     python benchmarks/dem_throughput.py [--sizes 1000 10000 100000] [--steps 2000] [--threads 1] [--out ...]
+    python benchmarks/dem_throughput.py --samples results/samples/box_1000000_phi0.55_seed0.h5 --steps 200 \
+        --physics bonds                      # samples from files (e.g. the ones scaling.py stored) instead
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ def main(argv=None) -> int:
     ap.add_argument("--physics", nargs="+", default=["bonds", "bonds+contacts"],
                     choices=["bonds", "bonds+contacts"])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--samples", nargs="+", default=None, metavar="H5",
+                    help="sample files (jaxbpm.io.save_sample) to run instead of generating --sizes")
     ap.add_argument("--quick", action="store_true", help="1k and 10k particles, 500 timed steps")
     ap.add_argument("--out", default="results/dem_throughput.json")
     args = ap.parse_args(argv)
@@ -40,10 +44,15 @@ def main(argv=None) -> int:
     from jaxbpm import dem
     from jaxbpm.physics.model import default_params
 
+    from jaxbpm.io import load_sample
+
     rows = []
-    for n in args.sizes:
+    for n in (args.samples or args.sizes):
         t0 = time.perf_counter()
-        sample = jaxbpm.generate.box(n, seed=args.seed, mean_radius=1e-3, radius_spread=0.05)
+        if args.samples:
+            sample = load_sample(n)
+        else:
+            sample = jaxbpm.generate.box(n, seed=args.seed, mean_radius=1e-3, radius_spread=0.05)
         gen_time = time.perf_counter() - t0
         params = default_params(sample)
         for physics in args.physics:
@@ -61,7 +70,8 @@ def main(argv=None) -> int:
                    "rotations": model.rotations, "compile_s": stats["compile_time"], "steps": stats["steps"],
                    "steps_per_s": sps, "bond_steps_per_s": sps * sample.n_bonds,
                    "particle_steps_per_s": sps * sample.n_particles, "contact_capacity": stats["contact_capacity"],
-                   "reallocations": stats["reallocations"], "generate_s": gen_time,
+                   "reallocations": stats["reallocations"],
+                   ("load_s" if args.samples else "generate_s"): gen_time,
                    "peak_rss_gib": peak_rss_gib()}
             rows.append(row)
             print(f"n={sample.n_particles} nb={sample.n_bonds} {physics}: {row['bond_steps_per_s']:.3g} bond-steps/s,"
