@@ -112,6 +112,11 @@ def _signature(args, static) -> tuple:
     return treedef, shapes, tuple(sorted(static.items())), jax.config.jax_enable_x64
 
 
+# priming stops after an execution that took longer than this [s]: priming is for millisecond-long programs (an STE
+# on 1M particles runs 4 s, and two primed executions would add 8 s to its compile time)
+_PRIME_LIMIT = 0.05
+
+
 class Program:
     """A jitted function compiled ahead of time once per argument signature.
 
@@ -125,7 +130,8 @@ class Program:
     memory in page by page: the STE at 3k particles has 13 MB of it, ~3,200 page faults, 6-8 ms a call; glibc's
     malloc hands that memory back to the system after each of the first two executions (the first from its own
     mapping, the second when the compiler's freed memory is trimmed with it) and keeps it from the third on. Without
-    priming, the second and third calls of such a program took 2-3x its steady run time.
+    priming, the second and third calls of such a program took 2-3x its steady run time. Priming stops after an
+    execution longer than 50 ms (a large sample, whose run is not dominated by its page faults).
     """
 
     def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = (), maxsize: int = 32, prime: int = 0):
@@ -152,7 +158,10 @@ class Program:
         tc = time.perf_counter()
         exe = self._jit.lower(*args, **static).compile()
         for _ in range(self.prime):
+            tp = time.perf_counter()
             jax.block_until_ready(exe(*args))
+            if time.perf_counter() - tp > _PRIME_LIMIT:  # a long run: its page faults are a small part of it
+                break
         compile_time = time.perf_counter() - tc
         self.compilations += 1
         self._compiled[key] = exe

@@ -88,6 +88,23 @@ def test_program_compiles_once_per_signature():
         prog(np.ones(3), kk=1)
 
 
+def test_priming_stops_after_a_long_execution(monkeypatch):
+    """``prime=k`` runs a new executable k times (page faults of ms-long programs), but stops after one execution
+    longer than the limit (a large sample's run)."""
+    runs = []
+
+    def fn(x):
+        jax.debug.callback(lambda: runs.append(1))
+        return x + 1.0
+
+    prog = Program(fn, prime=3)
+    prog(np.ones(2))
+    assert len(runs) == 3 + 1  # three primed executions and the call's own
+    monkeypatch.setattr(_compile, "_PRIME_LIMIT", -1.0)  # every execution counts as long
+    prog(np.ones(3))  # a new signature
+    assert len(runs) == 4 + 1 + 1
+
+
 def test_setup_programs_compile_quick_when_small(packing, monkeypatch):
     """A setup program (run once per sample) compiles with XLA's quick settings when its arguments are small, with the
     full optimisation when they are large or when it is traced inside another program; a DSM solve whose setup
