@@ -149,7 +149,7 @@ def predicted_run(method, n, done):
     return t0 * (n / n0) ** b
 
 
-def run_method(method, sample, scene, repeats):
+def run_method(method, sample, scene, repeats, options=None):
     import jaxbpm
 
     calls = 1 if method == "dem" else repeats
@@ -158,7 +158,7 @@ def run_method(method, sample, scene, repeats):
         warnings.simplefilter("always")
         for _ in range(calls):
             t = time.perf_counter()
-            results.append(jaxbpm.solve(sample, scene, method))
+            results.append(jaxbpm.solve(sample, scene, method, **(options or {})))
             walls.append(time.perf_counter() - t)
     r0 = results[0]
     runs = [r.run_time for r in results]
@@ -233,6 +233,8 @@ def main(argv=None) -> int:
     ap.add_argument("--fit-min", type=int, default=None, help="fit exponents over sizes >= this (default 10000)")
     ap.add_argument("--packing-fraction", type=float, default=0.55)
     ap.add_argument("--strain", type=float, default=0.002)
+    ap.add_argument("--dsm-stiffness-tol", type=float, default=None,
+                    help="the DSM's stiffness_tol (default: the library's: residual tolerance alone)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cache-dir", default=None, help="read samples from / store them in this folder (HDF5)")
     ap.add_argument("--threads", type=int, default=None, help="restrict to this many cores")
@@ -277,7 +279,8 @@ def main(argv=None) -> int:
                 log(f"  {LABEL[m]}: skipped ({why})")
                 continue
             try:
-                rec[m] = run_method(m, sample, scene, args.repeats)
+                rec[m] = run_method(m, sample, scene, args.repeats,
+                                    {"stiffness_tol": args.dsm_stiffness_tol} if m == "dsm" and args.dsm_stiffness_tol else None)
             except Exception as exc:  # recorded, not fatal
                 rec[m] = {"error": f"{type(exc).__name__}: {exc}"}
                 log(f"  {LABEL[m]}: FAILED {type(exc).__name__}: {exc}")

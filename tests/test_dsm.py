@@ -301,9 +301,10 @@ def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, 
     free = dsm.free_mask(model, scene, s)[0]
     coarse = dsm.coarse_space(model, free, aggregate_size=25)
     geo = dsm.bond_geometry(model, coarse, n_materials=2)
+    assert geo.reduced is None  # read by the preconditioner's parts only
     p = default_params(s)
     ref = dsm.reduced_jacobians(model, p)
-    jr, jp, _ = dsm.operator.geometric_jacobians(model, p, geo)
+    jr, jp, _ = dsm.operator.geometric_jacobians(model, p, dsm.bond_geometry(model, coarse))
     scale = float(jnp.abs(ref).max())
     np.testing.assert_allclose(jr, ref, rtol=0, atol=1e-12 * scale)
     np.testing.assert_allclose(jp, dsm.packed_jacobians(ref), rtol=0, atol=1e-12 * scale)
@@ -327,6 +328,36 @@ def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, 
     np.testing.assert_allclose(k_geo, k_ref, rtol=1e-9)
     for name in ("bond_E", "bond_nu"):
         np.testing.assert_allclose(g_geo[name], g_ref[name], rtol=1e-7)
+
+
+@pytest.mark.parametrize("dofs", [3, 6])
+def test_setup_over_bond_chunks_equals_the_whole_sample(packing, dofs, monkeypatch):
+    # large samples build the bonds' geometric parts chunk by chunk (lax.map over padded chunks): same numbers as
+    # one pass over all bonds, the padding cut off
+    chunk = dsm.operator.BOND_CHUNK
+    assert dsm.operator.bond_chunk(7 * chunk) == chunk and dsm.operator.bond_chunk(11 * chunk // 4) == chunk // 4
+    assert dsm.operator.bond_chunk(7 * chunk + 1) == chunk  # no divisor: padded
+    model = UniaxialCompression(strain=0.002).model(packing, rotations=dofs == 6)
+    nb = model.bonds.shape[0]
+    whole = jax.jit(dsm.operator._geometry_chunk)(model)
+    chunked = jax.jit(lambda m: dsm.operator.over_bonds(dsm.operator._geometry_chunk, m, chunk=97))(model)
+    assert nb % dsm.operator.bond_chunk(nb, 97) != 0 and nb > 2 * 97  # padded
+    for a, b in zip(whole, chunked):
+        assert a.shape == b.shape and a.shape[-1] == nb
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-14 * float(jnp.abs(a).max()))
+    # the preconditioner's parts, sums over bonds and over the coupling bonds, chunk by chunk
+    s = jaxbpm.generate.mix_materials(packing, [0.5, 0.5], seed=2, materials={"E": [1e9, 3e9], "nu": [0.2, 0.35]})
+    model = UniaxialCompression(strain=0.002).model(s, rotations=dofs == 6)
+    free = dsm.free_mask(model, UniaxialCompression(strain=0.002), s)[0]
+    coarse = dsm.coarse_space(model, free, aggregate_size=25)
+    reduced = dsm.operator._geometry_parts(model)[0]
+    parts = dsm.preconditioner._preconditioner_parts.__wrapped__
+    ref = jax.jit(parts, static_argnums=3)(model, reduced, coarse, 2)
+    monkeypatch.setattr(dsm.operator, "BOND_CHUNK", 53)
+    assert coarse.bonds.shape[0] > 2 * 53
+    got = jax.jit(parts, static_argnums=3)(model, reduced, coarse, 2)
+    for a, b in zip(ref, got):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-13 * float(jnp.abs(a).max()))
 
 
 def test_two_level_preconditioner_same_answer_fewer_iterations(packing):

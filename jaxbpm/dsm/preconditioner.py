@@ -14,8 +14,8 @@ import numpy as np
 
 from jaxbpm._compile import put, setup_jit
 from jaxbpm.dsm.operator import (
-    _geometry_parts, _packed_all, _uses_geometry, block_diagonal, BondGeometry, full_jacobians, material_weights,
-    reduced_jacobians)
+    _BOND_FIELDS, _geometry_parts, bond_chunk, _packed_all, _uses_geometry, block_diagonal, BondGeometry,
+    full_jacobians, material_weights, reduced_jacobians)
 from jaxbpm.physics.model import Model
 
 
@@ -23,15 +23,60 @@ _MAX_PRECOMPUTED_MATERIALS = 8
 _MAX_PRECOMPUTED_BYTES = 2 ** 30  # memory for the preconditioner's parts; above it they are assembled per solve
 
 
+def _bond_subset(model: Model, idx) -> Model:
+    """The model with the bonds ``idx`` only (``None``: all of them); its bond keys are not the sample's."""
+    if idx is None:
+        return model
+    return dataclasses.replace(model, **{k: getattr(model, k)[idx] for k in _BOND_FIELDS})
+
+
+def _sum_over_bond_chunks(fn, n: int, chunk: int | None = None):
+    """``sum_c fn(idx_c, w_c)`` over chunks of the indices ``0 .. n-1`` (``fn(None, None)`` when ``n <= chunk``):
+    ``idx_c`` the chunk's indices (the last chunk's padding repeats ``n - 1``), ``w_c`` 1 on them and 0 on the
+    padding. For sums over bonds whose terms are linear in the weights: each chunk's temporaries are reused from chunk
+    to chunk instead of being allocated for all bonds at once (see :func:`~jaxbpm.dsm.operator.over_bonds`)."""
+    chunk = bond_chunk(n, chunk)
+    if n <= chunk:
+        return fn(None, None)
+    ks = jnp.arange(chunk)
+
+    def term(c):
+        k = c * chunk + ks
+        return fn(jnp.minimum(k, n - 1), (k < n))
+
+    shape = jax.eval_shape(term, 0)
+    init = jax.tree_util.tree_map(lambda t: jnp.zeros(t.shape, t.dtype), shape)
+    return jax.lax.fori_loop(0, -(-n // chunk), lambda c, acc: jax.tree_util.tree_map(jnp.add, acc, term(c)), init)
+
+
 @setup_jit(static_argnames=("n_materials",))
 def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
-    """Block diagonals and coarse matrices per (material, part) of :class:`BondGeometry`."""
+    """Block diagonals and coarse matrices per (material, part) of :class:`BondGeometry` (over chunks of bonds on
+    large samples)."""
     def one(mp):
         m, part = mp // 2, mp % 2
-        jac = jnp.where(model.bond_material == m.astype(model.bond_material.dtype), jnp.take(reduced, part, axis=0),
-                        0.0)
-        a = None if coarse is None else coarse_matrix(model, jac, coarse)
-        return block_diagonal(model, None, jac), a
+        whole = jnp.take(reduced, part, axis=0)
+
+        def jacobians(sub, idx, w):
+            jac = whole if idx is None else whole[:, :, idx]
+            keep = sub.bond_material == m.astype(sub.bond_material.dtype)
+            return jnp.where(keep if w is None else keep & w, jac, 0.0)
+
+        def blocks_of(idx, w):
+            sub = _bond_subset(model, idx)
+            return block_diagonal(sub, None, jacobians(sub, idx, w))
+
+        blocks = _sum_over_bond_chunks(blocks_of, model.bonds.shape[0])
+        if coarse is None:
+            return blocks, None
+
+        def coarse_of(idx, w):  # over the coupling bonds only
+            sel = coarse.bonds if idx is None else coarse.bonds[idx]
+            sub = _bond_subset(model, sel)
+            local = dataclasses.replace(coarse, bonds=jnp.arange(sel.shape[0], dtype=coarse.bonds.dtype))
+            return coarse_matrix(sub, jacobians(sub, sel, w), local)
+
+        return blocks, _sum_over_bond_chunks(coarse_of, coarse.bonds.shape[0])
 
     blocks, mats = jax.lax.map(one, jnp.arange(2 * n_materials))
     blocks = blocks.reshape((n_materials, 2) + blocks.shape[1:])
@@ -42,7 +87,8 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
                   ) -> BondGeometry | None:
     """:class:`BondGeometry` of the model's bonds (``None`` without bonds). With ``n_materials`` (the length of
     ``params["bond_E"]``; at most ``_MAX_PRECOMPUTED_MATERIALS``), the preconditioner's parts as well, for the
-    :class:`CoarseSpace` ``coarse`` (or block-Jacobi alone with ``None``)."""
+    :class:`CoarseSpace` ``coarse`` (or block-Jacobi alone with ``None``), and then without the reduced form (which
+    nothing else reads)."""
     if model.bonds.shape[0] == 0:
         return None
     reduced, err = _geometry_parts(model)
@@ -54,7 +100,9 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
     if (n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS
             and n_materials * per_material * reduced.dtype.itemsize <= _MAX_PRECOMPUTED_BYTES):
         blocks, mats = _preconditioner_parts(model, reduced, coarse, int(n_materials))
-        geometry = dataclasses.replace(geometry, blocks=blocks, coarse=mats)
+        # the reduced form was kept for the preconditioner only (2 x 81 numbers a bond: 3.7 GB on a million
+        # particles); a solve with another material count builds its Jacobians from the bond law instead
+        geometry = dataclasses.replace(geometry, reduced=None, blocks=blocks, coarse=mats)
     return geometry
 
 
