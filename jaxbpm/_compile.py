@@ -115,6 +115,13 @@ def _signature(args, static) -> tuple:
 # priming stops after an execution that took longer than this [s]: priming is for millisecond-long programs (an STE
 # on 1M particles runs 4 s, and two primed executions would add 8 s to its compile time)
 _PRIME_LIMIT = 0.05
+# ... and is skipped when the arguments hold more than this many bytes: such a program does not run in milliseconds,
+# and a primed execution would double the wall time of its first call (the STE on 1M particles: 3-4 s more)
+_PRIME_BYTES = 1 << 26
+
+
+def _nbytes(args) -> int:
+    return sum(int(getattr(x, "nbytes", 0)) for x in jax.tree_util.tree_leaves(args))
 
 
 class Program:
@@ -131,7 +138,8 @@ class Program:
     malloc hands that memory back to the system after each of the first two executions (the first from its own
     mapping, the second when the compiler's freed memory is trimmed with it) and keeps it from the third on. Without
     priming, the second and third calls of such a program took 2-3x its steady run time. Priming stops after an
-    execution longer than 50 ms (a large sample, whose run is not dominated by its page faults).
+    execution longer than 50 ms and is skipped for arguments over 64 MiB (a large sample, whose run is not dominated by
+    its page faults).
     """
 
     def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = (), maxsize: int = 32, prime: int = 0):
@@ -157,7 +165,7 @@ class Program:
             return exe, 0.0
         tc = time.perf_counter()
         exe = self._jit.lower(*args, **static).compile()
-        for _ in range(self.prime):
+        for _ in range(self.prime if _nbytes(args) <= _PRIME_BYTES else 0):
             tp = time.perf_counter()
             jax.block_until_ready(exe(*args))
             if time.perf_counter() - tp > _PRIME_LIMIT:  # a long run: its page faults are a small part of it

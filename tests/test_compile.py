@@ -90,7 +90,8 @@ def test_program_compiles_once_per_signature():
 
 def test_priming_stops_after_a_long_execution(monkeypatch):
     """``prime=k`` runs a new executable k times (page faults of ms-long programs), but stops after one execution
-    longer than the limit (a large sample's run)."""
+    longer than the limit, and does not prime at all on arguments of more bytes than its limit (a large sample's
+    run)."""
     runs = []
 
     def fn(x):
@@ -103,6 +104,12 @@ def test_priming_stops_after_a_long_execution(monkeypatch):
     monkeypatch.setattr(_compile, "_PRIME_LIMIT", -1.0)  # every execution counts as long
     prog(np.ones(3))  # a new signature
     assert len(runs) == 4 + 1 + 1
+    monkeypatch.setattr(_compile, "_PRIME_LIMIT", 1e9)
+    monkeypatch.setattr(_compile, "_PRIME_BYTES", 8 * 4 - 1)  # arguments of more bytes are not primed at all
+    prog(np.ones(4))
+    assert len(runs) == 6 + 1
+    prog(np.ones(2, np.float32).reshape(1, 2))  # 8 bytes: primed three times
+    assert len(runs) == 7 + 3 + 1
 
 
 def test_setup_programs_compile_quick_when_small(packing, monkeypatch):
