@@ -174,6 +174,93 @@ def _packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool)
     return allocate, init, run
 
 
+# from this many spheres on the CPU the neighbour list is built on the host (a k-d tree) instead of by jax-md's cell
+# list inside the step: the cell list's rebuild fills a dense [n, 27 x cell capacity, 3] candidate array, gigabytes
+# fresh from the system at every rebuild (at 200k spheres 9-20 s a rebuild against 0.17 s a step)
+_HOST_LIST_MIN = 20_000
+
+
+class _HostList(NamedTuple):
+    """A neighbour list built on the host: jax-md's sparse layout (``idx [2, capacity]``, both directions, grouped
+    by ``idx[1]``, padded with ``n``), the positions it was built at, and whether a sphere has moved more than half
+    the skin since (named as jax-md's overflow flag: the caller rebuilds the list on either)."""
+
+    idx: jax.Array
+    reference: jax.Array
+    did_buffer_overflow: jax.Array
+
+
+def _host_pairs(x: np.ndarray, radius: float, capacity: int) -> tuple[np.ndarray, int]:
+    """Pairs of centres closer than ``radius`` in jax-md's sparse layout with ``capacity`` slots (more when they do
+    not fit), and that slot count; sorted by ``idx[1]`` then ``idx[0]``."""
+    from scipy.spatial import cKDTree
+
+    n = x.shape[0]
+    half = cKDTree(x).query_pairs(radius, output_type="ndarray").astype(np.int32)
+    rows = np.concatenate([half[:, 0], half[:, 1]])
+    cols = np.concatenate([half[:, 1], half[:, 0]])
+    order = np.argsort(rows.astype(np.int64) * n + cols)  # by row, then column: jax-md's order of the sums
+    count = rows.shape[0]
+    if count > capacity:
+        capacity = int(count * _CAPACITY) + 1
+    idx = np.full((2, capacity), n, np.int32)
+    idx[1, :count], idx[0, :count] = rows[order], cols[order]
+    return idx, capacity
+
+
+@functools.lru_cache(maxsize=8)
+def _host_packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool):
+    """:func:`_packer`'s three functions with the neighbour list built on the host (:func:`_host_pairs`): the
+    jitted chunk stops at the step after which a sphere has moved more than half the skin, and the caller rebuilds
+    the list there and recomputes the forces, as on a jax-md overflow. The slot count only grows (one compiled
+    chunk)."""
+    box = np.asarray(cell_box, dtype=np.float64)
+    slots = [0]
+
+    def allocate(x):
+        idx, slots[0] = _host_pairs(np.asarray(x, dtype=np.float64), cutoff + _SKIN, slots[0])
+        return _HostList(jnp.asarray(idx), x, jnp.zeros((), bool))
+
+    @jax.jit
+    def init(x, nbrs, radii, walls):
+        f, max_overlap = _forces(x, nbrs.idx, radii, walls, cylinder)
+        zero = jnp.zeros((), x.dtype)
+        return _Fire(x, jnp.zeros_like(x), f, max_overlap, zero + _DT_START, zero + _ALPHA0,
+                     jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
+
+    @jax.jit
+    def run(state, nbrs, radii, walls, tol, stop):
+        cell = jnp.asarray(box, dtype=state.x.dtype)
+
+        def cond(carry):
+            s, nb = carry
+            return (s.step < stop) & (s.max_overlap >= tol) & ~nb.did_buffer_overflow
+
+        def body(carry):
+            s, nb = carry
+            s, _ = _fire_step(s, _Static(nb.idx), radii, walls, cell, cylinder)
+            moved = jnp.max(jnp.sum((s.x - nb.reference) ** 2, axis=1)) > (0.5 * _SKIN) ** 2
+            return s, nb._replace(did_buffer_overflow=moved)
+
+        return jax.lax.while_loop(cond, body, (state, nbrs))
+
+    return allocate, init, run
+
+
+class _Static(NamedTuple):
+    """A neighbour list that :func:`_fire_step` updates to itself (the host list is checked by its caller)."""
+
+    idx: jax.Array
+
+    def update(self, x):
+        return self
+
+
+def _packer_for(n: int):
+    """:func:`_host_packer` for large samples on the CPU, :func:`_packer` (jax-md's cell list in the step) else."""
+    return _host_packer if n >= _HOST_LIST_MIN and jax.default_backend() == "cpu" else _packer
+
+
 class _Attempt(NamedTuple):
     """One FIRE run at one packing fraction."""
 
@@ -189,7 +276,7 @@ def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, p
     returns ``[n, 3]`` float64, or raises :class:`SampleError` when the spheres jam or ``max_steps`` run out."""
     cell_box = _cell_box(walls)
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
-        packer = _packer(cell_box, float(cutoff), walls.cylinder)
+        packer = _packer_for(len(x0))(cell_box, float(cutoff), walls.cylinder)
         report = _reporter(progress, phi)
         run = _relax(packer, x0, radii, walls, _target(tol, cell_box), max_steps, _CHUNK, _jammed, report)
         report.close()
@@ -206,7 +293,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
     cell_box = _cell_box(walls[-1])  # the largest domain: one cell list, one compiled program for all fractions
     nbrs = None
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
-        packer = _packer(cell_box, float(cutoff), walls[0].cylinder)
+        packer = _packer_for(len(radii))(cell_box, float(cutoff), walls[0].cylinder)
         target = _target(tol, cell_box)
         for k, (phi, wall) in enumerate(zip(fractions, walls)):
             last = k == len(fractions) - 1
@@ -264,11 +351,18 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     steps, overlaps = [], []
     while True:
         stop = min(int(state.step) + chunk, max_steps)
-        state, nbrs = run(state, nbrs, r, w, tol_j, jnp.asarray(stop, dtype=jnp.int32))
-        if bool(nbrs.did_buffer_overflow):  # the last step used a truncated list: rebuild, recompute forces
+        while True:
+            state, nbrs = run(state, nbrs, r, w, tol_j, jnp.asarray(stop, dtype=jnp.int32))
+            if not bool(nbrs.did_buffer_overflow):
+                break
+            # the last step used a truncated (jax-md) or stale (host) list: rebuild, recompute the forces, and go
+            # on with the chunk
             nbrs = allocate(state.x)
             fresh = init(state.x, nbrs, r, w)
             state = state._replace(f=fresh.f, max_overlap=fresh.max_overlap)
+            if int(state.step) >= stop or not float(state.max_overlap) >= target:
+                break
+            report(int(state.step), float(state.max_overlap), time.perf_counter() - t0, False)  # (display only)
         step, worst = int(state.step), float(state.max_overlap)
         steps.append(step)
         overlaps.append(worst)
@@ -350,8 +444,9 @@ def _not_converged(run: _Attempt, max_steps: int, tol: float, phi: float) -> str
 
 
 def _reporter(progress, phi: float) -> Callable[[int, float, float, bool], None]:
-    """Progress of one attempt: a callable gets every chunk; ``True`` shows a bar of FIRE steps with the largest
-    overlap (:mod:`jaxbpm.progress`), and a last line when the attempt packed. ``close()`` ends its display."""
+    """Progress of one attempt: a callable gets every chunk (and every rebuild of a host neighbour list, for display
+    only); ``True`` shows a bar of FIRE steps with the largest overlap (:mod:`jaxbpm.progress`), and a last line
+    when the attempt packed. ``close()`` ends its display."""
     if callable(progress) or not progress:
         def report(step, worst, elapsed, packed):
             if callable(progress):

@@ -179,6 +179,32 @@ def test_box_packing_is_dense_overlap_free_and_bonded(box400):
     np.testing.assert_allclose(s.bond_radius, 0.5 * np.minimum(rad[s.bonds[:, 0]], rad[s.bonds[:, 1]]))
 
 
+def test_host_neighbour_list_packs_as_the_cell_list_does(box400, monkeypatch):
+    # large samples build their neighbour list on the host (k-d tree) between jitted chunks instead of with jax-md's
+    # cell list inside the step: the same pairs in jax-md's sparse layout, and the same packing (to 1e-3 R: the
+    # force sums add in another order, and FIRE's path amplifies those 1e-16 differences to ~1e-4 R)
+    rng = np.random.default_rng(4)
+    x = rng.uniform(0.0, 8.0, (300, 3))
+    idx, slots = pk._host_pairs(x, 1.5, 0)
+    count = int((idx[1] < 300).sum())
+    assert slots >= count and np.all(idx[:, count:] == 300) and np.all(np.diff(idx[1, :count]) >= 0)
+    d = np.linalg.norm(x[:, None] - x[None], axis=2)
+    want = {(i, j) for i, j in zip(*np.nonzero(d < 1.5)) if i != j}
+    assert {(int(i), int(j)) for j, i in idx[:, :count].T} == want and count == len(want)
+    assert pk._host_pairs(x, 1.5, slots)[1] == slots  # the slots are kept while the pairs fit
+    monkeypatch.setattr(pk, "_HOST_LIST_MIN", 0)
+    assert pk._packer_for(400) is pk._host_packer
+    s = g.random_packing(400, packing_fraction=0.56, seed=0)
+    check_packing(s, phi_min=0.55)
+    np.testing.assert_allclose(s.positions, box400.positions, rtol=0, atol=1e-3 * R)
+    assert np.array_equal(s.bonds, box400.bonds)
+    c = g.random_packing(300, shape="cylinder", packing_fraction=0.5, seed=1)
+    check_packing(c)
+    monkeypatch.setattr(pk, "_HOST_LIST_MIN", 10**9)
+    np.testing.assert_allclose(c.positions, g.random_packing(300, shape="cylinder", packing_fraction=0.5,
+                                                             seed=1).positions, rtol=0, atol=1e-3 * R)
+
+
 def test_packing_is_deterministic_and_reports_progress(box400, capsys, caplog):
     with jax.log_compiles(), caplog.at_level(logging.WARNING):
         again = g.random_packing(400, packing_fraction=0.56, seed=0, progress=True)
