@@ -115,6 +115,14 @@ def _fire_step(state: _Fire, nbrs, radii, walls, cell_box, cylinder: bool):
     return _Fire(x, v, f, max_overlap, dt, alpha, n_pos, step + 1), nbrs
 
 
+def _fire_start(x, nbrs, radii, walls, cylinder: bool) -> _Fire:
+    """The FIRE state at rest at ``x``: its forces from the neighbour list ``nbrs``."""
+    f, max_overlap = _forces(x, nbrs.idx, radii, walls, cylinder)
+    zero = jnp.zeros((), x.dtype)
+    return _Fire(x, jnp.zeros_like(x), f, max_overlap, zero + _DT_START, zero + _ALPHA0,
+                 jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
+
+
 def _jax_md_neighbors():
     """jax-md's ``partition`` and ``space`` modules, imported lazily (and, not being strict-promotion safe, within
     the caller's promotion context). Unless jax-md is imported already, only these two modules and their own
@@ -151,12 +159,7 @@ def _packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool)
             nbrs = dataclasses.replace(nbrs, cell_list_fn=cell_list_fn)
         return nbrs
 
-    @jax.jit
-    def init(x, nbrs, radii, walls):
-        f, max_overlap = _forces(x, nbrs.idx, radii, walls, cylinder)
-        zero = jnp.zeros((), x.dtype)
-        return _Fire(x, jnp.zeros_like(x), f, max_overlap, zero + _DT_START, zero + _ALPHA0,
-                     jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
+    init = jax.jit(functools.partial(_fire_start, cylinder=cylinder))
 
     @jax.jit
     def run(state, nbrs, radii, walls, tol, stop):
@@ -221,12 +224,7 @@ def _host_packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: 
         idx, slots[0] = _host_pairs(np.asarray(x, dtype=np.float64), cutoff + _SKIN, slots[0])
         return _HostList(jnp.asarray(idx), x, jnp.zeros((), bool))
 
-    @jax.jit
-    def init(x, nbrs, radii, walls):
-        f, max_overlap = _forces(x, nbrs.idx, radii, walls, cylinder)
-        zero = jnp.zeros((), x.dtype)
-        return _Fire(x, jnp.zeros_like(x), f, max_overlap, zero + _DT_START, zero + _ALPHA0,
-                     jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
+    init = jax.jit(functools.partial(_fire_start, cylinder=cylinder))
 
     @jax.jit
     def run(state, nbrs, radii, walls, tol, stop):
