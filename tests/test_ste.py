@@ -8,6 +8,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import SampleError, SceneError, ste
+from jaxbpm.physics import chunks
 from jaxbpm.physics.bond import BondStiffness
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
@@ -237,6 +238,28 @@ def test_pair_form_matches_edge_form(packing):
     first = ste.estimator(packing, scene, first_neighbour=True)
     fast, ref = jax.jit(lambda e, p: (ste.raw_body_tensor(e, p), ste.tensor.raw_body_tensor_edges(e, p)))(first, p)
     np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * float(jnp.abs(ref).max()))
+
+
+@pytest.mark.parametrize("first_neighbour", [False, True])
+def test_pair_sums_over_chunks_equal_one_pass(packing, monkeypatch, first_neighbour):
+    # large samples fold the pair sums over chunks of pairs (padding weighed zero): the same tensor and gradient as
+    # one pass over all pairs, bonds and contacts
+    scene = UniaxialCompression(strain=0.002, contacts=True)
+    est = ste.estimator(packing, scene, first_neighbour=first_neighbour)
+    p = default_params(packing)
+
+    def tensor_and_grad(e, p):
+        t = ste.raw_body_tensor(e, p)
+        return t, jax.grad(lambda q: ste.raw_body_tensor(e, q)[2, 2, 2, 2])(p)
+
+    one, g_one = jax.jit(tensor_and_grad)(est, p)
+    pairs = est.pairs.shape[0]
+    monkeypatch.setattr(chunks, "CHUNK", 97)
+    assert pairs > 2 * 97 and pairs % chunks.chunk_length(pairs) != 0  # several chunks, the last padded
+    folded, g_folded = jax.jit(lambda e, q: tensor_and_grad(e, q))(est, p)  # a new function: traced again
+    np.testing.assert_allclose(folded, one, rtol=0, atol=1e-12 * float(jnp.abs(one).max()))
+    for name in ("bond_E", "bond_nu"):
+        np.testing.assert_allclose(g_folded[name], g_one[name], rtol=1e-10)
 
 
 def test_float32_estimate_matches_float64(packing, plain):

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 
 from jaxbpm._compile import setup_jit
 from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation, tangent, vec
+from jaxbpm.physics.chunks import chunk_length
 from jaxbpm.physics.model import Model
 
 
@@ -125,33 +126,19 @@ def _shear_factor(nu):
     return bond_mod.stiffness(1.0, nu, 1.0, 1.0, 1.0, 1.0).kt
 
 
-BOND_CHUNK = 1 << 16
-"""Bonds per chunk of :func:`over_bonds`: setup programs on larger samples run over chunks of this many bonds."""
-
 _BOND_FIELDS = ("bonds", "r0", "bond_material", "bond_area", "bond_I", "bond_J", "bond_length", "bond_keys",
                 "bond_key_index", "bond_radius")
 
 
-def bond_chunk(nb: int, chunk: int | None = None) -> int:
-    """The chunk length :func:`over_bonds` uses for ``nb`` bonds: ``chunk`` (default :data:`BOND_CHUNK`), or the
-    largest power of two down to an eighth of it that divides ``nb`` (the padded bond counts of a size class), so
-    that no padding is cut off afterwards."""
-    chunk = BOND_CHUNK if chunk is None else int(chunk)
-    for c in (chunk >> k for k in range(4)):
-        if c and nb % c == 0:
-            return c
-    return chunk
-
-
 def over_bonds(fn, model: Model, chunk: int | None = None):
     """``fn(model)`` for a per-bond function whose outputs have the bond axis last, run over chunks of bonds
-    (:func:`bond_chunk`; a loop that writes each chunk's outputs in place) when the model has more: each chunk's
+    (:func:`~jaxbpm.physics.chunks.chunk_length`; a loop that writes each chunk's outputs in place) when the model has more: each chunk's
     temporaries (the bond law's forward-mode derivatives, tens of numbers per bond) are then reused from chunk to
     chunk instead of being allocated for every bond at once -- on a million-particle sample that allocation cost
     more than the arithmetic (82 s against 6 s in chunks). Within a chunk the model holds that chunk's bonds only
     (its bond keys are not the sample's)."""
     nb = model.bonds.shape[0]
-    chunk = bond_chunk(nb, chunk)
+    chunk = chunk_length(nb, chunk)
     if nb <= chunk:
         return fn(model)
     count = -(-nb // chunk)

@@ -14,8 +14,9 @@ import numpy as np
 
 from jaxbpm._compile import put, setup_jit
 from jaxbpm.dsm.operator import (
-    _BOND_FIELDS, _geometry_parts, bond_chunk, _packed_all, _uses_geometry, block_diagonal, BondGeometry,
+    _BOND_FIELDS, _geometry_parts, _packed_all, _uses_geometry, block_diagonal, BondGeometry,
     full_jacobians, material_weights, reduced_jacobians)
+from jaxbpm.physics.chunks import sum_chunks
 from jaxbpm.physics.model import Model
 
 
@@ -28,25 +29,6 @@ def _bond_subset(model: Model, idx) -> Model:
     if idx is None:
         return model
     return dataclasses.replace(model, **{k: getattr(model, k)[idx] for k in _BOND_FIELDS})
-
-
-def _sum_over_bond_chunks(fn, n: int, chunk: int | None = None):
-    """``sum_c fn(idx_c, w_c)`` over chunks of the indices ``0 .. n-1`` (``fn(None, None)`` when ``n <= chunk``):
-    ``idx_c`` the chunk's indices (the last chunk's padding repeats ``n - 1``), ``w_c`` 1 on them and 0 on the
-    padding. For sums over bonds whose terms are linear in the weights: each chunk's temporaries are reused from chunk
-    to chunk instead of being allocated for all bonds at once (see :func:`~jaxbpm.dsm.operator.over_bonds`)."""
-    chunk = bond_chunk(n, chunk)
-    if n <= chunk:
-        return fn(None, None)
-    ks = jnp.arange(chunk)
-
-    def term(c):
-        k = c * chunk + ks
-        return fn(jnp.minimum(k, n - 1), (k < n))
-
-    shape = jax.eval_shape(term, 0)
-    init = jax.tree_util.tree_map(lambda t: jnp.zeros(t.shape, t.dtype), shape)
-    return jax.lax.fori_loop(0, -(-n // chunk), lambda c, acc: jax.tree_util.tree_map(jnp.add, acc, term(c)), init)
 
 
 @setup_jit(static_argnames=("n_materials",))
@@ -66,7 +48,7 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
             sub = _bond_subset(model, idx)
             return block_diagonal(sub, None, jacobians(sub, idx, w))
 
-        blocks = _sum_over_bond_chunks(blocks_of, model.bonds.shape[0])
+        blocks = sum_chunks(blocks_of, model.bonds.shape[0])
         if coarse is None:
             return blocks, None
 
@@ -76,7 +58,7 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
             local = dataclasses.replace(coarse, bonds=jnp.arange(sel.shape[0], dtype=coarse.bonds.dtype))
             return coarse_matrix(sub, jacobians(sub, sel, w), local)
 
-        return blocks, _sum_over_bond_chunks(coarse_of, coarse.bonds.shape[0])
+        return blocks, sum_chunks(coarse_of, coarse.bonds.shape[0])
 
     blocks, mats = jax.lax.map(one, jnp.arange(2 * n_materials))
     blocks = blocks.reshape((n_materials, 2) + blocks.shape[1:])
