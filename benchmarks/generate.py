@@ -10,7 +10,7 @@ is retried ``--fallback-step`` lower, down to ``--min-packing-fraction``; every 
 
 Usage::
 
-    python benchmarks/generate.py [--sizes 1000 10000 50000] [--out results/generate.json]
+    python benchmarks/generate.py [--sizes 1000 10000 50000] [--shape box] [--out results/generate.json]
 
 Prints the results as JSON and writes them atomically to ``--out``.
 """
@@ -24,12 +24,15 @@ import platform
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(__file__))
+from _common import peak_rss_gib  # noqa: E402
 
-def _time_packing(g, n: int, phi: float, seed: int) -> dict:
+
+def _time_packing(g, n: int, phi: float, seed: int, shape: str = "box") -> dict:
     """One timed call of random_packing; packing time from the progress callback."""
     calls = []
     t0 = time.perf_counter()
-    sample = g.random_packing(n, "box", radius_spread=0.05, packing_fraction=phi, seed=seed,
+    sample = g.random_packing(n, shape, radius_spread=0.05, packing_fraction=phi, seed=seed,
                               progress=lambda step, worst, elapsed: calls.append((step, worst, elapsed)))
     total = time.perf_counter() - t0
     t1 = time.perf_counter()
@@ -55,7 +58,7 @@ def _run_size(g, errors, n: int, args) -> dict:
     while phi >= args.min_packing_fraction - 1e-12:
         t0 = time.perf_counter()
         try:
-            res = _time_packing(g, n, phi, args.seed)
+            res = _time_packing(g, n, phi, args.seed, args.shape)
         except errors.SampleError as err:
             entry["attempts"].append({"packing_fraction": phi, "ok": False, "time_s": round(time.perf_counter() - t0, 3),
                                       "error": str(err)})
@@ -82,6 +85,7 @@ def main(argv=None) -> dict:
     parser.add_argument("--fallback-step", type=float, default=0.02)
     parser.add_argument("--min-packing-fraction", type=float, default=0.5)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--shape", choices=["box", "cylinder", "beam"], default="box")
     parser.add_argument("--quick", action="store_true", help="1k and 5k particles")
     args = parser.parse_args(argv)
     if args.quick:
@@ -104,14 +108,14 @@ def main(argv=None) -> dict:
     for n in sizes:
         entry = _run_size(g, errors, n, args)
         if n == sizes[0] and entry["first_call"] is not None:
-            second = _time_packing(g, n, entry["packing_fraction_used"], args.seed)
+            second = _time_packing(g, n, entry["packing_fraction_used"], args.seed, args.shape)
             second.pop("_sample")
             entry["second_call"] = second
             print(f"n={n}: second call {second['total_s']:.2f} s", file=sys.stderr)
         results.append(entry)
 
     report = {
-        "benchmark": "jaxbpm.generate.random_packing (box, radius_spread 0.05)",
+        "benchmark": f"jaxbpm.generate.random_packing ({args.shape}, radius_spread 0.05)",
         "seed": args.seed,
         "dtype": "float64",
         "jax_md_import_s": round(import_s, 3),
@@ -121,6 +125,7 @@ def main(argv=None) -> dict:
         "platform": platform.platform(),
         "python": platform.python_version(),
         "results": results,
+        "peak_rss_gib": peak_rss_gib(),
     }
     text = json.dumps(report, indent=2)
     print(text)
