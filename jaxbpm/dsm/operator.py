@@ -12,7 +12,7 @@ import jax.numpy as jnp
 
 from jaxbpm._compile import setup_jit
 from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation, tangent, vec
-from jaxbpm.physics.chunks import chunk_length
+from jaxbpm.physics.chunks import chunk_length, fold_chunks
 from jaxbpm.physics.model import Model
 
 
@@ -130,34 +130,34 @@ _BOND_FIELDS = ("bonds", "r0", "bond_material", "bond_area", "bond_I", "bond_J",
                 "bond_key_index", "bond_radius")
 
 
+def bond_subset(model: Model, idx) -> Model:
+    """The model with the bonds ``idx`` only (``None``: all of them); its bond keys are not the sample's."""
+    if idx is None:
+        return model
+    return dataclasses.replace(model, **{k: getattr(model, k)[idx] for k in _BOND_FIELDS})
+
+
 def over_bonds(fn, model: Model, chunk: int | None = None):
     """``fn(model)`` for a per-bond function whose outputs have the bond axis last, run over chunks of bonds
-    (:func:`~jaxbpm.physics.chunks.chunk_length`; a loop that writes each chunk's outputs in place) when the model has more: each chunk's
-    temporaries (the bond law's forward-mode derivatives, tens of numbers per bond) are then reused from chunk to
-    chunk instead of being allocated for every bond at once -- on a million-particle sample that allocation cost
-    more than the arithmetic (82 s against 6 s in chunks). Within a chunk the model holds that chunk's bonds only
-    (its bond keys are not the sample's)."""
+    (:func:`~jaxbpm.physics.chunks.fold_chunks`; each chunk's outputs written in place) when the model has more:
+    each chunk's temporaries (the bond law's forward-mode derivatives, tens of numbers per bond) are then reused
+    from chunk to chunk instead of being allocated for every bond at once -- on a million-particle sample that
+    allocation cost more than the arithmetic (82 s against 6 s in chunks). Within a chunk the model holds that
+    chunk's bonds only (:func:`bond_subset`; the last chunk's padding repeats the last bond)."""
     nb = model.bonds.shape[0]
-    chunk = chunk_length(nb, chunk)
-    if nb <= chunk:
+    length = chunk_length(nb, chunk)
+    if nb <= length:
         return fn(model)
-    count = -(-nb // chunk)
-    pad = count * chunk - nb
+    size = -(-nb // length) * length
+    shapes = jax.eval_shape(lambda: fn(bond_subset(model, jnp.arange(length))))
+    out = jax.tree_util.tree_map(lambda t: jnp.zeros(t.shape[:-1] + (size,), t.dtype), shapes)
 
-    def padded(x):  # with copies of the last bond, so the padding computes finite numbers
-        return jnp.concatenate([x, jnp.broadcast_to(x[-1:], (pad,) + x.shape[1:])]) if pad else x
+    def step(acc, idx, _):  # idx[0]: the chunk's first bond
+        return jax.tree_util.tree_map(lambda o, r: jax.lax.dynamic_update_slice_in_dim(o, r, idx[0], axis=o.ndim - 1),
+                                      acc, fn(bond_subset(model, idx)))
 
-    fields = {k: padded(getattr(model, k)) for k in _BOND_FIELDS}
-
-    def sub(c):
-        return dataclasses.replace(model, **{k: jax.lax.dynamic_slice_in_dim(x, c * chunk, chunk)
-                                             for k, x in fields.items()})
-
-    shapes = jax.eval_shape(lambda c: fn(sub(c)), 0)
-    out = jax.tree_util.tree_map(lambda t: jnp.zeros(t.shape[:-1] + (count * chunk,), t.dtype), shapes)
-    out = jax.lax.fori_loop(0, count, lambda c, acc: jax.tree_util.tree_map(
-        lambda o, r: jax.lax.dynamic_update_slice_in_dim(o, r, c * chunk, axis=o.ndim - 1), acc, fn(sub(c))), out)
-    return jax.tree_util.tree_map(lambda o: o[..., :nb], out) if pad else out
+    out = fold_chunks(step, out, nb, chunk)
+    return jax.tree_util.tree_map(lambda o: o[..., :nb], out) if size != nb else out
 
 
 def _geometry_chunk(model: Model):

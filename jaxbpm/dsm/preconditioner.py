@@ -14,21 +14,14 @@ import numpy as np
 
 from jaxbpm._compile import put, setup_jit
 from jaxbpm.dsm.operator import (
-    _BOND_FIELDS, _geometry_parts, _packed_all, _uses_geometry, block_diagonal, BondGeometry,
-    full_jacobians, material_weights, reduced_jacobians)
+    _geometry_parts, _packed_all, _uses_geometry, block_diagonal, bond_subset, BondGeometry, full_jacobians,
+    material_weights, reduced_jacobians)
 from jaxbpm.physics.chunks import sum_chunks
 from jaxbpm.physics.model import Model
 
 
 _MAX_PRECOMPUTED_MATERIALS = 8
 _MAX_PRECOMPUTED_BYTES = 2 ** 30  # memory for the preconditioner's parts; above it they are assembled per solve
-
-
-def _bond_subset(model: Model, idx) -> Model:
-    """The model with the bonds ``idx`` only (``None``: all of them); its bond keys are not the sample's."""
-    if idx is None:
-        return model
-    return dataclasses.replace(model, **{k: getattr(model, k)[idx] for k in _BOND_FIELDS})
 
 
 @setup_jit(static_argnames=("n_materials",))
@@ -45,7 +38,7 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
             return jnp.where(keep if w is None else keep & w, jac, 0.0)
 
         def blocks_of(idx, w):
-            sub = _bond_subset(model, idx)
+            sub = bond_subset(model, idx)
             return block_diagonal(sub, None, jacobians(sub, idx, w))
 
         blocks = sum_chunks(blocks_of, model.bonds.shape[0])
@@ -54,7 +47,7 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
 
         def coarse_of(idx, w):  # over the coupling bonds only
             sel = coarse.bonds if idx is None else coarse.bonds[idx]
-            sub = _bond_subset(model, sel)
+            sub = bond_subset(model, sel)
             local = dataclasses.replace(coarse, bonds=jnp.arange(sel.shape[0], dtype=coarse.bonds.dtype))
             return coarse_matrix(sub, jacobians(sub, sel, w), local)
 
