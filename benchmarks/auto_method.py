@@ -43,7 +43,7 @@ from _common import enable_x64, machine_info, pin_threads, table, write_json
 
 TOLS = (0.01, 0.05)
 PARTICLE = {"E": 1e10, "nu": 0.25, "density": 2500.0, "friction": 0.5, "restitution": 0.5}
-ROUTES = ("ste", "dsm_bonds", "dsm_linearised", "dsm_nonlinear", "dem")
+ROUTES = ("ste", "dsm_bonds", "dsm_bonds_corrected", "dsm_linearised", "dsm_nonlinear", "dem")
 NOISE = 1.25
 
 
@@ -108,6 +108,8 @@ def candidates(scene):
     out = {"ste": (scene, "ste", {}), "dem": (scene, "dem", {}), "dsm_nonlinear": (scene, "dsm", {"nonlinear": True})}
     if not scene.uses_walls:
         out["dsm_bonds"] = (dataclasses.replace(scene, contacts=False), "dsm", lin)
+        out["dsm_bonds_corrected"] = (dataclasses.replace(scene, contacts=False), "dsm",
+                                      {**lin, "geometric_correction": True})
         if scene.contacts:
             out["dsm_linearised"] = (scene, "dsm", lin)
     return out

@@ -140,7 +140,7 @@ _CHECKS = {
             "throw": _flag, "operator": _choice("auto", "jacobians", "jvp"),
             "preconditioner": _choice("auto", "two-level", "jacobi"), "aggregate_size": _optional_positive,
             "slip": _flag, "contact_fraction": lambda n, v: None if v is None else _fraction(n, v),
-            "contact_passes": _whole, "pad": _flag},
+            "contact_passes": _whole, "pad": _flag, "geometric_correction": _flag},
     "ste": {"dofs": _choice(3, 6), "first_neighbour": _flag, "layered": _flag, "contacts": _optional_flag,
             "contact_fraction": lambda n, v: None if v is None else _fraction(n, v),
             "layer_thickness": _optional_positive, "surface_depth": _surface_depth, "volumes": _volumes,

@@ -48,8 +48,13 @@ def test_rule_without_solving(box):
     assert auto.choose(box, small, 0.05).route == "dsm_bonds"
     assert auto.choose(box, small, 0.05).options == {"nonlinear": False, "stiffness_tol": 1e-2}
     assert auto.choose(box, small, 0.005).options == {"nonlinear": False}  # tight tol: the default stiffness_tol
-    # 2 % strain: the linear DSM is ~1.1 % stiff (geometric nonlinearity), the nonlinear DSM solves it
-    assert auto.choose(box, large, 0.01).route == "dsm_nonlinear"
+    # 2 % strain: the linear DSM is ~1.1 % stiff (geometric nonlinearity); its geometric correction is within
+    # tol 1 %, the nonlinear DSM only below the correction's envelope
+    assert auto.choose(box, large, 0.01).route == "dsm_bonds_corrected"
+    assert auto.choose(box, large, 0.01).options == {"nonlinear": False, "geometric_correction": True,
+                                                     "stiffness_tol": 1e-2}
+    assert auto.choose(box, large, 0.001).route == "dsm_nonlinear"
+    assert auto.choose(box, UniaxialCompression(strain=0.08), 0.01).route == "dsm_nonlinear"  # not measured there
     assert auto.choose(box, large, 0.05).route == "dsm_bonds"
     assert auto.choose(box, small, 1e-4).route == "dem"
     walls = auto.choose(box, UniaxialCompression(strain=0.002, boundary="walls"), 0.05)
@@ -136,8 +141,39 @@ def test_unconverged_nonlinear_falls_back_to_dem(box, monkeypatch):
         return dataclasses.replace(c, options={"nonlinear": True, "newton_maxiter": 1, "tol": 1e-14})
 
     monkeypatch.setattr(auto, "choose", starved)
-    r = jaxbpm.solve(box, scene, "auto", tol=0.01)
+    r = jaxbpm.solve(box, scene, "auto", tol=0.001)
     choice = r.stats["method_choice"]
     assert r.method == "dem" and choice["route"] == "dem" and choice["fallback"]["status"] == "max_iterations"
     assert "the DEM" in choice["why"]
     assert r.wall_time == pytest.approx(r.setup_time + r.compile_time + r.run_time, rel=1e-9)
+
+
+def test_geometrically_corrected_route_against_nonlinear(box):
+    """2 % strain, bonds only, tol 1 %: the linear DSM with its geometric correction, within 0.1 % of the nonlinear
+    DSM (the linear K alone is ~1 % stiff)."""
+    scene = UniaxialCompression(strain=0.02)
+    r = jaxbpm.solve(box, scene, "auto", tol=0.01)
+    choice = r.stats["method_choice"]
+    assert choice["route"] == "dsm_bonds_corrected" and r.method == "dsm"
+    nonlinear = jaxbpm.solve(box, scene, "dsm", nonlinear=True).stiffness
+    assert r.stats["stiffness_linear"] / nonlinear - 1 > 0.005
+    assert abs(r.stiffness / nonlinear - 1) < 1e-3
+    assert r.wall_time == pytest.approx(r.setup_time + r.compile_time + r.run_time, rel=1e-9)
+
+
+def test_measured_geometric_error_bounds_the_linearised_contacts():
+    """The linearised contacts' envelope with the bonds' geometric error measured: the geometric part is scaled by
+    the bonds' share and offsets the contacts' (soft) part up to a 70 % share; beyond they add."""
+    scene = UniaxialCompression(strain=0.02, contacts=True)
+    s, g = 0.069, 0.0079  # methods.py's porous cylinder at 2 %: measured
+    unmeasured = auto.expected_errors(scene, s)["dsm_linearised"]
+    measured = auto.expected_errors(scene, s, g)["dsm_linearised"]
+    h = auto._envelope(auto.LINEARISED_ENVELOPE, s)
+    assert unmeasured == pytest.approx(max(auto.geometric_error(0.02), h))
+    assert measured == pytest.approx(max(g * (1 - s), h - g * (1 - s)) + auto.corrected_error(0.02))
+    assert measured < 0.01 < unmeasured
+    high = auto.expected_errors(scene, 0.8, g)["dsm_linearised"]
+    assert high == pytest.approx(g * 0.2 + auto._envelope(auto.LINEARISED_ENVELOPE, 0.8) + auto.corrected_error(0.02))
+    # never below half the contacts' envelope, whatever g is
+    for g in np.linspace(0, 0.05, 11):
+        assert auto.expected_errors(scene, 0.4, g)["dsm_linearised"] >= auto._linearised_best_case(0.4)

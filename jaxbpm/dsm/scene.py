@@ -17,7 +17,7 @@ from jaxbpm.dsm.boundary import (
     _check_contact_skin, _check_held, affine_field, contact_candidates, free_mask, LINEAR_REACH)
 from jaxbpm.dsm.linear import (
     _bond_forces_at, _energy_test, _linear_stiffness_tol, _report_convergence, _solve_linear, contacts_program,
-    pad_candidates)
+    pad_candidates, with_geometric_correction)
 from jaxbpm.dsm.newton import _newton
 from jaxbpm.dsm.preconditioner import _coarse_for, bond_geometry
 from jaxbpm.errors import SceneError
@@ -58,13 +58,16 @@ def wall_touching(sample, scene, delta):
 def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, linear_tol=1e-6, maxiter=None,
                 newton_maxiter=30, stiffness_tol="auto", contact_skin=None, load_steps=4, throw=True,
                 operator="auto", preconditioner="auto", aggregate_size=None, slip=True, contact_fraction=None,
-                contact_passes=2, pad=True, _auto_skin=None):
+                contact_passes=2, pad=True, geometric_correction=False, _auto_skin=None):
     """Solve a :class:`~jaxbpm.scenes.UniaxialCompression` statically. See :func:`jaxbpm.solve`.
 
     pad: the linear bonds-only solve pads the sample to its size class (:func:`jaxbpm._compile.size_class`: held
     padding particles joined by bonds of zero stiffness), so that samples of similar size share one compiled
     program; the result is the same to round-off. Its setup (model, coarse space, bond geometry) is kept for the
     last few samples solved (:class:`jaxbpm._compile.SetupCache`): solving one sample again costs the solve alone.
+    geometric_correction: the linear bonds-only solve's stiffness corrected for the bonds' geometric nonlinearity
+    (:func:`jaxbpm.dsm.linear.geometric_stiffness`: the exact bond law's work along the linear displacement field,
+    second-order accurate; a few force evaluations after the solve).
     """
     arguments = dict(locals())  # for a second try with a wider contact reach
     from jaxbpm.physics.model import default_params
@@ -78,11 +81,19 @@ def solve_scene(sample, scene, params, *, dofs=None, nonlinear=None, tol=None, l
         raise SceneError(f"dofs must be 3 or 6 per particle, got {dofs!r}")
     if nonlinear is None:
         nonlinear = bool(scene.contacts or scene.uses_walls)
+    if geometric_correction and (nonlinear or scene.contacts or scene.uses_walls):
+        raise SceneError("geometric_correction corrects the linear DSM on bonds alone between clamped layers "
+                         "(nonlinear=False, no contacts, no walls); the nonlinear DSM solves the geometric "
+                         "nonlinearity itself")
     if not nonlinear and not scene.contacts and not scene.uses_walls:
         stiffness_tol = _linear_stiffness_tol(stiffness_tol)
-        return _solve_linear(sample, scene, params, rotations=rotations, linear_tol=linear_tol, maxiter=maxiter,
-                             stiffness_tol=stiffness_tol, throw=throw, operator=operator,
-                             preconditioner=preconditioner, aggregate_size=aggregate_size, pad=pad, t0=t0)
+        setup_options = dict(rotations=rotations, operator=operator, preconditioner=preconditioner,
+                             aggregate_size=aggregate_size, pad=pad)
+        result = _solve_linear(sample, scene, params, linear_tol=linear_tol, maxiter=maxiter,
+                               stiffness_tol=stiffness_tol, throw=throw, t0=t0, **setup_options)
+        if geometric_correction:
+            result = with_geometric_correction(result, sample, scene, params, **setup_options)
+        return result
     if isinstance(stiffness_tol, str) and stiffness_tol == "auto":  # the default of the linear bonds-only solve
         stiffness_tol = None
     if scene.uses_walls and not nonlinear:
