@@ -501,7 +501,7 @@ INVALID_OPTIONS = {
             "load_steps": _WHOLE + [None], "throw": _FLAG, "operator": ["JVP", "", None, 1, ["jvp"]],
             "preconditioner": ["multigrid", None, 2], "aggregate_size": _POSITIVE, "slip": _FLAG,
             "contact_fraction": [0, -0.5, 1.5, np.nan, "0.5", True], "contact_passes": _WHOLE + [None],
-            "pad": _FLAG},
+            "pad": _FLAG, "geometric_correction": _FLAG},
     "ste": {"dofs": [None, 4, "6", 6.0, True], "first_neighbour": _FLAG, "layered": _FLAG,
             "contacts": _FLAG[:3] + [1.0], "contact_fraction": [0, 1.01, np.nan, "all"],
             "layer_thickness": _POSITIVE, "surface_depth": [-1.0, np.nan, np.inf, "1e-3", True, np.array([1.0, 2.0])],
