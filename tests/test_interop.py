@@ -650,3 +650,26 @@ def test_old_module_names_still_import_with_a_warning():
         finally:
             if saved is not None:
                 sys.modules[old] = saved
+
+
+@pytest.mark.parametrize("comment", [False, True])
+def test_lammps_bond_coeffs_in_any_order(tmp_path, comment):
+    """Bond Coeffs rows need not come in type order (LAMMPS takes them by type): reversed, read in one go or line by
+    line (a comment on each row), each bond gets its own type's coefficients. (Line by line, a reversed section
+    used to raise IndexError: the types were looked up as if sorted.)"""
+    import jaxbpm
+    from jaxbpm.interop.lammps import lammps_coefficients
+
+    s = jaxbpm.generate.lattice("sc", (2, 2, 3), 1e-3, bond_radius_ratio=0.5,
+                                materials={"E": [1e9, 3e9, 2e9], "nu": 0.25})
+    s = jaxbpm.generate.mix_materials(s, [0.4, 0.3, 0.3], seed=0)
+    lines = formats.write_lammps_data(tmp_path / "s.data", s).read_text().splitlines()
+    start = lines.index("Bond Coeffs # bpm/rotational") + 2
+    end = lines.index("", start)
+    rows = lines[start:end][::-1]
+    assert len(rows) >= 2
+    lines[start:end] = [r + " # a type" for r in rows] if comment else rows
+    lines[0] = lines[0].split(" crc32=")[0]  # edited: no checksum
+    (tmp_path / "r.data").write_text("\n".join(lines) + "\n")
+    back = formats.read_lammps_data(tmp_path / "r.data")
+    np.testing.assert_array_equal(lammps_coefficients(back), lammps_coefficients(s))

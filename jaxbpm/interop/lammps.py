@@ -323,12 +323,14 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     if nb == 0:
         mats = meta["materials"] if meta else None
         return Sample.from_arrays(pos, radii, bonds, np.zeros(0), materials=mats, particle_material=pm, **kw)
-    tkeys, tvals = table
-    missing = np.setdiff1d(np.unique(btype), tkeys).tolist()
-    if missing:
+    tkeys, tvals = table  # (keys sorted)
+    at = np.minimum(np.searchsorted(tkeys, btype), max(len(tkeys) - 1, 0))
+    found = tkeys[at] == btype if len(tkeys) else np.zeros(nb, bool)
+    if not found.all():
+        missing = np.unique(btype[~found]).tolist()
         raise SampleFileError(f"{path}: no bpm/rotational coefficients for bond types {missing[:10]} (no Bond Coeffs "
                               f"section or coeffs= file); give coeffs=, or bond_radius_ratio= and materials=")
-    coef = tvals[np.searchsorted(tkeys, btype)]
+    coef = tvals[at]
     length = np.linalg.norm(pos[bonds[:, 1]] - pos[bonds[:, 0]], axis=1)
     if meta is not None and not np.isnan(rb_c).any() and (mat_c >= 0).all():
         mats = meta["materials"]
@@ -359,7 +361,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
 
 def _table_arrays(table: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """``{type: 12 coefficients}`` as sorted types and their rows (types outside int64 name no bond: dropped)."""
-    keys = [t for t in table if -2 ** 63 <= t < 2 ** 63]
+    keys = sorted(t for t in table if -2 ** 63 <= t < 2 ** 63)
     return (np.array(keys, np.int64).reshape(-1),
             np.array([table[t] for t in keys], np.float64).reshape(-1, _N_COEFFS))
 
