@@ -190,3 +190,22 @@ def test_bonds_only_routes_allow_for_the_share_being_low():
     for share in (0.01, 0.1, 0.3):
         e = auto.expected_errors(scene, share)
         assert e["dsm_bonds"] >= share * (1 + auto.SHARE_UNCERTAINTY) and e["dsm_bonds_corrected"] > share
+
+
+def test_measured_geometric_error_in_the_choice(box):
+    """Contacts carrying a small share at 2 % strain, tol 1 %: the bonds' geometric envelope alone would rule the
+    linearised contacts out, so the probe measures it; the choice reports it, and the wall time the result states
+    is no more than the call took (each probe solve's compilation counted once)."""
+    import time
+
+    scene = UniaxialCompression(strain=0.02, contacts=True)
+    t = time.perf_counter()
+    r = jaxbpm.solve(box, scene, "auto", tol=0.01, params=bond_E(1e10))
+    elapsed = time.perf_counter() - t
+    choice = r.stats["method_choice"]
+    assert choice["geometric_error"] is not None and 0.003 < choice["geometric_error"] < 0.03
+    assert "geometric error measured" in choice["why"]
+    assert r.wall_time <= elapsed * 1.001
+    assert r.wall_time == pytest.approx(r.setup_time + r.compile_time + r.run_time, rel=1e-9)
+    dem = jaxbpm.solve(box, scene, "dem", params=bond_E(1e10))
+    assert abs(r.stiffness / dem.stiffness - 1) <= 0.01
