@@ -274,21 +274,15 @@ def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
             and ROUTES.index(route) > ROUTES.index("dsm_linearised")
             and _linearised_best_case(share) + corrected_error(scene.strain) <= tol):
         # the bonds' geometric error, measured on the probe's bonds-only field, may let the linearised contacts in
-        t = time.perf_counter()
-        corrected = _corrected(sample, scene, params, probe["dsm_bonds"])
-        seconds += time.perf_counter() - t
-        if corrected is not None:
-            probe["dsm_bonds_corrected"] = corrected
+        seconds += _correct_probe(sample, scene, params, probe)
+        if "dsm_bonds_corrected" in probe:
+            corrected = probe["dsm_bonds_corrected"]
             geometric = corrected.stats["stiffness_linear"] / corrected.stiffness - 1.0
             expected = expected_errors(scene, share, geometric)
             route = next(r for r in ROUTES if expected[r] <= tol)
             note += f"; the bonds' geometric error measured on its bonds-only field: {100 * geometric:+.2g} %"
     if route == "dsm_bonds_corrected" and "dsm_bonds" in probe and route not in probe:
-        t = time.perf_counter()
-        corrected = _corrected(sample, scene, params, probe["dsm_bonds"])
-        seconds += time.perf_counter() - t
-        if corrected is not None:
-            probe[route] = corrected
+        seconds += _correct_probe(sample, scene, params, probe)
     options = {"ste": {}, "dsm_bonds": {"nonlinear": False, **_linear_options(tol)},
                "dsm_bonds_corrected": {"nonlinear": False, "geometric_correction": True, **_linear_options(tol)},
                "dsm_linearised": {"nonlinear": False, **_linear_options(tol)},
@@ -308,14 +302,18 @@ def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
     return Choice(method, options, route, why, solve_scene, tol, share, expected, seconds, probe, geometric)
 
 
-def _corrected(sample, scene, params, bonds_result):
-    """The probe's bonds-only result with its geometric correction, or ``None`` where that fails."""
+def _correct_probe(sample, scene, params, probe) -> float:
+    """Add the probe's bonds-only result with its geometric correction to ``probe`` as ``"dsm_bonds_corrected"``
+    (nothing where that fails); returns the seconds it took."""
     from jaxbpm.dsm.linear import with_geometric_correction
 
+    t = time.perf_counter()
     try:
-        return with_geometric_correction(bonds_result, sample, dataclasses.replace(scene, contacts=False), params)
+        probe["dsm_bonds_corrected"] = with_geometric_correction(
+            probe["dsm_bonds"], sample, dataclasses.replace(scene, contacts=False), params)
     except (SceneError, SolveError, FloatingPointError):
-        return None
+        pass
+    return time.perf_counter() - t
 
 
 def _probe_compile_time(choice) -> float:

@@ -94,6 +94,17 @@ linear_program = Program(_linear_outputs, static_argnames=("maxiter", "operator"
 _linear_setups = SetupCache()
 
 
+def _setup_for(sample, scene, params, rotations, operator, preconditioner, aggregate_size, pad):
+    """The sample's :class:`_LinearSetup` for these options (kept in ``_linear_setups``) and the seconds its own
+    programs took to compile (0 when it was kept)."""
+    n_materials = int(jnp.shape(params["bond_E"])[0])
+    key = (scene, rotations, operator, preconditioner, aggregate_size, n_materials, bool(pad))
+    with compile_clock() as setup_compile:  # programs the setup compiles count as compilation
+        setup = _linear_setups.get(sample, key, lambda: _linear_setup(
+            sample, scene, rotations, operator, preconditioner, aggregate_size, n_materials, pad))
+    return setup, setup_compile.seconds
+
+
 def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stiffness_tol, throw, operator,
                   preconditioner, aggregate_size, pad, t0):
     """The linear DSM on a bonds-only scene with clamped layers (see :func:`solve_scene`): setup (kept per sample),
@@ -103,16 +114,12 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
     from jaxbpm.scenes import lateral_stats
 
     params = default_params(sample) if params is None else params
-    n_materials = int(jnp.shape(params["bond_E"])[0])
-    key = (scene, rotations, operator, preconditioner, aggregate_size, n_materials, bool(pad))
-    with compile_clock() as setup_compile:  # programs the setup compiles count as compilation
-        setup = _linear_setups.get(sample, key, lambda: _linear_setup(
-            sample, scene, rotations, operator, preconditioner, aggregate_size, n_materials, pad))
-    setup_time = time.perf_counter() - t0 - setup_compile.seconds
+    setup, setup_compile = _setup_for(sample, scene, params, rotations, operator, preconditioner, aggregate_size, pad)
+    setup_time = time.perf_counter() - t0 - setup_compile
     ((u, force_total, force_boundary, res, iterations), bond_forces), compile_time, _ = linear_program(
         setup.model, params, setup.free, setup.u_p, linear_tol, _energy_test(stiffness_tol), setup.coarse,
         setup.geometry, setup.guess, maxiter=maxiter, operator=operator)
-    compile_time += setup_compile.seconds
+    compile_time += setup_compile
     n, nb, delta = setup.n, setup.nb, setup.delta
     res, iterations, reaction = float(res), int(iterations), float(force_total)
     u = np.asarray(u)[:n]
@@ -173,11 +180,7 @@ def geometric_stiffness(sample, scene, params, u, *, rotations=None, operator="a
     from jaxbpm.physics.model import default_params
 
     params = default_params(sample) if params is None else params
-    n_materials = int(jnp.shape(params["bond_E"])[0])
-    key = (scene, rotations, operator, preconditioner, aggregate_size, n_materials, bool(pad))
-    with compile_clock() as setup_compile:
-        setup = _linear_setups.get(sample, key, lambda: _linear_setup(
-            sample, scene, rotations, operator, preconditioner, aggregate_size, n_materials, pad))
+    setup, setup_compile = _setup_for(sample, scene, params, rotations, operator, preconditioner, aggregate_size, pad)
     u = np.asarray(u, dtype=np.asarray(setup.u_p).dtype)
     full = np.zeros(setup.u_p.shape, u.dtype)
     full[:u.shape[0]] = u
@@ -186,7 +189,7 @@ def geometric_stiffness(sample, scene, params, u, *, rotations=None, operator="a
     work, compile_time, run_time = path_work_program(setup.model, params, jnp.asarray(full), fractions=fractions)
     forces = np.asarray(work) / setup.delta
     stiffness = scene.fit_stiffness(np.asarray(fractions) * setup.delta, forces, setup.delta)
-    return stiffness, forces, np.asarray(fractions), compile_time + setup_compile.seconds, run_time
+    return stiffness, forces, np.asarray(fractions), compile_time + setup_compile, run_time
 
 
 def with_geometric_correction(result, sample, scene, params, **setup_options):
@@ -194,8 +197,6 @@ def with_geometric_correction(result, sample, scene, params, **setup_options):
     (:func:`geometric_stiffness`): the force-displacement points along the path, ``stats["stiffness_linear"]`` (the
     linear solve's K) and ``stats["geometric_correction"]`` (``K / K_linear - 1``); the correction's compile and run
     count in the result's times."""
-    import dataclasses as dc
-
     t0 = time.perf_counter()
     k, forces, fractions, compile_time, run_time = geometric_stiffness(sample, scene, params, result.state,
                                                                        **setup_options)
@@ -204,11 +205,12 @@ def with_geometric_correction(result, sample, scene, params, **setup_options):
     stats = {**result.stats, "stiffness_linear": float(result.stiffness),
              "geometric_correction": float(k / result.stiffness - 1.0),
              "correction_fractions": [float(f) for f in fractions]}
-    return dc.replace(result, stiffness=float(k), youngs_modulus=float(k) * result.gauge_length / result.area,
-                      displacement=np.concatenate([[0.0], fractions * delta]),
-                      force=np.concatenate([[0.0], forces]), wall_time=result.wall_time + spent,
-                      compile_time=result.compile_time + compile_time, run_time=result.run_time + run_time,
-                      setup_time=result.setup_time + max(spent - compile_time - run_time, 0.0), stats=stats)
+    return dataclasses.replace(
+        result, stiffness=float(k), youngs_modulus=float(k) * result.gauge_length / result.area,
+        displacement=np.concatenate([[0.0], fractions * delta]), force=np.concatenate([[0.0], forces]),
+        wall_time=result.wall_time + spent, compile_time=result.compile_time + compile_time,
+        run_time=result.run_time + run_time, setup_time=result.setup_time + max(spent - compile_time - run_time, 0.0),
+        stats=stats)
 
 
 def _report_convergence(stats, converged, residual, tol):
