@@ -87,10 +87,11 @@ def integrate(q, theta):
     w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     tx, ty, tz = theta[:, 0], theta[:, 1], theta[:, 2]
     a2 = tx * tx + ty * ty + tz * tz
-    small = a2 < 1e-12
+    small = a2 < 1e-3  # turns below 0.032 rad: the series' next terms are below 1e-19
 
     def series():  # sin(a/2)/a and cos(a/2) to double precision below the threshold
-        return 0.5 - a2 / 48.0, 1.0 - a2 / 8.0
+        return (0.5 + a2 * (-1.0 / 48.0 + a2 * (1.0 / 3840.0 - a2 / 645120.0)),
+                1.0 + a2 * (-1.0 / 8.0 + a2 * (1.0 / 384.0 - a2 / 46080.0)))
 
     def exact():
         a = jnp.sqrt(jnp.where(small, 1.0, a2))
