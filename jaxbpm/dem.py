@@ -617,7 +617,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                         f"far, too fast: max speed {vmax:.3g} m/s) with time step dt = {dt:.4g} s, critical time "
                         f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
                 extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if overflow else 0
-                nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra)
+                nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra, reach=(pmin, pmax))
                 origin = jnp.asarray(nb_owner.origin, dtype)
                 spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring,
                                                   state.cohesion)

@@ -55,11 +55,13 @@ class _Neighbors:
 
     def __init__(self, model: Model, settings: NeighborSettings, positions):
         self.model, self.settings = model, settings
-        self._setup(np.asarray(positions))
+        pos = np.asarray(positions)
+        self._setup(pos.min(axis=0), pos.max(axis=0))
 
-    def _setup(self, pos):
+    def _setup(self, pos_min, pos_max):
+        """The cell-list box around the centres' extent ``pos_min``..``pos_max`` (with the settings' margin)."""
         r_max = float(np.max(np.asarray(self.model.radii)))
-        lo, hi = pos.min(axis=0) - r_max, pos.max(axis=0) + r_max
+        lo, hi = pos_min - r_max, pos_max + r_max
         pad = self.settings.box_margin * (hi - lo) + 4 * r_max
         self.origin = lo - pad
         box = tuple(float(v) for v in (hi - lo + 2 * pad))
@@ -71,11 +73,16 @@ class _Neighbors:
     def inside(self, pos_min, pos_max) -> bool:
         return bool(np.all(np.asarray(pos_min) > self.lo) and np.all(np.asarray(pos_max) < self.hi))
 
-    def allocate(self, positions, extra_per_particle: int = 0):
-        """A fresh list; ``extra_per_particle`` adds room for that many more pairs per particle."""
+    def allocate(self, positions, extra_per_particle: int = 0, reach=None):
+        """A fresh list; ``extra_per_particle`` adds room for that many more pairs per particle. ``reach``
+        (``(pos_min, pos_max)``) is where the particles went in a chunk that left the box: the box covers it too, so
+        that the chunk, run again from ``positions``, stays inside (a fragment flying off after a failure)."""
         pos = np.asarray(positions)
-        if not self.inside(pos.min(axis=0), pos.max(axis=0)):
-            self._setup(pos)
+        lo, hi = pos.min(axis=0), pos.max(axis=0)
+        if reach is not None:
+            lo, hi = np.minimum(lo, np.asarray(reach[0])), np.maximum(hi, np.asarray(reach[1]))
+        if not self.inside(lo, hi):
+            self._setup(lo, hi)
         with _jax_md_context():
             nbrs = self.fns.allocate(jnp.asarray(positions) - jnp.asarray(self.origin)[None, :],
                                      extra_capacity=extra_per_particle)

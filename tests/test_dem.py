@@ -130,6 +130,25 @@ def test_simple_cubic_column_modulus(cells):
     assert res.force[-1] > 0  # compression positive
 
 
+def test_fragment_flying_out_of_the_neighbour_box_within_a_chunk():
+    """A particle that leaves the contact search box within one chunk (a fragment after a failure): the box is
+    re-made around where the chunk took it and the chunk runs again, once; the flight is free (x0 + v t). The box
+    was re-made around the chunk's start only, so the chunk left it again and again and the run stopped ("stalled")."""
+    pos = np.array([[0.0, 0.0, 0.0], [2.5 * R, 0.0, 0.0], [0.0, 2.5 * R, 0.0]])
+    s = jaxbpm.Sample.from_arrays(pos, R, np.zeros((0, 2), int), bond_radius=np.zeros(0),
+                                  particle_material={"E": 1e8, "nu": 0.3, "friction": 0.0})
+    model = build_model(s, contacts=True)
+    params, load = default_params(s), _free_loading(3)
+    owner = dem._Neighbors(model, dem.NeighborSettings(skin=0.5 * R), model.positions0)
+    state = dem.init_state(model, params, load, nbrs=owner.allocate(model.positions0))
+    dt, v0, chunk = 1e-6, 100.0, 100  # 0.1 R a step, 10 R a chunk: past the box's padding (~5 R) in one chunk
+    state = dataclasses.replace(state, velocities=jnp.array([[0.0, 0.0, 0.0], [v0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    final, _, stats = dem.simulate(model, params, load, dt=dt, n_steps=3 * chunk, chunk=chunk, state=state)
+    assert 1 <= stats["reallocations"] <= 3  # at most once per chunk
+    np.testing.assert_allclose(np.asarray(final.positions), pos + np.array([[0, 0, 0], [v0 * 3 * chunk * dt, 0, 0],
+                                                                            [0, 0, 0]]), rtol=0, atol=1e-12)
+
+
 def test_hertz_impact_contact_time():
     """Two spheres colliding head-on: Hertz contact duration 2.87 (m*^2 / (R*^2 E*^4 v))^(1/5)."""
     E, nu, v0 = 1e8, 0.3, 0.05
