@@ -9,6 +9,7 @@ Usage::
     python benchmarks/vs_lammps.py --scene ucs-contacts           # UCS to failure with contacts, 8000 particles
     python benchmarks/vs_lammps.py --scene ucs-contacts --quick   # the same on 2000 particles
     python benchmarks/vs_lammps.py --scene ucs-contacts --ucs-large   # 100 000 particles (~30 min per code)
+    python benchmarks/vs_lammps.py --scene ucs-contacts --ucs-bonds-only --no-lammps   # contacts against bonds only
     python benchmarks/vs_lammps.py --scene all      # both scenes
 
 Two scenes (``--scene``): ``bonds`` (the default, described first below) compares the elastic response of a
@@ -149,6 +150,7 @@ The contact scene (``--scene ucs-contacts``)
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import pathlib
@@ -683,6 +685,9 @@ def main(argv=None) -> int:
     g.add_argument("--ucs-tau", type=float, default=8e6, help="bond shear strength [Pa]")
     g.add_argument("--ucs-sample-file", default=None,
                    help="HDF5 cylinder: loaded if it exists, else generated and saved")
+    g.add_argument("--ucs-bonds-only", action="store_true",
+                   help="also run jaxbpm on the same scene without contacts (bonds and breakage only): the contacts' "
+                        "cost as the ratio of the two bond-steps/s")
     g.add_argument("--ucs-out", default=None,
                    help="default results/vs_lammps_contacts.json (--quick: results/vs_lammps_contacts_quick.json)")
     ap.add_argument("--lammps-worker", default=None, help=argparse.SUPPRESS)
@@ -1087,6 +1092,18 @@ def _ucs_scene(args) -> int:
     print(f"  jaxbpm: {steps} steps, E = {r.youngs_modulus:.5g} Pa, UCS = {jx['ucs']:.5g} Pa at strain "
           f"{jx['strain_at_peak']:.4g}, broken {jx['broken_end']}; run {r.run_time:.2f} s, compile "
           f"{r.compile_time:.2f} s, wall {r.wall_time:.2f} s", file=sys.stderr, flush=True)
+
+    if args.ucs_bonds_only:  # the same run without contacts: what the contacts cost
+        rb = jaxbpm.solve(sample, dataclasses.replace(scene, contacts=False), "dem", transits=args.ucs_transits,
+                          damping=args.damping, safety=args.safety)
+        sps_b = float(rb.stats["steps_per_second"])
+        jx["bonds_only"] = {"steps": int(rb.stats["steps"]), "run_time": rb.run_time, "wall_time": rb.wall_time,
+                            "compile_time": rb.compile_time, "steps_per_second": sps_b,
+                            "bond_steps_per_second": sps_b * nb, "ucs": float(rb.stats["strength"]),
+                            "contacts_over_bonds_only": jx["steps_per_second"] / sps_b}
+        print(f"  jaxbpm bonds only: {rb.stats['steps']} steps, UCS = {rb.stats['strength']:.5g} Pa; run "
+              f"{rb.run_time:.2f} s; with contacts at {100 * jx['steps_per_second'] / sps_b:.0f} % of its "
+              f"bond-steps/s", file=sys.stderr, flush=True)
 
     # ---------------------------------------------------------------- LAMMPS
     lm = None
