@@ -250,22 +250,24 @@ def test_pairs_within_reach_match_packing_every_step(contact_box, monkeypatch):
 def test_pairs_within_reach_through_breakage(bond_contact, monkeypatch):
     """To failure: where bonds replace contacts, a broken bond's pair joins the pairs within reach (they are found
     again); where they superimpose, it always was a candidate. Either way the run is the per-step packing's, to
-    round-off before the breaks (as sliding contacts amplify it) and within the chaos of breakage after them."""
+    round-off before the breaks and within the chaos of breakage after them. Without local damping: its
+    ``-alpha |F| sign(v)`` jumps where a velocity component changes sign, so it turns a last-bit difference in the
+    order the two programs sum forces into a jump (1e-13 to 1e-9 of the force within three records on one XLA
+    thread, 1e-4 before the first break); undamped, the two agree to 2e-13 there."""
     s = jaxbpm.generate.cylinder(250, seed=0, bond_contact=bond_contact,
                                  materials={"E": 1e9, "nu": 0.25, "tensile_strength": 5e6, "shear_strength": 5e6},
                                  particle_material={"E": 1e9, "nu": 0.25, "density": 2500.0, "friction": 0.5,
                                                     "restitution": 0.5}).largest_cluster()
     assert s.bond_contact == bond_contact
     scene = jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02)
-    near = jaxbpm.solve(s, scene, "dem", transits=30)
+    near = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
     _with_near(monkeypatch, None)
-    every = jaxbpm.solve(s, scene, "dem", transits=30)
+    every = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
     curve = np.sum(every.stats["broken_curve"], axis=1)
     first = int(np.argmax(curve > 0))
     assert 0 < first and curve[-1] > 20  # bonds break, and not from the start
-    # (the two differ from step 26 on by 1e-17 of the force, 3e-10 by step 300, 1e-6 by step 400: sliding contacts)
-    steps, scale = min(first, 300), np.max(np.abs(every.force))
-    np.testing.assert_allclose(near.force[:steps], every.force[:steps], rtol=0, atol=1e-8 * scale)
+    scale = np.max(np.abs(every.force))
+    np.testing.assert_allclose(near.force[:first], every.force[:first], rtol=0, atol=1e-10 * scale)
     assert abs(near.stats["strength"] / every.stats["strength"] - 1) < 0.02
 
 
