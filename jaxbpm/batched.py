@@ -236,7 +236,7 @@ def _run_batch(t0, compiling, sample, scene, members, vectorize, *, dt=None, saf
         while len(records) < n_chunks and any(f is None for f in failure):
             _interrupt.check()
             tc, compiled = time.perf_counter(), compiling.seconds
-            new, rec, _, finite, _, _ = _run_chunks(model, pre, load, state, dt, damping, origin, chunk,
+            new, rec, _, finite, _, _, _ = _run_chunks(model, pre, load, state, dt, damping, origin, chunk,
                                                     vectorize=vectorize)
             jax.block_until_ready(new.positions)
             kernel.append(time.perf_counter() - tc - (compiling.seconds - compiled))

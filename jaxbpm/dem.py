@@ -11,8 +11,10 @@ Integration (per step, time step dt)::
     F, M = forces(x, q)                                           (one force evaluation per step)
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
 
-Contacts: jax-md's neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin);
-inside it, the pairs within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds
+Contacts: a neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin): jax-md's
+cell list, rebuilt inside the step; from ``neighbors.HOST_LIST_MIN`` (20k) particles on the CPU, a k-d tree on the
+host, rebuilt between chunks (a chunk stops before the step that would make it stale and goes on after the rebuild;
+jax-md's rebuild fills a dense candidate array that took a 1M-particle run past 22 GiB). Inside the list, the pairs within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds
 replace contacts) are found again when a particle has moved half that margin or such a bond breaks, and each step
 runs the contact law on those only (on an 8k dense box 1.6x faster per step than testing and packing every
 candidate each step).
@@ -51,7 +53,8 @@ from jaxbpm.physics import rotation
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
 from jaxbpm.neighbors import (_contact_pairs, _jax_md_context, _Near, _Neighbors, _remap_history, _remap_springs,
-                              near_build, near_size, near_springs, near_stale, NeighborSettings, pack)
+                              HostList, near_build, near_size, near_springs, near_stale, neighbors_owner,
+                              NeighborSettings, pack, stale)
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
            "potential_energy", "NeighborSettings", "progress_printer", "pad_loading", "unpad_state"]
@@ -262,6 +265,16 @@ def _damped(f, v, alpha):
     return f - alpha * jnp.abs(f) * jnp.sign(v)
 
 
+def _drift(model: Model, load: Loading, state: DEMState, dt, alpha):
+    """The first half kick and the drift of :func:`step`: the half-step velocities, the new positions and time."""
+    clamped = load.clamped[:, None]
+    v = state.velocities + 0.5 * dt * _damped(state.force, state.velocities, alpha) * (1.0 / model.mass[:, None])
+    v = jnp.where(clamped, load.velocity, v)
+    t = state.time + dt
+    x = jnp.where(clamped, model.positions0 + t * load.velocity, state.positions + dt * v)
+    return v, x, t
+
+
 def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin, near: _Near | None = None,
          margin=None):
     """One velocity-Verlet step. Returns ``(new_state, record)``; record holds the reaction forces ``[W+2, 3]``
@@ -272,10 +285,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
     every step tests and packs the whole candidate list."""
     clamped = load.clamped[:, None]
     inv_m, inv_i = 1.0 / model.mass[:, None], 1.0 / model.inertia[:, None]
-    v = state.velocities + 0.5 * dt * _damped(state.force, state.velocities, alpha) * inv_m
-    v = jnp.where(clamped, load.velocity, v)
-    t = state.time + dt
-    x = jnp.where(clamped, model.positions0 + t * load.velocity, state.positions + dt * v)
+    v, x, t = _drift(model, load, state, dt, alpha)
     if model.rotations:
         w = state.omegas + 0.5 * dt * _damped(state.moment, state.omegas, alpha) * inv_i
         w = jnp.where(clamped, 0.0, w)
@@ -291,9 +301,12 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
         # once, not again inside every gather
         one = dt / dt
         x, v, w = x / one, v / one, w / one
-        with _jax_md_context():
-            nbrs = state.nbrs.update(x - origin[None, :])
-        rebuilt = jnp.any(nbrs.reference_position != state.nbrs.reference_position)
+        if isinstance(state.nbrs, HostList):  # built between chunks; the chunk stops before it goes stale
+            nbrs, rebuilt = state.nbrs, jnp.zeros((), bool)
+        else:
+            with _jax_md_context():
+                nbrs = state.nbrs.update(x - origin[None, :])
+            rebuilt = jnp.any(nbrs.reference_position != state.nbrs.reference_position)
         new = dataclasses.replace(new, positions=x, velocities=v, omegas=w, nbrs=nbrs)
         if model.contact_law == "cohesive":
             spring, cohesion = jax.lax.cond(
@@ -341,30 +354,60 @@ def _precompute(model, params):
 
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "near_slots"))
-def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=None, near_slots=None):
+def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=None, near_slots=None, limit=None):
     # ``params`` comes precomputed (stiffnesses and strengths, once per run, not per step): its structure is the
     # same whatever entries the caller's dict had, so the chunk compiles once per model. With Hertz contacts and a
     # ``margin``, the steps carry the pairs within reach (``near_slots`` of them at most; found at the chunk's
-    # start, again when stale) and hand their springs back to the state at its end.
+    # start, again when stale) and hand their springs back to the state at its end. With a candidate list built on
+    # the host (:class:`jaxbpm.neighbors.HostList`) the chunk runs at most ``limit`` steps and stops before the step
+    # that would make the list stale; ``done`` says how many ran (the records after them are zeros).
     near_overflow = jnp.zeros((), bool)
+    near = None
     if margin is not None and model.contacts and model.contact_law != "cohesive":
-        def body(carry, _):
+        def advance(carry):
             s, rec, near = step(model, params, load, carry[0], dt, alpha, origin, near=carry[1], margin=margin)
             return (s, near), rec
 
         near = near_build(model, state.positions, state.nbrs, state.intact, state.spring, margin, near_slots)
-        (state, near), records = jax.lax.scan(body, (state, near), None, length=n_steps)
+    else:
+        def advance(carry):
+            s, rec = step(model, params, load, carry[0], dt, alpha, origin)
+            return (s, None), rec
+
+    if model.contacts and isinstance(state.nbrs, HostList):
+        (state, near), records, done = _run_until_stale(model, load, advance, (state, near), dt, alpha, n_steps,
+                                                        limit)
+    else:
+        (state, near), records = jax.lax.scan(lambda c, _: advance(c), (state, near), None, length=n_steps)
+        done = jnp.asarray(n_steps, jnp.int32)
+    if near is not None:
         state = dataclasses.replace(state, spring=near_springs(near, state.spring.shape[0]))
         near_overflow = near.overflow
-    else:
-        def body(s, _):
-            return step(model, params, load, s, dt, alpha, origin)
-
-        state, records = jax.lax.scan(body, state, None, length=n_steps)
     overflow = jnp.stack([jnp.asarray(state.nbrs.did_buffer_overflow if model.contacts else False).astype(bool),
                           near_overflow.astype(bool)])
     finite = jnp.all(jnp.isfinite(state.positions))
-    return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0)
+    return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), done
+
+
+def _run_until_stale(model, load, advance, carry, dt, alpha, n_steps, limit):
+    """``advance`` (``carry -> (carry, record)``, ``carry[0]`` the state) at most ``min(n_steps, limit)`` times,
+    stopping before the step whose drift would take a particle past the host list's threshold. Returns the carry,
+    the records ``[n_steps, ...]`` (zeros after the last step run) and the number of steps run."""
+    template = jax.eval_shape(lambda c: advance(c)[1], carry)
+    records = jax.tree.map(lambda a: jnp.zeros((n_steps,) + a.shape, a.dtype), template)
+    limit = n_steps if limit is None else jnp.minimum(limit, n_steps)
+
+    def going(c):
+        k, (s, _), _ = c
+        return (k < limit) & ~stale(s.nbrs, _drift(model, load, s, dt, alpha)[1])
+
+    def body(c):
+        k, carry, records = c
+        carry, rec = advance(carry)
+        return k + 1, carry, jax.tree.map(lambda r, a: r.at[k].set(a), records, rec)
+
+    done, carry, records = jax.lax.while_loop(going, body, (jnp.zeros((), jnp.int32), carry, records))
+    return carry, records, done
 
 
 def pad_loading(load: Loading, n: int) -> Loading:
@@ -555,7 +598,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     clock = {"t0": t0, "compiling": compiling, "kernel": []}
     if model.contacts:
         settings = neighbors or NeighborSettings(skin=0.5 * r_min)
-        nb_owner = _Neighbors(model, settings, model.positions0)
+        nb_owner = neighbors_owner(model, settings, model.positions0)
         nbrs = nb_owner.allocate(model.positions0 if state is None else state.positions)
         if NEAR_MARGIN is not None and model.contact_law != "cohesive":
             margin, near_slots = jnp.asarray(NEAR_MARGIN * settings.skin, dtype), near_size(nbrs.idx.shape[1])
@@ -583,19 +626,34 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     crit = f"{dt_crit:.4g} s" if dt_crit is not None else "unknown"  # for the error messages
     report = _progress_fn(progress)
     done = state  # the state after the last completed chunk
+    # a candidate list built on the host: a chunk stops before the list goes stale, the list is built again and the
+    # chunk goes on from there (``left`` steps; the records and kernel time of its parts so far in ``parts``)
+    host = model.contacts and isinstance(state.nbrs, HostList)
+    left, parts, fresh = chunk, [], False
     clock["loop"] = time.perf_counter()
     try:
         while len(records) < n_chunks:
             _interrupt.check()
             tc, compiled = time.perf_counter(), compiling.seconds
-            new, rec, overflow, finite, pmin, pmax = _run_chunk(model, pre, load, state, dt, alpha, origin, chunk,
-                                                                 margin, near_slots)
+            new, rec, overflow, finite, pmin, pmax, ran = _run_chunk(
+                model, pre, load, state, dt, alpha, origin, chunk, margin, near_slots,
+                jnp.asarray(left, jnp.int32) if host else None)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
-            rec = jax.device_get(rec)
+            rec, ran = jax.device_get(rec), int(ran)
+            if host:
+                rec = {k: r[:ran] for k, r in rec.items()}
+                if ran == 0:
+                    if fresh:
+                        raise InstabilityError(
+                            f"DEM run stalled at step {len(records) * chunk + chunk - left}: a particle moves more "
+                            f"than half the neighbour list's skin ({0.5 * nb_owner.settings.skin:.3g} m) in one step "
+                            f"with time step dt = {dt:.4g} s, critical time step estimate = {crit}. Use a smaller "
+                            f"time step (or a larger skin).")
+                    new = state  # nothing ran: the list is built again below
             # instability first: a blown-up chunk also overflows the neighbour buffer, and re-allocating for it
             # would only run it again (and again)
-            vmax = float(np.max(rec["vmax"]))
+            vmax = float(np.max(rec["vmax"])) if rec["vmax"].size else 0.0
             if not np.isfinite(vmax) or not bool(finite) or vmax * dt > 0.25 * r_min:
                 raise InstabilityError(
                     f"DEM run became unstable within steps {len(records) * chunk}..{(len(records) + 1) * chunk} "
@@ -625,6 +683,23 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                 if near_slots is not None:
                     near_slots = clock["contact_slots"] = max(near_slots, near_size(nbrs.idx.shape[1]))
                 continue  # (a new buffer size compiles the chunk again)
+            if host and ran < left:
+                # the list would go stale in the next step: build it again where the particles are, go on
+                parts.append((rec, elapsed))
+                left -= ran
+                nbrs = nb_owner.allocate(new.positions)
+                spring, cohesion = _remap_history(new.nbrs.idx.T, nbrs.idx.T, model.n, new.spring, new.cohesion)
+                state = dataclasses.replace(new, nbrs=nbrs, spring=spring, cohesion=cohesion)
+                clock["rebuilds"] = clock.get("rebuilds", 0) + 1
+                if near_slots is not None:
+                    near_slots = clock["contact_slots"] = max(near_slots, near_size(nbrs.idx.shape[1]))
+                fresh = True
+                continue
+            if parts:
+                parts.append((rec, elapsed))
+                rec = {k: np.concatenate([p[0][k] for p in parts]) for k in rec}
+                elapsed = sum(p[1] for p in parts)
+            left, parts, fresh = chunk, [], False
             clock["kernel"].append(elapsed)
             stalled = 0
             state = done = new
@@ -658,7 +733,8 @@ def _collect(model, state, records, chunk, reallocs, clock):
              "wall_time": wall, "kernel_time": float(np.sum(kernel)), "steps": len(records) * chunk,
              "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
              "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0,
-             "contact_slots": clock.get("contact_slots", 0)}
+             "contact_slots": clock.get("contact_slots", 0), "contact_rebuilds": clock.get("rebuilds", 0),
+             "contact_list": ("host" if isinstance(state.nbrs, HostList) else "jax-md") if model.contacts else None}
     return out, stats
 
 

@@ -1,6 +1,7 @@
-"""The DEM's contact candidates: jax-md neighbour lists owned on the host (box, origin, re-allocation), the candidate
-pairs they give (bonded pairs masked where bonds replace contacts) and the per-contact state carried across a
-rebuild. jax-md is imported only when a scene has contacts.
+"""The DEM's contact candidates: jax-md neighbour lists owned on the host (box, origin, re-allocation) or, for large
+samples on the CPU, lists built on the host by a k-d tree (:class:`HostList`); the candidate pairs they give (bonded
+pairs masked where bonds replace contacts) and the per-contact state carried across a rebuild. jax-md is imported
+only when a scene has contacts and uses its lists.
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ __all__ = ["NeighborSettings"]
 
 @dataclasses.dataclass(frozen=True)
 class NeighborSettings:
-    """Neighbour-list settings: ``skin`` [m] (list radius = 2 r_max + skin; rebuilt when a particle has moved more
-    than skin / 2), ``capacity_multiplier`` (spare room in the pair buffer), ``box_margin`` (relative padding of the
+    """Neighbour-list settings: ``skin`` [m] (list radius = 2 r_max + 2 skin, jax-md's cutoff ``2 r_max + skin``
+    plus its threshold ``skin``; rebuilt when a particle has moved more than skin / 2), ``capacity_multiplier`` (spare room in the pair buffer), ``box_margin`` (relative padding of the
     cell-list box around the sample)."""
 
     skin: float
@@ -94,6 +95,85 @@ class _Neighbors:
 
 
 _CELL_LIST_FNS: dict = {}  # cell-list functions by neighbour-list settings (see _Neighbors.allocate)
+
+#: from this many particles on the CPU the DEM's candidate list is built on the host (a k-d tree, between steps)
+#: instead of by jax-md's cell list inside the step: the cell list fills a dense ``[n, 27 x cell capacity]``
+#: candidate array at every (re)build, which at 1M particles took the run past 22 GiB before its first chunk
+HOST_LIST_MIN = 20_000
+
+
+class HostList(NamedTuple):
+    """A candidate list built on the host (:class:`_HostNeighbors`), in jax-md's ``OrderedSparse`` layout: ``idx [2,
+    capacity]`` (each pair once, ``idx[0] < idx[1]``, sorted by ``idx[0]`` then ``idx[1]``; padding ``n``), the
+    positions it was built at (``reference_position``) and ``threshold`` (the squared distance a particle may move
+    from there before the list is stale: ``(skin / 2)^2``). The DEM's chunk stops before the step that would take a
+    particle further (:func:`stale`) and the list is built again between chunks; inside a chunk it never changes
+    (``update`` is the identity, as for a list whose buffer never overflows)."""
+
+    idx: jax.Array
+    reference_position: jax.Array
+    threshold: jax.Array
+
+    @property
+    def did_buffer_overflow(self):
+        return jnp.zeros((), bool)
+
+    def update(self, positions):
+        return self
+
+
+def stale(nbrs: HostList, positions) -> jax.Array:
+    """Whether a particle at ``positions`` has moved more than half the skin from where ``nbrs`` was built."""
+    return jnp.max(jnp.sum((positions - nbrs.reference_position) ** 2, axis=1)) > nbrs.threshold
+
+
+def ordered_pairs(x: np.ndarray, radius: float, capacity: int, multiplier: float) -> tuple[np.ndarray, int]:
+    """Pairs of centres ``x [n, 3]`` closer than ``radius`` (a k-d tree) in the ``OrderedSparse`` layout of
+    :class:`HostList`, in ``capacity`` slots; when they do not fit, ``multiplier`` x as many slots (so that a list
+    built again later, with a few more pairs, keeps its size and the compiled chunk). Returns ``(idx, capacity)``."""
+    from scipy.spatial import cKDTree
+
+    n = x.shape[0]
+    half = cKDTree(x).query_pairs(radius, output_type="ndarray")
+    half = half[np.argsort(half[:, 0].astype(np.int64) * n + half[:, 1], kind="stable")]
+    count = half.shape[0]
+    if count > capacity or capacity == 0:  # (never empty: a slot for the first pair)
+        capacity = int(count * multiplier) + 1
+    idx = np.full((2, capacity), n, np.int32)
+    idx[:, :count] = half.T
+    return idx, capacity
+
+
+class _HostNeighbors:
+    """:class:`_Neighbors` for :class:`HostList`: no box (the k-d tree has none; ``inside`` is always true, the
+    origin zero), the same list radius as jax-md's (``2 r_max + 2 skin``: cutoff plus threshold), a capacity that
+    only grows."""
+
+    def __init__(self, model: Model, settings: NeighborSettings, positions):
+        self.model, self.settings = model, settings
+        r_max = float(np.max(np.asarray(model.radii)))
+        self.radius = 2 * r_max + 2 * settings.skin
+        self.capacity = 0
+        self.origin = np.zeros(3)
+
+    def inside(self, pos_min, pos_max) -> bool:
+        return True
+
+    def allocate(self, positions, extra_per_particle: int = 0, reach=None):
+        x = np.asarray(positions, dtype=np.float64)
+        idx, self.capacity = ordered_pairs(x, self.radius, self.capacity + extra_per_particle * x.shape[0],
+                                           self.settings.capacity_multiplier)
+        dtype = jnp.asarray(positions).dtype
+        return HostList(jax.device_put(idx), jnp.asarray(positions),
+                        jnp.asarray((0.5 * self.settings.skin) ** 2, dtype))
+
+
+def neighbors_owner(model: Model, settings: NeighborSettings, positions):
+    """The owner of the DEM's candidate list: :class:`_HostNeighbors` from :data:`HOST_LIST_MIN` particles on the
+    CPU, :class:`_Neighbors` (jax-md's cell list, rebuilt inside the step) else."""
+    if model.n >= HOST_LIST_MIN and jax.default_backend() == "cpu":
+        return _HostNeighbors(model, settings, positions)
+    return _Neighbors(model, settings, positions)
 
 
 def _contact_pairs(model: Model, nbrs, intact=None):

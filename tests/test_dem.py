@@ -149,6 +149,80 @@ def test_fragment_flying_out_of_the_neighbour_box_within_a_chunk():
                                                                             [0, 0, 0]]), rtol=0, atol=1e-12)
 
 
+def _host_lists(monkeypatch):
+    """The DEM's candidate list built on the host (a k-d tree between chunks) at every size, not only from 20k
+    particles."""
+    from jaxbpm import neighbors
+
+    monkeypatch.setattr(neighbors, "HOST_LIST_MIN", 0)
+
+
+def test_host_candidate_list_holds_every_pair_within_its_radius():
+    from jaxbpm.neighbors import ordered_pairs
+
+    x = np.random.default_rng(0).uniform(0.0, 1.0, (300, 3))
+    idx, capacity = ordered_pairs(x, 0.2, 0, 1.5)
+    i, j = np.nonzero(np.triu(np.linalg.norm(x[:, None] - x[None], axis=2) < 0.2, 1))  # by i, then j
+    assert i.size > 1000
+    np.testing.assert_array_equal(idx[:, :i.size], np.stack([i, j]))
+    assert capacity == int(1.5 * i.size) + 1 and np.all(idx[:, i.size:] == 300)
+    idx2, capacity2 = ordered_pairs(x, 0.201, capacity, 1.5)  # a few more pairs: the same size (no recompilation)
+    assert capacity2 == capacity and np.sum(idx2[0] < 300) > i.size
+
+
+def test_host_candidate_list_runs_as_jax_md_list_through_breakage(monkeypatch):
+    """To failure with contacts (bonds replace them): the list built on the host between chunks, with each chunk
+    stopped before it goes stale, gives jax-md's run (its list rebuilt inside the step), to round-off."""
+    s = jaxbpm.generate.cylinder(250, seed=0, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 5e6,
+                                                         "shear_strength": 5e6},
+                                 particle_material={"E": 1e9, "nu": 0.25, "density": 2500.0, "friction": 0.5,
+                                                    "restitution": 0.5}).largest_cluster()
+    scene = jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02)
+    cell = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
+    _host_lists(monkeypatch)
+    host = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
+    assert (cell.stats["contact_list"], host.stats["contact_list"]) == ("jax-md", "host")
+    assert host.stats["contact_rebuilds"] > 5 and cell.stats["contact_rebuilds"] == 0
+    curve = np.sum(cell.stats["broken_curve"], axis=1)
+    first = int(np.argmax(curve > 0))
+    assert 0 < first and curve[-1] > 20
+    scale = np.max(np.abs(cell.force))
+    np.testing.assert_allclose(host.force[:first], cell.force[:first], rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(host.force, cell.force, rtol=0, atol=1e-8 * scale)
+    assert abs(host.stats["strength"] / cell.stats["strength"] - 1) < 1e-8
+
+
+def _head_on(monkeypatch, gap, v0, skin=0.5 * R):
+    """Two spheres ``gap`` apart closing at ``2 v0``, the list built on the host."""
+    _host_lists(monkeypatch)
+    pos = np.array([[0.0, 0.0, 0.0], [2 * R + gap, 0.0, 0.0]])
+    s = jaxbpm.Sample.from_arrays(pos, R, np.zeros((0, 2), int), bond_radius=np.zeros(0),
+                                  particle_material={"E": 1e8, "nu": 0.3, "friction": 0.0})
+    model = build_model(s, contacts=True)
+    params, load = default_params(s), _free_loading(2)
+    owner = dem.neighbors_owner(model, dem.NeighborSettings(skin=skin), model.positions0)
+    state = dem.init_state(model, params, load, nbrs=owner.allocate(model.positions0))
+    return model, params, load, dataclasses.replace(state, velocities=jnp.array([[v0, 0, 0], [-v0, 0, 0]]))
+
+
+def test_host_candidate_list_finds_a_contact_made_within_a_chunk(monkeypatch):
+    """Two spheres 10 R apart (beyond the list's 3 R) meet within one chunk: the chunk stops where the list would go
+    stale, the list is built again and the spheres bounce (without the stop they would pass through each other)."""
+    model, params, load, state = _head_on(monkeypatch, 10 * R, 1.0)
+    final, rec, stats = dem.simulate(model, params, load, dt=2e-6, n_steps=6000, chunk=3000, state=state)
+    assert stats["contact_list"] == "host" and stats["contact_rebuilds"] >= 10
+    assert rec["vmax"].shape == (6000,)
+    v, x = np.asarray(final.velocities), np.asarray(final.positions)
+    assert v[0, 0] < -0.5 and v[1, 0] > 0.5  # they bounced (elastic: back near 1 m/s)
+    assert x[1, 0] - x[0, 0] > 2 * R  # and parted, the right way round
+
+
+def test_host_candidate_list_stalls_on_a_step_past_half_the_skin(monkeypatch):
+    model, params, load, state = _head_on(monkeypatch, 10 * R, 150.0)  # 0.3 R a step: over skin / 2 = 0.25 R
+    with pytest.raises(jaxbpm.InstabilityError, match="half the neighbour list's skin"):
+        dem.simulate(model, params, load, dt=2e-6, n_steps=100, chunk=50, state=state)
+
+
 def test_hertz_impact_contact_time():
     """Two spheres colliding head-on: Hertz contact duration 2.87 (m*^2 / (R*^2 E*^4 v))^(1/5)."""
     E, nu, v0 = 1e8, 0.3, 0.05
