@@ -53,7 +53,7 @@ from jaxbpm.physics import rotation
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
 from jaxbpm.neighbors import (_contact_pairs, _jax_md_context, _Near, _Neighbors, _remap_history, _remap_springs,
-                              HostList, near_build, near_size, near_springs, near_stale, neighbors_owner,
+                              HostList, near_build, near_count, near_size, near_springs, near_stale, neighbors_owner,
                               NeighborSettings, pack, stale)
 
 __all__ = ["DEMState", "Loading", "critical_time_step", "init_state", "step", "simulate", "kinetic_energy",
@@ -161,7 +161,7 @@ def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMSta
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, spring, new.nbrs.idx.T, model.n),
                               lambda: spring)
         found = near_build(model, new.positions, new.nbrs, new.intact, spring, margin, near.slot.shape[0])
-        return found._replace(overflow=found.overflow | near.overflow)
+        return found._replace(overflow=found.overflow | near.overflow, count=jnp.maximum(found.count, near.count))
 
     near = jax.lax.cond(rebuilt | near_stale(model, near, new.positions, new.intact, margin), refresh, lambda: near)
     force, moment, walls, spring, intact, broken = _contact_forces(model, params, load, new, near.pairs,
@@ -361,7 +361,7 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
     # start, again when stale) and hand their springs back to the state at its end. With a candidate list built on
     # the host (:class:`jaxbpm.neighbors.HostList`) the chunk runs at most ``limit`` steps and stops before the step
     # that would make the list stale; ``done`` says how many ran (the records after them are zeros).
-    near_overflow = jnp.zeros((), bool)
+    near_overflow, near_pairs = jnp.zeros((), bool), jnp.zeros((), jnp.int32)
     near = None
     if margin is not None and model.contacts and model.contact_law != "cohesive":
         def advance(carry):
@@ -382,11 +382,12 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
         done = jnp.asarray(n_steps, jnp.int32)
     if near is not None:
         state = dataclasses.replace(state, spring=near_springs(near, state.spring.shape[0]))
-        near_overflow = near.overflow
+        near_overflow, near_pairs = near.overflow, near.count
     overflow = jnp.stack([jnp.asarray(state.nbrs.did_buffer_overflow if model.contacts else False).astype(bool),
                           near_overflow.astype(bool)])
     finite = jnp.all(jnp.isfinite(state.positions))
-    return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), done
+    counts = jnp.stack([done, near_pairs]).astype(jnp.int32)  # steps run, most pairs within reach
+    return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), counts
 
 
 def _run_until_stale(model, load, advance, carry, dt, alpha, n_steps, limit):
@@ -573,8 +574,10 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     this process had them all) + ``run_time``
     (the rest: the chunks, the checks between them, records and callbacks); ``kernel_time`` (the chunks alone),
     steps, steps per second (the median chunk), number of neighbour-list re-allocations; with contacts the
-    candidate list's capacity (``contact_capacity``) and the slots of the pairs within reach (``contact_slots``,
-    doubled and the chunk run again when they overflow).
+    candidate list's capacity (``contact_capacity``), the most pairs within reach (``contacts_within_reach``) and
+    their slots (``contact_slots``: sized to them at the start, grown and the chunk run again when they overflow),
+    where the list is built (``contact_list``: ``"host"`` or ``"jax-md"``) and how often the host built it again
+    between steps (``contact_rebuilds``).
     progress: ``True`` prints progress (:func:`progress_printer`); a callable is called as
     ``progress(steps_done, steps_total, elapsed_s)`` after every chunk.
     on_chunk: called as ``on_chunk(steps_done, state, chunk_records)`` after every chunk (records of that chunk
@@ -601,8 +604,11 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
         nb_owner = neighbors_owner(model, settings, model.positions0)
         nbrs = nb_owner.allocate(model.positions0 if state is None else state.positions)
         if NEAR_MARGIN is not None and model.contact_law != "cohesive":
-            margin, near_slots = jnp.asarray(NEAR_MARGIN * settings.skin, dtype), near_size(nbrs.idx.shape[1])
-            clock["contact_slots"] = near_slots
+            margin = NEAR_MARGIN * settings.skin
+            within = near_count(model, model.positions0 if state is None else state.positions, nbrs,
+                                None if state is None else state.intact, margin)
+            margin, near_slots = jnp.asarray(margin, dtype), near_size(within, nbrs.idx.shape[1])
+            clock["contact_slots"], clock["near_count"] = near_slots, within
         origin = jnp.asarray(nb_owner.origin, dtype)
         if state is not None and state.nbrs is not None:
             spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion)
@@ -635,12 +641,14 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
         while len(records) < n_chunks:
             _interrupt.check()
             tc, compiled = time.perf_counter(), compiling.seconds
-            new, rec, overflow, finite, pmin, pmax, ran = _run_chunk(
+            new, rec, overflow, finite, pmin, pmax, counts = _run_chunk(
                 model, pre, load, state, dt, alpha, origin, chunk, margin, near_slots,
                 jnp.asarray(left, jnp.int32) if host else None)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
-            rec, ran = jax.device_get(rec), int(ran)
+            rec, (ran, within) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
+            if near_slots is not None:
+                clock["near_count"] = max(clock["near_count"], within)
             if host:
                 rec = {k: r[:ran] for k, r in rec.items()}
                 if ran == 0:
@@ -662,7 +670,9 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             overflow, near_overflow = (bool(o) for o in np.asarray(overflow))
             if near_overflow and not overflow:
                 # more pairs within reach than slots: the chunk again with more (a new size compiles it again)
-                near_slots = clock["contact_slots"] = min(2 * near_slots, state.nbrs.idx.shape[1])
+                near_slots = clock["contact_slots"] = min(max(near_size(within, state.nbrs.idx.shape[1]),
+                                                              near_slots + near_slots // 4 + 1),
+                                                          state.nbrs.idx.shape[1])
                 continue
             if model.contacts and (overflow or not nb_owner.inside(pmin, pmax)):
                 # re-allocate from the chunk's start and run it again: no contact is ever dropped
@@ -681,7 +691,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                                                   state.cohesion)
                 state = done = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
                 if near_slots is not None:
-                    near_slots = clock["contact_slots"] = max(near_slots, near_size(nbrs.idx.shape[1]))
+                    near_slots = clock["contact_slots"] = min(near_slots, nbrs.idx.shape[1])
                 continue  # (a new buffer size compiles the chunk again)
             if host and ran < left:
                 # the list would go stale in the next step: build it again where the particles are, go on
@@ -692,7 +702,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                 state = dataclasses.replace(new, nbrs=nbrs, spring=spring, cohesion=cohesion)
                 clock["rebuilds"] = clock.get("rebuilds", 0) + 1
                 if near_slots is not None:
-                    near_slots = clock["contact_slots"] = max(near_slots, near_size(nbrs.idx.shape[1]))
+                    near_slots = clock["contact_slots"] = min(near_slots, nbrs.idx.shape[1])
                 fresh = True
                 continue
             if parts:
@@ -733,7 +743,8 @@ def _collect(model, state, records, chunk, reallocs, clock):
              "wall_time": wall, "kernel_time": float(np.sum(kernel)), "steps": len(records) * chunk,
              "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
              "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0,
-             "contact_slots": clock.get("contact_slots", 0), "contact_rebuilds": clock.get("rebuilds", 0),
+             "contact_slots": clock.get("contact_slots", 0), "contacts_within_reach": clock.get("near_count", 0),
+             "contact_rebuilds": clock.get("rebuilds", 0),
              "contact_list": ("host" if isinstance(state.nbrs, HostList) else "jax-md") if model.contacts else None}
     return out, stats
 
