@@ -14,10 +14,10 @@ Integration (per step, time step dt)::
 Contacts: a neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin): jax-md's
 cell list, rebuilt inside the step; from ``neighbors.HOST_LIST_MIN`` (20k) particles on the CPU, a k-d tree on the
 host, rebuilt between chunks (a chunk stops before the step that would make it stale and goes on after the rebuild;
-jax-md's rebuild fills a dense candidate array that took a 1M-particle run past 22 GiB). Inside the list, the pairs within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds
-replace contacts) are found again when a particle has moved half that margin or such a bond breaks, and each step
-runs the contact law on those only (on an 8k dense box 1.6x faster per step than testing and packing every
-candidate each step).
+jax-md's rebuild fills a dense candidate array that took a 1M-particle run past 22 GiB). Inside the list, the pairs
+within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds replace contacts) are
+found again when a particle has moved half that margin or such a bond breaks, and each step runs the contact law on
+those only (on an 8k dense box 1.6x faster per step than testing and packing every candidate each step).
 
 Damping ``F_d`` is local non-viscous damping as in PFC and MUSEN: ``F_d = -alpha |F| sign(v)`` per component
 (and the same for moments). It removes kinetic energy where a particle accelerates, without slowing a uniform
@@ -161,7 +161,8 @@ def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMSta
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, spring, new.nbrs.idx.T, model.n),
                               lambda: spring)
         found = near_build(model, new.positions, new.nbrs, new.intact, spring, margin, near.slot.shape[0])
-        return found._replace(overflow=found.overflow | near.overflow, count=jnp.maximum(found.count, near.count))
+        return found._replace(overflow=found.overflow | near.overflow, count=jnp.maximum(found.count, near.count),
+                              found=near.found + 1)
 
     near = jax.lax.cond(rebuilt | near_stale(model, near, new.positions, new.intact, margin), refresh, lambda: near)
     force, moment, walls, spring, intact, broken = _contact_forces(model, params, load, new, near.pairs,
@@ -361,7 +362,7 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
     # start, again when stale) and hand their springs back to the state at its end. With a candidate list built on
     # the host (:class:`jaxbpm.neighbors.HostList`) the chunk runs at most ``limit`` steps and stops before the step
     # that would make the list stale; ``done`` says how many ran (the records after them are zeros).
-    near_overflow, near_pairs = jnp.zeros((), bool), jnp.zeros((), jnp.int32)
+    near_overflow, near_pairs, near_found = jnp.zeros((), bool), jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32)
     near = None
     if margin is not None and model.contacts and model.contact_law != "cohesive":
         def advance(carry):
@@ -382,11 +383,11 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
         done = jnp.asarray(n_steps, jnp.int32)
     if near is not None:
         state = dataclasses.replace(state, spring=near_springs(near, state.spring.shape[0]))
-        near_overflow, near_pairs = near.overflow, near.count
+        near_overflow, near_pairs, near_found = near.overflow, near.count, near.found
     overflow = jnp.stack([jnp.asarray(state.nbrs.did_buffer_overflow if model.contacts else False).astype(bool),
                           near_overflow.astype(bool)])
     finite = jnp.all(jnp.isfinite(state.positions))
-    counts = jnp.stack([done, near_pairs]).astype(jnp.int32)  # steps run, most pairs within reach
+    counts = jnp.stack([done, near_pairs, near_found]).astype(jnp.int32)  # steps run; pairs within reach: most, refound
     return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), counts
 
 
@@ -576,8 +577,9 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     steps, steps per second (the median chunk), number of neighbour-list re-allocations; with contacts the
     candidate list's capacity (``contact_capacity``), the most pairs within reach (``contacts_within_reach``) and
     their slots (``contact_slots``: sized to them at the start, grown and the chunk run again when they overflow),
-    where the list is built (``contact_list``: ``"host"`` or ``"jax-md"``) and how often the host built it again
-    between steps (``contact_rebuilds``).
+    where the list is built (``contact_list``: ``"host"`` or ``"jax-md"``), how often the host built it again
+    between steps (``contact_rebuilds``) and how often the pairs within reach were found (``contacts_refound``: passes
+    over the candidate list, at each chunk's start and when stale; chunks run again included).
     progress: ``True`` prints progress (:func:`progress_printer`); a callable is called as
     ``progress(steps_done, steps_total, elapsed_s)`` after every chunk.
     on_chunk: called as ``on_chunk(steps_done, state, chunk_records)`` after every chunk (records of that chunk
@@ -646,9 +648,10 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                 jnp.asarray(left, jnp.int32) if host else None)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
-            rec, (ran, within) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
+            rec, (ran, within, refound) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
             if near_slots is not None:
                 clock["near_count"] = max(clock["near_count"], within)
+                clock["near_found"] = clock.get("near_found", 0) + refound
             if host:
                 rec = {k: r[:ran] for k, r in rec.items()}
                 if ran == 0:
@@ -744,7 +747,7 @@ def _collect(model, state, records, chunk, reallocs, clock):
              "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
              "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0,
              "contact_slots": clock.get("contact_slots", 0), "contacts_within_reach": clock.get("near_count", 0),
-             "contact_rebuilds": clock.get("rebuilds", 0),
+             "contact_rebuilds": clock.get("rebuilds", 0), "contacts_refound": clock.get("near_found", 0),
              "contact_list": ("host" if isinstance(state.nbrs, HostList) else "jax-md") if model.contacts else None}
     return out, stats
 

@@ -23,8 +23,8 @@ __all__ = ["NeighborSettings"]
 @dataclasses.dataclass(frozen=True)
 class NeighborSettings:
     """Neighbour-list settings: ``skin`` [m] (list radius = 2 r_max + 2 skin, jax-md's cutoff ``2 r_max + skin``
-    plus its threshold ``skin``; rebuilt when a particle has moved more than skin / 2), ``capacity_multiplier`` (spare room in the pair buffer), ``box_margin`` (relative padding of the
-    cell-list box around the sample)."""
+    plus its threshold ``skin``; rebuilt when a particle has moved more than skin / 2), ``capacity_multiplier``
+    (spare room in the pair buffer), ``box_margin`` (relative padding of the cell-list box around the sample)."""
 
     skin: float
     capacity_multiplier: float = 1.5
@@ -221,7 +221,7 @@ class _Near(NamedTuple):
     ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
     ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``intact`` (intact bonds
     then), ``overflow`` (more pairs within reach than ``S``: the run needs more slots), ``count`` (the most pairs
-    within reach found so far)."""
+    within reach found so far), ``found`` (how often they were found: passes over the candidate list)."""
 
     pairs: jnp.ndarray
     slot: jnp.ndarray
@@ -230,6 +230,7 @@ class _Near(NamedTuple):
     intact: jnp.ndarray
     overflow: jnp.ndarray
     count: jnp.ndarray
+    found: jnp.ndarray
 
 
 def near_size(count: int, capacity: int) -> int:
@@ -282,7 +283,8 @@ def near_build(model: Model, positions, nbrs, intact, spring, margin, size: int)
     take, count = pack(close, size)
     return _Near(pairs=pairs.at[take].get(mode="fill", fill_value=model.n), slot=take,
                  spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions,
-                 intact=jnp.sum(intact.astype(jnp.int32)), overflow=count > size, count=count)
+                 intact=jnp.sum(intact.astype(jnp.int32)), overflow=count > size, count=count,
+                 found=jnp.ones((), jnp.int32))
 
 
 def near_springs(near: _Near, capacity: int):

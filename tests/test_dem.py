@@ -183,6 +183,7 @@ def test_host_candidate_list_runs_as_jax_md_list_through_breakage(monkeypatch):
     host = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
     assert (cell.stats["contact_list"], host.stats["contact_list"]) == ("jax-md", "host")
     assert host.stats["contact_rebuilds"] > 5 and cell.stats["contact_rebuilds"] == 0
+    assert host.stats["contacts_refound"] >= host.stats["contact_rebuilds"]  # (a new list: found again)
     curve = np.sum(cell.stats["broken_curve"], axis=1)
     first = int(np.argmax(curve > 0))
     assert 0 < first and curve[-1] > 20
