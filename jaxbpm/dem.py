@@ -688,24 +688,19 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                         f"far, too fast: max speed {vmax:.3g} m/s) with time step dt = {dt:.4g} s, critical time "
                         f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
                 extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if overflow else 0
-                nbrs = nb_owner.allocate(state.positions, extra_per_particle=extra, reach=(pmin, pmax))
+                state = done = _with_new_list(model, nb_owner, state, extra_per_particle=extra, reach=(pmin, pmax))
                 origin = jnp.asarray(nb_owner.origin, dtype)
-                spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring,
-                                                  state.cohesion)
-                state = done = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
                 if near_slots is not None:
-                    near_slots = clock["contact_slots"] = min(near_slots, nbrs.idx.shape[1])
+                    near_slots = clock["contact_slots"] = min(near_slots, state.nbrs.idx.shape[1])
                 continue  # (a new buffer size compiles the chunk again)
             if host and ran < left:
                 # the list would go stale in the next step: build it again where the particles are, go on
                 parts.append((rec, elapsed))
                 left -= ran
-                nbrs = nb_owner.allocate(new.positions)
-                spring, cohesion = _remap_history(new.nbrs.idx.T, nbrs.idx.T, model.n, new.spring, new.cohesion)
-                state = dataclasses.replace(new, nbrs=nbrs, spring=spring, cohesion=cohesion)
+                state = _with_new_list(model, nb_owner, new)
                 clock["rebuilds"] = clock.get("rebuilds", 0) + 1
                 if near_slots is not None:
-                    near_slots = clock["contact_slots"] = min(near_slots, nbrs.idx.shape[1])
+                    near_slots = clock["contact_slots"] = min(near_slots, state.nbrs.idx.shape[1])
                 fresh = True
                 continue
             if parts:
@@ -733,6 +728,14 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
         raise SimulationInterrupted(done, out, stats) from err
     out, stats = _collect(model, state, records, chunk, reallocs, clock)
     return state, out, stats
+
+
+def _with_new_list(model, nb_owner, state, **allocate):
+    """``state`` with a candidate list built again at its positions (``allocate``: the owner's ``allocate``
+    options) and its per-contact history (springs, cohesion) carried over to the new list's layout."""
+    nbrs = nb_owner.allocate(state.positions, **allocate)
+    spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion)
+    return dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
 
 
 def _collect(model, state, records, chunk, reallocs, clock):
