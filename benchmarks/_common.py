@@ -53,13 +53,33 @@ def peak_rss_gib() -> float | None:
     return kib / 2**20 if sys.platform != "darwin" else kib / 2**30  # Linux: KiB, macOS: bytes
 
 
+def device_peak_gib() -> float | None:
+    """The peak memory in use on JAX's default device so far [GiB], where that device is an accelerator that says
+    (GPUs do); ``None`` on the CPU (its figure is ``peak_rss_gib``) or where JAX has not been imported."""
+    jax = sys.modules.get("jax")
+    if jax is None:
+        return None
+    try:
+        dev = jax.devices()[0]
+        stats = dev.memory_stats() if dev.platform != "cpu" else None
+    except Exception:  # a backend without memory statistics
+        return None
+    peak = (stats or {}).get("peak_bytes_in_use")
+    return None if peak is None else peak / 2**30
+
+
 def write_json(path, data):
     """Write ``data`` as JSON atomically (temporary file, then rename): never a half-written result. Adds the
-    process's peak resident set (``peak_rss_gib``) where ``data`` is a dict without one."""
+    process's peak resident set (``peak_rss_gib``) where ``data`` is a dict without one, and on an accelerator the
+    device's peak memory in use (``device_peak_gib``)."""
     from jaxbpm.io import write_json as _write
 
     if isinstance(data, dict) and "peak_rss_gib" not in data:
         data = {**data, "peak_rss_gib": peak_rss_gib()}
+    if isinstance(data, dict) and "device_peak_gib" not in data:
+        dev_peak = device_peak_gib()
+        if dev_peak is not None:
+            data = {**data, "device_peak_gib": dev_peak}
     return _write(path, data)
 
 

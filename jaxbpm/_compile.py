@@ -195,6 +195,24 @@ class Program:
 # 2000-particle sample (the bond law's Jacobians, the preconditioner's parts, the time-step estimate) compiles 4-6x
 # faster and runs 2-5x slower: 7 s less compilation for 0.25 s more run time, measured on one CPU core
 QUICK_OPTIONS = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
+_quick_options: dict | None = None
+
+
+def quick_options() -> dict:
+    """The :data:`QUICK_OPTIONS` that this jaxlib's CPU compiler knows (jaxlib 0.11 removed the older fusion
+    emitters and, with them, ``xla_cpu_use_fusion_emitters``: an option it does not know fails the compilation).
+    Each option is tried once per process on a one-line program."""
+    global _quick_options
+    if _quick_options is None:
+        known = {}
+        for name, value in QUICK_OPTIONS.items():
+            try:
+                jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(np.float32(0)).compile()
+            except Exception:  # noqa: BLE001 -- an option this compiler does not have
+                continue
+            known[name] = value
+        _quick_options = known
+    return _quick_options
 QUICK_ROWS = 1 << 15
 """Setup programs (:func:`setup_jit`) whose arguments have at most this many rows (bonds, particles) compile with
 :data:`QUICK_OPTIONS` on the CPU; at 32k bonds (about 10k particles) the slower run still costs less than the
@@ -212,7 +230,8 @@ class SetupJit:
     def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = ()):
         self.fn = fn
         self._full = jax.jit(fn, static_argnames=static_argnames)
-        self._quick = jax.jit(fn, static_argnames=static_argnames, compiler_options=QUICK_OPTIONS)
+        self._static = static_argnames
+        self._quick_jit = None
         self.__name__ = getattr(fn, "__name__", "setup")
         self.__doc__ = fn.__doc__
         self.__wrapped__ = fn
@@ -222,6 +241,12 @@ class SetupJit:
         if QUICK_ROWS <= 0 or traced(args) or jax.default_backend() != "cpu":
             return False
         return all(np.ndim(x) == 0 or np.shape(x)[0] <= QUICK_ROWS for x in jax.tree_util.tree_leaves(args))
+
+    @property
+    def _quick(self):
+        if self._quick_jit is None:
+            self._quick_jit = jax.jit(self.fn, static_argnames=self._static, compiler_options=quick_options())
+        return self._quick_jit
 
     def __call__(self, *args, **static):
         return (self._quick if self.quick(*args) else self._full)(*args, **static)
@@ -257,11 +282,12 @@ class SetupCache:
 
     def get(self, owner, key, build: Callable[[], Any]):
         """The setup of ``owner`` under ``key`` (hashable options), built by ``build()`` when absent. An unhashable
-        key is built every time."""
+        key is built every time. A setup built in float64 is not one for float32 (and the other way round): JAX's
+        precision is part of the key."""
         if not hashable(key):
             self.builds += 1
             return build()
-        k = (id(owner), key)
+        k = (id(owner), bool(jax.config.jax_enable_x64), key)
         hit = self._items.get(k)
         if hit is not None and hit[0]() is owner:
             self._items.move_to_end(k)

@@ -254,3 +254,16 @@ def test_linearised_contact_candidates_are_padded(packing, monkeypatch):
     c = jaxbpm.solve(s, scene, method="dsm", nonlinear=False, contact_skin=k2)
     assert c.stats["contact_candidates"] != a.stats["contact_candidates"]
     assert dsm.linear.contacts_program.compilations == before and c.compile_time == 0.0
+
+
+def test_quick_options_are_those_the_compiler_knows(monkeypatch):
+    # jaxlib 0.11 dropped xla_cpu_use_fusion_emitters: an option the compiler does not know must be left out, not
+    # fail every setup program
+    known = _compile.quick_options()
+    assert known and set(known) <= set(_compile.QUICK_OPTIONS)
+    assert known["xla_backend_optimization_level"] == 0
+    monkeypatch.setattr(_compile, "_quick_options", None)
+    monkeypatch.setattr(_compile, "QUICK_OPTIONS", {**_compile.QUICK_OPTIONS, "xla_no_such_option": True})
+    assert "xla_no_such_option" not in _compile.quick_options()
+    square = _compile.setup_jit(lambda x: x * x)
+    np.testing.assert_allclose(square(np.arange(3.0)), [0.0, 1.0, 4.0])
