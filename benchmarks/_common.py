@@ -68,6 +68,36 @@ def device_peak_gib() -> float | None:
     return None if peak is None else peak / 2**30
 
 
+# spans that hold other spans (Python frames, the executor, loops, conditionals, whole programs)
+_PROFILE_CONTAINERS = ("$", "ThunkExecutor", "while", "conditional", "PjitFunction", "CommonPjRt", "PjRt")
+
+
+def profile_top(trace_dir: str, steps: int, top: int = 25) -> list[dict]:
+    """The ``top`` operations that took longest in the trace JAX's profiler wrote under ``trace_dir``
+    (``jax.profiler.trace(..., create_perfetto_trace=True)``): XLA's fusions and thunks on the CPU, the kernels on a
+    GPU; Python frames and the executor's own spans left out. Each with its total per step (the trace covers
+    ``steps`` steps) and how often it ran per step."""
+    import collections
+    import glob
+    import gzip
+    import json
+
+    files = glob.glob(os.path.join(trace_dir, "**", "*.trace.json.gz"), recursive=True)
+    if not files:
+        return []
+    with gzip.open(max(files, key=os.path.getmtime)) as fh:
+        events = json.load(fh).get("traceEvents", [])
+    total, count = collections.Counter(), collections.Counter()
+    for e in events:
+        name = e.get("name", "")
+        if e.get("ph") != "X" or name.startswith(_PROFILE_CONTAINERS):
+            continue
+        total[name] += e.get("dur", 0.0)
+        count[name] += 1
+    return [{"name": name, "ms_per_step": t / 1e3 / steps, "calls_per_step": count[name] / steps}
+            for name, t in total.most_common(top)]
+
+
 def write_json(path, data):
     """Write ``data`` as JSON atomically (temporary file, then rename): never a half-written result. Adds the
     process's peak resident set (``peak_rss_gib``) where ``data`` is a dict without one, and on an accelerator the

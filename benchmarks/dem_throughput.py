@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 
-from _common import enable_x64, machine_info, peak_rss_gib, pin_threads, table, write_json
+from _common import enable_x64, machine_info, peak_rss_gib, pin_threads, profile_top, table, write_json
 
 
 def main(argv=None) -> int:
@@ -38,6 +39,9 @@ def main(argv=None) -> int:
     ap.add_argument("--contact-list", choices=["auto", "host", "jax-md"], default="auto",
                     help="the candidate list of contacts: built on the host (a k-d tree, between steps; the default "
                          "from 20k particles on the CPU) or by jax-md's cell list inside the step")
+    ap.add_argument("--profile", default=None, metavar="DIR",
+                    help="after each timed run, trace one more chunk with JAX's profiler into DIR/<case> and record "
+                         "the operations (XLA fusions, GPU kernels) that took longest, per step")
     ap.add_argument("--quick", action="store_true", help="1k and 10k particles, 500 timed steps")
     ap.add_argument("--out", default="results/dem_throughput.json")
     args = ap.parse_args(argv)
@@ -93,6 +97,16 @@ def main(argv=None) -> int:
                    "contacts_refound": stats["contacts_refound"], "reallocations": stats["reallocations"],
                    ("load_s" if args.samples else "generate_s"): gen_time,
                    "peak_rss_gib": peak_rss_gib()}
+            if args.profile:
+                import jax
+
+                trace = os.path.join(args.profile, f"{sample.n_particles}_{physics.replace('+', '_')}")
+                with jax.profiler.trace(trace, create_perfetto_trace=True):
+                    dem.simulate(model, params, load, dt=dt, n_steps=args.chunk, chunk=args.chunk, alpha=0.7)
+                row["profile_top"] = profile_top(trace, steps=args.chunk)
+                for op in row["profile_top"][:12]:
+                    print(f"  {op['ms_per_step']:9.3f} ms/step  {op['calls_per_step']:6.2f}x  {op['name']}",
+                          file=sys.stderr)
             rows.append(row)
             print(f"n={sample.n_particles} nb={sample.n_bonds} {physics}: {row['bond_steps_per_s']:.3g} bond-steps/s,"
                   f" compile {row['compile_s']:.2f} s", file=sys.stderr, flush=True)

@@ -31,6 +31,7 @@ import argparse
 import os
 import subprocess
 import sys
+import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -52,7 +53,8 @@ CASES = {
 
 # --short: the same cases at sizes that fit a first look of about ten minutes on one GPU, most telling first.
 SHORT = {
-    "dem_throughput": ["--sizes", "10000", "100000", "--steps", "1000"],
+    "dem_throughput": ["--sizes", "10000", "100000", "--steps", "1000",
+                       "--profile", os.path.join(tempfile.gettempdir(), "jaxbpm-gpu-traces")],
     "ste": ["--random-sizes", "10000", "--fcc-sizes", "100000", "1000000", "--dem-max", "10000",
             "--dsm-max", "10000"],
     "scaling": ["--sizes", "10000", "100000", "300000", "--methods", "ste", "dsm", "--dsm-stiffness-tol", "1e-2"],

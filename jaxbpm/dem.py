@@ -375,9 +375,19 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
             s, rec = step(model, params, load, carry[0], dt, alpha, origin)
             return (s, None), rec
 
+    rebuilds = jnp.zeros((), jnp.int32)
     if model.contacts and isinstance(state.nbrs, HostList):
         (state, near), records, done = _run_until_stale(model, load, advance, (state, near), dt, alpha, n_steps,
                                                         limit)
+    elif model.contacts:
+        # jax-md's list is built again inside a step when a particle has moved half the skin: count those steps
+        def counted(c, _):
+            carry, k = advance(c[0]), c[1]
+            moved = jnp.any(carry[0][0].nbrs.reference_position != c[0][0].nbrs.reference_position)
+            return (carry[0], k + moved.astype(jnp.int32)), carry[1]
+
+        ((state, near), rebuilds), records = jax.lax.scan(counted, ((state, near), rebuilds), None, length=n_steps)
+        done = jnp.asarray(n_steps, jnp.int32)
     else:
         (state, near), records = jax.lax.scan(lambda c, _: advance(c), (state, near), None, length=n_steps)
         done = jnp.asarray(n_steps, jnp.int32)
@@ -387,7 +397,8 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
     overflow = jnp.stack([jnp.asarray(state.nbrs.did_buffer_overflow if model.contacts else False).astype(bool),
                           near_overflow.astype(bool)])
     finite = jnp.all(jnp.isfinite(state.positions))
-    counts = jnp.stack([done, near_pairs, near_found]).astype(jnp.int32)  # steps run; pairs within reach: most, refound
+    # steps run; pairs within reach: most, refound; candidate list built again inside the steps (jax-md's)
+    counts = jnp.stack([done, near_pairs, near_found, rebuilds]).astype(jnp.int32)
     return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), counts
 
 
@@ -577,8 +588,8 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, al
     steps, steps per second (the median chunk), number of neighbour-list re-allocations; with contacts the
     candidate list's capacity (``contact_capacity``), the most pairs within reach (``contacts_within_reach``) and
     their slots (``contact_slots``: sized to them at the start, grown and the chunk run again when they overflow),
-    where the list is built (``contact_list``: ``"host"`` or ``"jax-md"``), how often the host built it again
-    between steps (``contact_rebuilds``) and how often the pairs within reach were found (``contacts_refound``: passes
+    where the list is built (``contact_list``: ``"host"`` or ``"jax-md"``), how often it was built again
+    (``contact_rebuilds``: by the host between steps, or by jax-md inside them; chunks run again included) and how often the pairs within reach were found (``contacts_refound``: passes
     over the candidate list, at each chunk's start and when stale; chunks run again included).
     progress: ``True`` prints progress (:func:`progress_printer`); a callable is called as
     ``progress(steps_done, steps_total, elapsed_s)`` after every chunk.
@@ -648,7 +659,8 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                 jnp.asarray(left, jnp.int32) if host else None)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
-            rec, (ran, within, refound) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
+            rec, (ran, within, refound, rebuilt) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
+            clock["rebuilds"] = clock.get("rebuilds", 0) + rebuilt
             if near_slots is not None:
                 clock["near_count"] = max(clock["near_count"], within)
                 clock["near_found"] = clock.get("near_found", 0) + refound

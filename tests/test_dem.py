@@ -182,7 +182,9 @@ def test_host_candidate_list_runs_as_jax_md_list_through_breakage(monkeypatch):
     _host_lists(monkeypatch)
     host = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
     assert (cell.stats["contact_list"], host.stats["contact_list"]) == ("jax-md", "host")
-    assert host.stats["contact_rebuilds"] > 5 and cell.stats["contact_rebuilds"] == 0
+    # the host builds its list again between the steps where jax-md builds its own inside them: as often
+    assert host.stats["contact_rebuilds"] > 5
+    assert abs(cell.stats["contact_rebuilds"] - host.stats["contact_rebuilds"]) <= 1, (cell.stats, host.stats)
     assert host.stats["contacts_refound"] >= host.stats["contact_rebuilds"]  # (a new list: found again)
     curve = np.sum(cell.stats["broken_curve"], axis=1)
     first = int(np.argmax(curve > 0))
