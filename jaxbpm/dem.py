@@ -11,10 +11,10 @@ Integration (per step, time step dt)::
     F, M = forces(x, q)                                           (one force evaluation per step)
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
 
-Contacts: a neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin): jax-md's
-cell list, rebuilt inside the step; from ``neighbors.HOST_LIST_MIN`` (20k) particles on the CPU, a k-d tree on the
-host, rebuilt between chunks (a chunk stops before the step that would make it stale and goes on after the rebuild;
-jax-md's rebuild fills a dense candidate array that took a 1M-particle run past 22 GiB). Inside the list, the pairs
+Contacts: a neighbour list gives the candidate pairs (rebuilt when a particle has moved half its skin): on the CPU
+a k-d tree on the host, rebuilt between chunks (a chunk stops before the step that would make it stale and goes on
+after the rebuild); on accelerators jax-md's cell list, rebuilt inside the step (its rebuild fills a dense candidate
+array that took a 1M-particle run on the CPU past 22 GiB). Inside the list, the pairs
 within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds replace contacts) are
 found again when a particle has moved half that margin or such a bond breaks, and each step runs the contact law on
 those only (on an 8k dense box 1.6x faster per step than testing and packing every candidate each step).

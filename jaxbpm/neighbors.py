@@ -98,8 +98,11 @@ _CELL_LIST_FNS: dict = {}  # cell-list functions by neighbour-list settings (see
 
 #: from this many particles on the CPU the DEM's candidate list is built on the host (a k-d tree, between steps)
 #: instead of by jax-md's cell list inside the step: the cell list fills a dense ``[n, 27 x cell capacity]``
-#: candidate array at every (re)build, which at 1M particles took the run past 22 GiB before its first chunk
-HOST_LIST_MIN = 20_000
+#: candidate array at every (re)build, which at 1M particles took the run past 22 GiB before its first chunk. On the
+#: CPU the host list is as fast or faster at every size and compiles less (UCS to failure with contacts, one core,
+#: wall of the solve: 500 particles 5.6 s against 6.6 s, 2k 8.1 s against 9.0 s, 8k 35.2 s against 39.8 s, the same
+#: rebuilds), so it is the CPU's list from the first particle; accelerators keep jax-md's (no host round trip)
+HOST_LIST_MIN = 0
 
 
 class HostList(NamedTuple):
@@ -169,8 +172,8 @@ class _HostNeighbors:
 
 
 def neighbors_owner(model: Model, settings: NeighborSettings, positions):
-    """The owner of the DEM's candidate list: :class:`_HostNeighbors` from :data:`HOST_LIST_MIN` particles on the
-    CPU, :class:`_Neighbors` (jax-md's cell list, rebuilt inside the step) else."""
+    """The owner of the DEM's candidate list: :class:`_HostNeighbors` on the CPU (from :data:`HOST_LIST_MIN`
+    particles), :class:`_Neighbors` (jax-md's cell list, rebuilt inside the step) on accelerators."""
     if model.n >= HOST_LIST_MIN and jax.default_backend() == "cpu":
         return _HostNeighbors(model, settings, positions)
     return _Neighbors(model, settings, positions)

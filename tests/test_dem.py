@@ -130,7 +130,7 @@ def test_simple_cubic_column_modulus(cells):
     assert res.force[-1] > 0  # compression positive
 
 
-def test_fragment_flying_out_of_the_neighbour_box_within_a_chunk():
+def test_fragment_flying_out_of_the_neighbour_box_within_a_chunk(monkeypatch):
     """A particle that leaves the contact search box within one chunk (a fragment after a failure): the box is
     re-made around where the chunk took it and the chunk runs again, once; the flight is free (x0 + v t). The box
     was re-made around the chunk's start only, so the chunk left it again and again and the run stopped ("stalled")."""
@@ -139,6 +139,7 @@ def test_fragment_flying_out_of_the_neighbour_box_within_a_chunk():
                                   particle_material={"E": 1e8, "nu": 0.3, "friction": 0.0})
     model = build_model(s, contacts=True)
     params, load = default_params(s), _free_loading(3)
+    _jax_md_lists(monkeypatch)  # (the host's list has no box)
     owner = dem._Neighbors(model, dem.NeighborSettings(skin=0.5 * R), model.positions0)
     state = dem.init_state(model, params, load, nbrs=owner.allocate(model.positions0))
     dt, v0, chunk = 1e-6, 100.0, 100  # 0.1 R a step, 10 R a chunk: past the box's padding (~5 R) in one chunk
@@ -150,11 +151,17 @@ def test_fragment_flying_out_of_the_neighbour_box_within_a_chunk():
 
 
 def _host_lists(monkeypatch):
-    """The DEM's candidate list built on the host (a k-d tree between chunks) at every size, not only from 20k
-    particles."""
+    """The DEM's candidate list built on the host (a k-d tree between chunks) at every size (the CPU's default)."""
     from jaxbpm import neighbors
 
     monkeypatch.setattr(neighbors, "HOST_LIST_MIN", 0)
+
+
+def _jax_md_lists(monkeypatch):
+    """The DEM's candidate list by jax-md's cell list inside the step (the accelerators' list) on the CPU too."""
+    from jaxbpm import neighbors
+
+    monkeypatch.setattr(neighbors, "HOST_LIST_MIN", 1 << 62)
 
 
 def test_host_candidate_list_holds_every_pair_within_its_radius():
@@ -178,6 +185,7 @@ def test_host_candidate_list_runs_as_jax_md_list_through_breakage(monkeypatch):
                                  particle_material={"E": 1e9, "nu": 0.25, "density": 2500.0, "friction": 0.5,
                                                     "restitution": 0.5}).largest_cluster()
     scene = jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02)
+    _jax_md_lists(monkeypatch)
     cell = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
     _host_lists(monkeypatch)
     host = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
@@ -282,14 +290,18 @@ def test_unstable_run_with_contacts_raises_instead_of_reallocating():
             jaxbpm.solve(s, scene, dt=2.0 * crit, transits=10)
 
 
-def test_neighbor_overflow_is_reallocated_and_matches_big_buffer():
+@pytest.mark.parametrize("lists", ["jax-md", "host"])
+def test_neighbor_overflow_is_reallocated_and_matches_big_buffer(lists, monkeypatch):
+    # jax-md's buffer overflows inside a chunk (which runs again); the host's list is sized when built
+    (_jax_md_lists if lists == "jax-md" else _host_lists)(monkeypatch)
     s = jaxbpm.generate.box(80, seed=1, mean_radius=R, packing_fraction=0.45)
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.05, contacts=True)
     tight = jaxbpm.solve(s, scene, neighbors=dem.NeighborSettings(skin=0.1 * R, capacity_multiplier=1.0),
                          transits=10)
     roomy = jaxbpm.solve(s, scene, neighbors=dem.NeighborSettings(skin=0.1 * R, capacity_multiplier=4.0),
                          transits=10)
-    assert tight.stats["reallocations"] >= 1
+    assert tight.stats["contact_list"] == lists
+    assert tight.stats["reallocations"] >= (1 if lists == "jax-md" else 0)
     assert roomy.stats["reallocations"] == 0
     np.testing.assert_allclose(tight.force, roomy.force, rtol=1e-9, atol=1e-12 * np.max(np.abs(roomy.force)))
 

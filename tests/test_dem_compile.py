@@ -45,20 +45,25 @@ def _check_times(res):
 
 
 def test_bonds_only_dem_does_not_import_jax_md():
-    # and the DEM with contacts loads only jax-md's neighbour lists: its package __init__ (rigid bodies, energies)
-    # computes at import, which compiled about 3 s of small programs in a first call
+    # nor does the DEM with contacts on the CPU (its candidate list is built on the host); with jax-md's list (the
+    # accelerators') it loads only jax-md's neighbour lists: the package __init__ (rigid bodies, energies) computes
+    # at import, which compiled about 3 s of small programs in a first call
     code = ("import jax, sys; jax.config.update('jax_enable_x64', True); import jaxbpm, jaxbpm.dem; "
             "print('jax_md' in sys.modules); "
             "s = jaxbpm.generate.lattice('sc', (2, 2, 3), 1e-3); "
             "r = jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), method='dem', transits=5); "
             "print(r.stiffness > 0, 'jax_md' in sys.modules); "
-            "c = jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002, contacts=True), method='dem', "
-            "transits=2); "
-            "print(c.stiffness > 0, 'jax_md.partition' in sys.modules, "
+            "scene = jaxbpm.scenes.UniaxialCompression(strain=0.002, contacts=True); "
+            "c = jaxbpm.solve(s, scene, method='dem', transits=2); "
+            "print(c.stiffness > 0, c.stats['contact_list'], any(m.startswith('jax_md') for m in sys.modules)); "
+            "jaxbpm.neighbors.HOST_LIST_MIN = 1 << 62; "
+            "c = jaxbpm.solve(s, scene, method='dem', transits=2); "
+            "print(c.stiffness > 0, c.stats['contact_list'], 'jax_md.partition' in sys.modules, "
             "any(m in sys.modules for m in ('jax_md', 'jax_md.rigid_body', 'jax_md.energy')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["False", "True", "False", "True", "True", "False"]
+    assert out.stdout.split() == ["False", "True", "False", "True", "host", "False", "True", "jax-md", "True",
+                                  "False"]
 
 
 def test_padding_changes_nothing(tmp_path):
