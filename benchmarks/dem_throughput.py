@@ -101,9 +101,13 @@ def main(argv=None) -> int:
                 import jax
 
                 trace = os.path.join(args.profile, f"{sample.n_particles}_{physics.replace('+', '_')}")
-                with jax.profiler.trace(trace, create_perfetto_trace=True):
-                    dem.simulate(model, params, load, dt=dt, n_steps=args.chunk, chunk=args.chunk, alpha=0.7)
-                row["profile_top"] = profile_top(trace, steps=args.chunk)
+                try:  # (a profiler that cannot start, e.g. without CUPTI on a GPU, costs the profile, not the row)
+                    with jax.profiler.trace(trace, create_perfetto_trace=True):
+                        dem.simulate(model, params, load, dt=dt, n_steps=args.chunk, chunk=args.chunk, alpha=0.7)
+                    row["profile_top"] = profile_top(trace, steps=args.chunk)
+                except Exception as exc:  # noqa: BLE001
+                    row["profile_top"], row["profile_error"] = [], f"{type(exc).__name__}: {exc}"[:500]
+                    print(f"  profile failed: {row['profile_error']}", file=sys.stderr)
                 for op in row["profile_top"][:12]:
                     print(f"  {op['ms_per_step']:9.3f} ms/step  {op['calls_per_step']:6.2f}x  {op['name']}",
                           file=sys.stderr)
