@@ -355,13 +355,15 @@ def _precompute(model, params):
 
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "near_slots"))
-def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=None, near_slots=None, limit=None):
+def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=None, near_slots=None, limit=None,
+               forced=None):
     # ``params`` comes precomputed (stiffnesses and strengths, once per run, not per step): its structure is the
     # same whatever entries the caller's dict had, so the chunk compiles once per model. With Hertz contacts and a
     # ``margin``, the steps carry the pairs within reach (``near_slots`` of them at most; found at the chunk's
     # start, again when stale) and hand their springs back to the state at its end. With a candidate list built on
     # the host (:class:`jaxbpm.neighbors.HostList`) the chunk runs at most ``limit`` steps and stops before the step
-    # that would make the list stale; ``done`` says how many ran (the records after them are zeros).
+    # that would make the list stale; ``done`` says how many ran (the records after them are zeros); its first
+    # ``forced`` steps run unchecked (a list built where the next step takes the particles).
     near_overflow, near_pairs, near_found = jnp.zeros((), bool), jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32)
     near = None
     if margin is not None and model.contacts and model.contact_law != "cohesive":
@@ -378,7 +380,7 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
     rebuilds = jnp.zeros((), jnp.int32)
     if model.contacts and isinstance(state.nbrs, HostList):
         (state, near), records, done = _run_until_stale(model, load, advance, (state, near), dt, alpha, n_steps,
-                                                        limit)
+                                                        limit, forced)
     elif model.contacts:
         # jax-md's list is built again inside a step when a particle has moved half the skin: count those steps
         def counted(c, _):
@@ -402,17 +404,19 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
     return state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), counts
 
 
-def _run_until_stale(model, load, advance, carry, dt, alpha, n_steps, limit):
+def _run_until_stale(model, load, advance, carry, dt, alpha, n_steps, limit, forced=None):
     """``advance`` (``carry -> (carry, record)``, ``carry[0]`` the state) at most ``min(n_steps, limit)`` times,
-    stopping before the step whose drift would take a particle past the host list's threshold. Returns the carry,
-    the records ``[n_steps, ...]`` (zeros after the last step run) and the number of steps run."""
+    stopping before the step whose drift would take a particle past the host list's threshold (not checked for the
+    first ``forced`` steps). Returns the carry, the records ``[n_steps, ...]`` (zeros after the last step run) and
+    the number of steps run."""
     template = jax.eval_shape(lambda c: advance(c)[1], carry)
     records = jax.tree.map(lambda a: jnp.zeros((n_steps,) + a.shape, a.dtype), template)
     limit = n_steps if limit is None else jnp.minimum(limit, n_steps)
+    forced = 0 if forced is None else forced
 
     def going(c):
         k, (s, _), _ = c
-        return (k < limit) & ~stale(s.nbrs, _drift(model, load, s, dt, alpha)[1])
+        return (k < limit) & ((k < forced) | ~stale(s.nbrs, _drift(model, load, s, dt, alpha)[1]))
 
     def body(c):
         k, carry, records = c
@@ -421,6 +425,12 @@ def _run_until_stale(model, load, advance, carry, dt, alpha, n_steps, limit):
 
     done, carry, records = jax.lax.while_loop(going, body, (jnp.zeros((), jnp.int32), carry, records))
     return carry, records, done
+
+
+@jax.jit
+def _ahead(model, load, state, dt, alpha):
+    """The positions the next step's drift takes the particles to."""
+    return _drift(model, load, state, dt, alpha)[1]
 
 
 def pad_loading(load: Loading, n: int) -> Loading:
@@ -648,7 +658,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     # a candidate list built on the host: a chunk stops before the list goes stale, the list is built again and the
     # chunk goes on from there (``left`` steps; the records and kernel time of its parts so far in ``parts``)
     host = model.contacts and isinstance(state.nbrs, HostList)
-    left, parts, fresh = chunk, [], False
+    left, parts, forced = chunk, [], 0
     clock["loop"] = time.perf_counter()
     try:
         while len(records) < n_chunks:
@@ -656,7 +666,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             tc, compiled = time.perf_counter(), compiling.seconds
             new, rec, overflow, finite, pmin, pmax, counts = _run_chunk(
                 model, pre, load, state, dt, alpha, origin, chunk, margin, near_slots,
-                jnp.asarray(left, jnp.int32) if host else None)
+                jnp.asarray(left, jnp.int32) if host else None, jnp.asarray(forced, jnp.int32) if host else None)
             jax.block_until_ready(new.positions)
             elapsed = time.perf_counter() - tc - (compiling.seconds - compiled)  # (less a new program's compilation)
             rec, (ran, within, refound, rebuilt) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
@@ -667,13 +677,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             if host:
                 rec = {k: r[:ran] for k, r in rec.items()}
                 if ran == 0:
-                    if fresh:
-                        raise InstabilityError(
-                            f"DEM run stalled at step {len(records) * chunk + chunk - left}: a particle moves more "
-                            f"than half the neighbour list's skin ({0.5 * nb_owner.settings.skin:.3g} m) in one step "
-                            f"with time step dt = {dt:.4g} s, critical time step estimate = {crit}. Use a smaller "
-                            f"time step (or a larger skin).")
-                    new = state  # nothing ran: the list is built again below
+                    new = state  # the first step would go stale: the list is built again below
             # instability first: a blown-up chunk also overflows the neighbour buffer, and re-allocating for it
             # would only run it again (and again)
             vmax = float(np.max(rec["vmax"])) if rec["vmax"].size else 0.0
@@ -699,27 +703,30 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                         f"neighbour list was re-allocated {stalled} times for the same chunk (particles moving too "
                         f"far, too fast: max speed {vmax:.3g} m/s) with time step dt = {dt:.4g} s, critical time "
                         f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
-                extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if overflow else 0
+                # (at least one slot a particle more: a list allocated with no pair in reach has no capacity)
+                extra = max(1, int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n))) if overflow else 0
                 state = done = _with_new_list(model, nb_owner, state, extra_per_particle=extra, reach=(pmin, pmax))
                 origin = jnp.asarray(nb_owner.origin, dtype)
                 if near_slots is not None:
                     near_slots = clock["contact_slots"] = min(near_slots, state.nbrs.idx.shape[1])
                 continue  # (a new buffer size compiles the chunk again)
             if host and ran < left:
-                # the list would go stale in the next step: build it again where the particles are, go on
+                # the list would go stale in the next step: build it again where that step takes the particles (as
+                # jax-md's list is built again inside the step) and go on with that step unchecked: a particle moving
+                # more than half the skin in every step (a skin set small) costs a rebuild a step, not the run
                 parts.append((rec, elapsed))
                 left -= ran
-                state = _with_new_list(model, nb_owner, new)
+                state = _with_new_list(model, nb_owner, new, at=_ahead(model, load, new, dt, alpha))
                 clock["rebuilds"] = clock.get("rebuilds", 0) + 1
                 if near_slots is not None:
                     near_slots = clock["contact_slots"] = min(near_slots, state.nbrs.idx.shape[1])
-                fresh = True
+                forced = 1
                 continue
             if parts:
                 parts.append((rec, elapsed))
                 rec = {k: np.concatenate([p[0][k] for p in parts]) for k in rec}
                 elapsed = sum(p[1] for p in parts)
-            left, parts, fresh = chunk, [], False
+            left, parts, forced = chunk, [], 0
             clock["kernel"].append(elapsed)
             stalled = 0
             state = done = new
@@ -742,10 +749,10 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
     return state, out, stats
 
 
-def _with_new_list(model, nb_owner, state, **allocate):
-    """``state`` with a candidate list built again at its positions (``allocate``: the owner's ``allocate``
-    options) and its per-contact history (springs, cohesion) carried over to the new list's layout."""
-    nbrs = nb_owner.allocate(state.positions, **allocate)
+def _with_new_list(model, nb_owner, state, at=None, **allocate):
+    """``state`` with a candidate list built again at its positions (or ``at``; ``allocate``: the owner's
+    ``allocate`` options) and its per-contact history (springs, cohesion) carried over to the new list's layout."""
+    nbrs = nb_owner.allocate(state.positions if at is None else at, **allocate)
     spring, cohesion = _remap_history(state.nbrs.idx.T, nbrs.idx.T, model.n, state.spring, state.cohesion)
     return dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
 

@@ -203,9 +203,9 @@ def test_host_candidate_list_runs_as_jax_md_list_through_breakage(monkeypatch):
     assert abs(host.stats["strength"] / cell.stats["strength"] - 1) < 1e-8
 
 
-def _head_on(monkeypatch, gap, v0, skin=0.5 * R):
-    """Two spheres ``gap`` apart closing at ``2 v0``, the list built on the host."""
-    _host_lists(monkeypatch)
+def _head_on(monkeypatch, gap, v0, skin=0.5 * R, lists="host"):
+    """Two spheres ``gap`` apart closing at ``2 v0``, the list built on the host (or by jax-md)."""
+    (_host_lists if lists == "host" else _jax_md_lists)(monkeypatch)
     pos = np.array([[0.0, 0.0, 0.0], [2 * R + gap, 0.0, 0.0]])
     s = jaxbpm.Sample.from_arrays(pos, R, np.zeros((0, 2), int), bond_radius=np.zeros(0),
                                   particle_material={"E": 1e8, "nu": 0.3, "friction": 0.0})
@@ -228,10 +228,22 @@ def test_host_candidate_list_finds_a_contact_made_within_a_chunk(monkeypatch):
     assert x[1, 0] - x[0, 0] > 2 * R  # and parted, the right way round
 
 
-def test_host_candidate_list_stalls_on_a_step_past_half_the_skin(monkeypatch):
-    model, params, load, state = _head_on(monkeypatch, 10 * R, 150.0)  # 0.3 R a step: over skin / 2 = 0.25 R
-    with pytest.raises(jaxbpm.InstabilityError, match="half the neighbour list's skin"):
-        dem.simulate(model, params, load, dt=2e-6, n_steps=100, chunk=50, state=state)
+def test_host_candidate_list_steps_past_half_the_skin_as_jax_md_does(monkeypatch):
+    """A skin set small, so that the spheres move more than half of it in every step (0.02 R a step, skin 0.02 R):
+    the host builds its list again where each step takes the particles, as jax-md builds its own inside the step, and
+    the two runs are the same (the collision included). Before, the host's run stopped ("stalled")."""
+    skin, runs = 0.02 * R, {}
+    for lists in ("host", "jax-md"):
+        model, params, load, state = _head_on(monkeypatch, 0.2 * R, 10.0, skin=skin, lists=lists)
+        runs[lists] = dem.simulate(model, params, load, dt=2e-6, n_steps=120, chunk=60, state=state,
+                                   neighbors=dem.NeighborSettings(skin=skin))
+    (host, _, stats), (cell, _, stats_cell) = runs["host"], runs["jax-md"]
+    assert (stats["contact_list"], stats_cell["contact_list"]) == ("host", "jax-md")
+    assert stats["contact_rebuilds"] >= 100 and stats_cell["contact_rebuilds"] >= 100  # about one a step
+    v = np.asarray(host.velocities)
+    assert v[0, 0] < -5.0 and v[1, 0] > 5.0  # they met and bounced
+    np.testing.assert_allclose(np.asarray(host.positions), np.asarray(cell.positions), rtol=0, atol=1e-12 * R)
+    np.testing.assert_allclose(v, np.asarray(cell.velocities), rtol=0, atol=1e-9)
 
 
 def test_hertz_impact_contact_time():
