@@ -37,8 +37,8 @@ def main(argv=None) -> int:
     ap.add_argument("--strain-per-step", type=float, default=2e-6,
                     help="compression per step (default 2e-6: 0.2 %% over 1000 steps; before, 0.2 %% over --steps)")
     ap.add_argument("--contact-list", choices=["auto", "host", "jax-md"], default="auto",
-                    help="the candidate list of contacts: built on the host (a k-d tree, between steps; the default "
-                         "from 20k particles on the CPU) or by jax-md's cell list inside the step")
+                    help="the candidate list of contacts: built on the host (a k-d tree, between steps; the CPU's "
+                         "default) or by jax-md's cell list inside the step (the accelerators')")
     ap.add_argument("--profile", default=None, metavar="DIR",
                     help="after each timed run, trace one more chunk with JAX's profiler into DIR/<case> and record "
                          "the operations (XLA fusions, GPU kernels) that took longest, per step")

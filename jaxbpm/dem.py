@@ -703,8 +703,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
                         f"neighbour list was re-allocated {stalled} times for the same chunk (particles moving too "
                         f"far, too fast: max speed {vmax:.3g} m/s) with time step dt = {dt:.4g} s, critical time "
                         f"step estimate = {crit}. Use a smaller time step (or a smaller safety factor).")
-                # (at least one slot a particle more: a list allocated with no pair in reach has no capacity)
-                extra = max(1, int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n))) if overflow else 0
+                extra = int(np.ceil(0.5 * state.nbrs.idx.shape[1] / model.n)) if overflow else 0
                 state = done = _with_new_list(model, nb_owner, state, extra_per_particle=extra, reach=(pmin, pmax))
                 origin = jnp.asarray(nb_owner.origin, dtype)
                 if near_slots is not None:

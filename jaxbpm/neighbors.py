@@ -85,8 +85,10 @@ class _Neighbors:
         if not self.inside(lo, hi):
             self._setup(lo, hi)
         with _jax_md_context():
-            nbrs = self.fns.allocate(jnp.asarray(positions) - jnp.asarray(self.origin)[None, :],
-                                     extra_capacity=extra_per_particle)
+            shifted = jnp.asarray(positions) - jnp.asarray(self.origin)[None, :]
+            nbrs = self.fns.allocate(shifted, extra_capacity=extra_per_particle)
+            if nbrs.idx.shape[1] == 0:  # never empty (as the host's list): room for the first pairs to come
+                nbrs = self.fns.allocate(shifted, extra_capacity=max(1, extra_per_particle))
         if getattr(nbrs, "cell_list_fn", None) is not None:
             # jax-md makes new cell-list functions (static pytree metadata) at every allocation, which would compile
             # the DEM chunk again for every run; those of one box, cell size and multiplier are interchangeable
@@ -190,8 +192,6 @@ def _contact_pairs(model: Model, nbrs, intact=None):
 
 def _remap_springs(old_pairs, old_spring, new_pairs, n):
     """Carry tangential springs across a neighbour-list rebuild by matching pair keys."""
-    if old_pairs.shape[0] == 0:
-        return jnp.zeros((new_pairs.shape[0],) + old_spring.shape[1:], old_spring.dtype)
     take, found = _remap_index(old_pairs, new_pairs, n)
     return jnp.where(found[:, None], old_spring[take], 0.0)
 
@@ -199,9 +199,6 @@ def _remap_springs(old_pairs, old_spring, new_pairs, n):
 def _remap_history(old_pairs, new_pairs, n, spring, cohesion):
     """Carry the per-contact state (springs and, with the cohesive law, the cohesion history) across a rebuild; a
     pair new to the list starts with an empty spring and zero cohesion (a new contact)."""
-    if old_pairs.shape[0] == 0:  # nothing to carry (a list allocated with no pair in reach)
-        spring = jnp.zeros((new_pairs.shape[0],) + spring.shape[1:], spring.dtype)
-        return spring, (None if cohesion is None else jnp.zeros(new_pairs.shape[0], cohesion.dtype))
     take, found = _remap_index(old_pairs, new_pairs, n)
     spring = jnp.where(found[:, None], spring[take], 0.0)
     return spring, (None if cohesion is None else jnp.where(found, cohesion[take], 0.0))
@@ -274,8 +271,6 @@ def pack(mask, size: int):
     """Indices of the ``True`` entries of ``mask [C]`` in ``size`` slots (``C`` for an empty slot) and how many
     there are (more than ``size``: they did not fit; ``associative_scan``: XLA's CPU cumsum is slower)."""
     capacity = mask.shape[0]
-    if capacity == 0:  # (jax-md's list of a sample with no pair in reach yet: every slot empty)
-        return jnp.zeros(size, jnp.int32), jnp.zeros((), jnp.int32)
     slot = jax.lax.associative_scan(jnp.add, mask.astype(jnp.int32)) - 1
     take = jnp.full(size, capacity, jnp.int32).at[jnp.where(mask, slot, size)].set(
         jnp.arange(capacity, dtype=jnp.int32), mode="drop")
@@ -291,12 +286,8 @@ def near_build(model: Model, positions, nbrs, intact, spring, margin, size: int)
     i, j, d = pair_vectors(positions, pairs, valid)
     close = valid & (model.radii[i] + model.radii[j] + margin - jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0)
     take, count = pack(close, size)
-    if pairs.shape[0] == 0:  # no candidate (see pack): every slot empty
-        got_pairs, got_spring = jnp.full((size, 2), model.n, pairs.dtype), jnp.zeros((size, 3), spring.dtype)
-    else:
-        got_pairs = pairs.at[take].get(mode="fill", fill_value=model.n)
-        got_spring = spring.at[take].get(mode="fill", fill_value=0.0)
-    return _Near(pairs=got_pairs, slot=take, spring=got_spring, ref=positions,
+    return _Near(pairs=pairs.at[take].get(mode="fill", fill_value=model.n), slot=take,
+                 spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions,
                  intact=jnp.sum(intact.astype(jnp.int32)), overflow=count > size, count=count,
                  found=jnp.ones((), jnp.int32))
 
