@@ -288,7 +288,7 @@ def _run_batch(t0, compiling, sample, scene, members, vectorize, *, dt=None, saf
             stats.update(interrupted=True, steps_planned=n_steps)
         stats.update(dt=dt, dt_crit=float(dt_crit[b]), loading_time=float(n_steps * dt), speed=float(speed),
                      damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks,
-                     contact_law=model.contact_law, interrupted=interrupted,
+                     contact_law=model.contact_law, failure_rule=model.failure_rule, interrupted=interrupted,
                      padded_to=None if size is None else (size.particles, size.bonds))
         stats.update(_dem_peak_stats(scene, sample, rec, disp, force, keep, breaks))
         stats["batch"] = {"size": n_batch, "index": b, "vectorize": vectorize, "dt": dt, "loading_time": loading_time, "chunk": chunk,

@@ -69,7 +69,7 @@ def _scalar(v):
 SAME_RUN = ("method", "scene", "dt", "speed", "gauge_length", "area", "target_displacement", "damping")
 # and the ones a resumed run must share besides (the chunks, the sample and the padding)
 RESUME_SAME = ("chunk", "steps_planned", "particles", "bonds", "sample_digest", "padded_particles", "padded_bonds",
-               "breakage", "contact_law")
+               "breakage", "contact_law", "failure_rule")
 
 
 def _differing(stored: Mapping[str, Any], attrs: Mapping[str, Any], keys) -> list[str]:

@@ -28,6 +28,15 @@ def sample_breaks(sample: Sample, breakage) -> bool:
     return bool(np.isfinite(m.tensile_strength).any() or np.isfinite(m.shear_strength).any())
 
 
+def _check_failure_rule(rule):
+    from jaxbpm.physics.bond import check_failure_rule
+
+    try:
+        check_failure_rule(rule)
+    except ValueError as exc:
+        raise SceneError(f"failure_rule: {exc}") from None
+
+
 def lateral_stats(scene, sample: Sample, displacement) -> dict:
     """``scene.lateral_strain(sample, displacement)`` where the scene measures one and the displacements are finite,
     else ``{}`` (the result then has no Poisson ratio)."""
@@ -84,6 +93,10 @@ class UniaxialCompression:
     breakage: bonds break in the DEM when their stresses exceed their strengths (``None``: when the sample's material
       table has a finite strength). Loading past the peak gives the uniaxial compressive strength (UCS = peak
       stress); see :meth:`to_failure`. The static solvers (DSM, STE) always model the elastic range.
+    failure_rule: how a bond's stresses combine when it breaks: ``"separate"`` (default; tension and shear checked
+      apart, the parallel bond of PFC and MUSEN), ``"summed"`` (LAMMPS ``bpm/rotational``: all four utilisations
+      summed) or ``"max"`` (Yade's ``CohFrictPhys``: each load on its own); see
+      :data:`jaxbpm.physics.bond.FAILURE_RULES`. Choose the rule of the code the calibrated strengths are for.
     """
 
     axis: int = 2
@@ -102,6 +115,7 @@ class UniaxialCompression:
     breakage: bool | None = None
     contact_law: Any = "hertz"
     cohesive: Any = None
+    failure_rule: str = "separate"
 
     @classmethod
     def to_failure(cls, strain: float = 0.02, **kw) -> "UniaxialCompression":
@@ -112,6 +126,7 @@ class UniaxialCompression:
         return cls(strain=strain, breakage=True, **kw)
 
     def __post_init__(self):
+        _check_failure_rule(self.failure_rule)
         if not _is_axis(self.axis):
             raise SceneError(f"axis must be the whole number 0, 1 or 2, got {self.axis!r}")
         if not (0 < self.strain < 0.5):
@@ -285,6 +300,7 @@ class ThreePointBending:
     b: width, h: height).
     span: [m], default 80 % of the beam length. support_width, punch_width: [m], default one mean diameter.
     contacts: Hertz-Mindlin contacts (on by default: broken bonds fall back to them).
+    breakage, failure_rule: as in :class:`UniaxialCompression`.
     """
 
     span: float | None = None
@@ -298,12 +314,14 @@ class ThreePointBending:
     rotations: bool | None = None
     fit_range: tuple[float, float] = (0.02, 0.1)
     breakage: bool | None = None
+    failure_rule: str = "separate"
 
     boundary = "layers"
     wall_law = "hertz"
     wall_stiffness = None
 
     def __post_init__(self):
+        _check_failure_rule(self.failure_rule)
         if not _is_axis(self.axis) or not _is_axis(self.span_axis) or self.axis == self.span_axis:
             raise SceneError(f"axis and span_axis must be two different axes of 0, 1, 2, got {self.axis!r} and "
                              f"{self.span_axis!r}")
@@ -367,7 +385,7 @@ class ThreePointBending:
     def model(self, sample: Sample, **overrides):
         from jaxbpm.physics.model import build_model
 
-        kw = dict(contacts=self.contacts, walls=None, rotations=self.rotations)
+        kw = dict(contacts=self.contacts, walls=None, rotations=self.rotations, failure_rule=self.failure_rule)
         kw.update(overrides)
         return build_model(sample, **kw)
 
@@ -433,6 +451,7 @@ class BrazilianDisc:
     material table has a finite strength). The default ``strain`` (2 % of D) goes past the peak of the discs
     measured (E = 1 GPa bonds of 5 MPa tensile strength peak at about 1.2 %); stronger bonds need more.
     DEM only: the static solvers (DSM, STE) raise :class:`~jaxbpm.errors.SceneError`.
+    failure_rule: as in :class:`UniaxialCompression`.
     """
 
     axis: int = 0
@@ -451,11 +470,13 @@ class BrazilianDisc:
     platens: str = "strips"
     strip_width: float | None = None
     layer_thickness: float | None = None
+    failure_rule: str = "separate"
 
     fixed = None
     driven = None
 
     def __post_init__(self):
+        _check_failure_rule(self.failure_rule)
         if not _is_axis(self.axis) or not _is_axis(self.disc_axis) or self.axis == self.disc_axis:
             raise SceneError(f"axis (the load) and disc_axis must be two different axes of 0, 1, 2, got "
                              f"{self.axis!r} and {self.disc_axis!r}")
@@ -599,7 +620,7 @@ def _build_model(scene, sample: Sample, overrides: dict):
     from jaxbpm.physics.model import build_model
 
     kw = dict(contacts=scene.contacts, walls=scene.wall_law if scene.uses_walls else None, rotations=scene.rotations,
-              wall_stiffness=scene.wall_stiffness)
+              wall_stiffness=scene.wall_stiffness, failure_rule=scene.failure_rule)
     law = scene.cohesive_law
     if law is not None and overrides.get("contacts", True):
         kw["contact_law"] = law

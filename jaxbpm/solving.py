@@ -211,7 +211,8 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
         progress = dem.progress_printer(strain_per_step=speed * dt / length)
     run_attrs = dict(method="dem", scene=type(scene).__name__, dt=float(dt), dt_crit=float(dt_crit),
                      speed=float(speed), gauge_length=length, area=area, target_displacement=target,
-                     damping=float(damping), chunk=chunk, contact_law=model.contact_law, breakage=breaks)
+                     damping=float(damping), chunk=chunk, contact_law=model.contact_law, breakage=breaks,
+                     failure_rule=model.failure_rule)
 
     writers = []
     recorder, prior, saved = None, {}, None
@@ -265,7 +266,7 @@ def _run_dem(t0, compiling, sample, scene, params, *, dt, safety, damping, loadi
                                                   strict=not interrupted and status == "converged")
         stats.update(dt=float(dt), dt_crit=float(dt_crit), loading_time=float(n_steps * dt), speed=float(speed),
                      damping=float(damping), rotations=model.rotations, contacts=model.contacts, breakage=breaks,
-                     contact_law=model.contact_law, interrupted=interrupted,
+                     contact_law=model.contact_law, failure_rule=model.failure_rule, interrupted=interrupted,
                      padded_to=None if size is None else (size.particles, size.bonds))
         # wall = setup (before the first chunk, less the compilations in it) + compile + run (the rest)
         setup = t_sim - t0 - setup_compile + stats["setup_time"]

@@ -171,6 +171,43 @@ def test_failure_rules_stated_differences():
     assert np.isclose(conventions.failure_index("yade", *tb, b), 0.5)
 
 
+def test_the_dem_breaks_bonds_by_each_codes_rule():
+    """jaxbpm's failure rules (the DEM's, in JAX) against the codes' rules as written here (NumPy), on random loads
+    of a translated bond: the same bonds break, and a translation to the code whose rule was used warns of nothing."""
+    import warnings
+
+    import jax.numpy as jnp
+
+    from jaxbpm.physics import bond as bond_mod
+
+    b = BOND
+    rng = np.random.default_rng(0)
+    n = 4000
+    limits = np.array([b.tensile_strength * b.area, b.shear_strength * b.area,
+                       b.shear_strength * b.polar / b.bond_radius, b.tensile_strength * b.inertia / b.bond_radius])
+    u = rng.uniform(0, 1.1, (n, 4)) * np.array([rng.choice([-1, 1], n), np.ones(n), np.ones(n), np.ones(n)]).T
+    normal, shear, twist, bend = (u * limits).T
+    strength = bond_mod.BondStrength(*(jnp.full(n, v) for v in (b.tensile_strength, b.shear_strength, 0.0,
+                                                                 b.bond_radius, b.area, b.inertia, b.polar)))
+    zero = jnp.zeros(n)
+    for rule, code in (("separate", "jaxbpm"), ("summed", "lammps"), ("max", "yade")):
+        mode = np.asarray(bond_mod.bond_failure(jnp.asarray(normal), (jnp.asarray(shear), zero, zero),
+                                                jnp.asarray(twist), (zero, jnp.asarray(bend), zero), strength,
+                                                rule)[0])
+        index = conventions.failure_index(code, normal, shear, twist, bend, b)
+        clear = np.abs(index - 1.0) > 1e-9
+        np.testing.assert_array_equal(mode[clear] > 0, index[clear] >= 1.0, err_msg=rule)
+        assert 0.05 < np.mean(mode > 0) < 0.95, rule  # the loads straddle the limit
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InexactTranslationWarning)
+        conventions.to_lammps(b, L, failure_rule="summed")
+        conventions.to_yade(b, L, R1, R2, failure_rule="max")
+    with pytest.warns(InexactTranslationWarning, match="failure_rule='summed'"):
+        conventions.to_lammps(b, L)
+    with pytest.raises(ConventionError, match="unknown bond failure rule"):
+        conventions.to_lammps(b, L, failure_rule="lammps")
+
+
 def test_unrepresentable_parameters():
     with pytest.raises(ConventionError, match=r"k_t/k_n = 0\.3 .*nu = 0\.666667"):
         conventions.from_yade(conventions.YadeCohFrict(1e9, 0.3, 2.0, 2.0), R1, R2, L)

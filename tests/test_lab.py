@@ -66,6 +66,11 @@ def test_lab_errors_and_the_command(specimens, tmp_path):
         lab({"ucs": cyl}, {"bts": 1e6})
     with pytest.raises(CalibrationError, match="'nu' must be in"):
         lab({"ucs": cyl}, {"nu": 0.7})
+    with pytest.raises(CalibrationError, match="unknown bond failure rule 'lammps'.*'summed'"):
+        lab({"ucs": cyl}, {"ucs": 1e6}, failure_rule="lammps")
+    with pytest.raises(CalibrationError, match="different failure rules \\['separate', 'summed'\\]"):
+        lab({"ucs": cyl, "bts": cyl}, {"ucs": 1e6, "bts": 1e5},
+            scenes={"bts": jaxbpm.scenes.BrazilianDisc(failure_rule="summed")})
     jaxbpm.io.save_sample(tmp_path / "cyl.h5", cyl)
     (tmp_path / "lab.json").write_text(json.dumps({"lab": {"targets": {"E": targets["E"], "nu": targets["nu"]},
                                                            "options": {"check": None}, "report": "out.md"}}))

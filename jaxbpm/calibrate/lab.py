@@ -45,7 +45,8 @@ class LabResult:
     material scaled alike). achieved: ``{target: (value, relative error)}`` by the method that checked it (DEM for
     strengths and, with ``check``, for the elastic targets). stages: each stage's
     :class:`~jaxbpm.calibrate.CalibrationResult`. unreached: ``{target: reason}``. conventions: the answer in other
-    codes' parameters. curves: the stress-strain curves of the strength runs at the answer.
+    codes' parameters. curves: the stress-strain curves of the strength runs at the answer. failure_rule: the bond
+    failure rule the strengths were calibrated under (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
     """
 
     targets: dict
@@ -57,6 +58,7 @@ class LabResult:
     curves: dict
     wall_time: float
     solves: dict
+    failure_rule: str = "separate"
 
     @property
     def converged(self) -> bool:
@@ -99,7 +101,7 @@ class LabResult:
         rows += [f"| {k} | {v:.6g} |" for k, v in self.params.items()]
         if self.unreached:
             rows += ["", "Not reached:", ""] + [f"- **{k}**: {why}" for k, why in self.unreached.items()]
-        rows += ["", "## In other codes (mean particle pair)", ""]
+        rows += ["", "## In other codes (mean particle pair)", "", _rule_note(self.failure_rule), ""]
         for code, values in self.conventions.items():
             shown = ", ".join(f"{k} = {v:.6g}" for k, v in values.items())
             rows.append(f"- **{code}**: {shown}")
@@ -137,7 +139,8 @@ class LabResult:
 def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Mapping[str, Any] | None = None,
         elastic_model: str = "dsm", check: str | None = "dem", elastic_tol: float = 0.02, tol: float = 0.05,
         max_iterations: int = 6, fd_step: float = 0.2,
-        solve_options: Mapping | None = None, executor=None, progress=None) -> LabResult:
+        solve_options: Mapping | None = None, executor=None, progress=None,
+        failure_rule: str | None = None) -> LabResult:
     """Calibrate bond parameters to laboratory targets in stages (see the module docstring).
 
     Args:
@@ -154,6 +157,9 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       solve_options: ``jaxbpm.solve`` options of the failure runs (default ``{"transits": 30}``).
       executor: a :class:`concurrent.futures.Executor` for the failure runs of each iteration.
       progress: True to print each solve and iteration (stderr).
+      failure_rule: the bond failure rule of the strength scenes: ``"separate"`` (PFC's parallel bond, MUSEN),
+        ``"summed"`` (LAMMPS ``bpm/rotational``) or ``"max"`` (Yade), so that the strengths found hold in the code
+        they are for (:data:`jaxbpm.physics.bond.FAILURE_RULES`); ``None``: the scenes' own (default ``"separate"``).
     """
     from jaxbpm.calibrate.elastic import calibrate_elastic
     from jaxbpm.sample import Sample
@@ -182,6 +188,19 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
             raise CalibrationError(f"samples[{key!r}] must be a jaxbpm.Sample, got {type(samples[key]).__name__}")
     scene_of = {"elastic": UniaxialCompression(strain=1e-3), "ucs": UniaxialCompression.to_failure(strain=0.02),
                 "bts": BrazilianDisc(), "flexural": ThreePointBending(strain=0.1), **dict(scenes or {})}
+    if failure_rule is not None:
+        from jaxbpm.physics.bond import check_failure_rule
+
+        try:
+            check_failure_rule(failure_rule)
+        except ValueError as exc:
+            raise CalibrationError(str(exc)) from None
+        scene_of = {k: (dataclasses.replace(v, failure_rule=failure_rule) if k in _SCENE_OF else v)
+                    for k, v in scene_of.items()}
+    rules = sorted({getattr(scene_of[k], "failure_rule", "separate") for k in _SCENE_OF if k in targets})
+    if len(rules) > 1:
+        raise CalibrationError(f"the strength scenes break bonds by different failure rules {rules}: one set of bond "
+                               "strengths holds under one rule; give failure_rule=")
     stages, unreached, achieved, solves = {}, {}, {}, {}
     params = _current(samples[sorted(need)[0]])
 
@@ -228,7 +247,8 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
     conventions = _translations(samples[sorted(need)[0]], params)
     return LabResult(targets=targets, params={k: float(v) for k, v in params.items()}, achieved=achieved,
                      stages=stages, unreached=unreached, conventions=conventions, curves=curves,
-                     wall_time=time.perf_counter() - t0, solves=solves)
+                     wall_time=time.perf_counter() - t0, solves=solves,
+                     failure_rule=rules[0] if rules else "separate")
 
 
 def _current(sample) -> dict:
@@ -358,6 +378,18 @@ def _curves(samples, scene_of, wanted, params, solve_options, achieved, targets)
         # the test's own stress measure (UCS: F / A; BTS: 2 F / (pi D t); bending: the flexural formula)
         out[key] = (np.asarray(r.strain), np.asarray(scene_of[key].strength(np.asarray(r.force), s)))
     return out
+
+
+#: the codes whose bonds break by each failure rule (their strength translation is exact only under it)
+_RULE_CODES = {"separate": "PFC (parallel bond, pb_mcf 1) and MUSEN (criterion 1)", "summed": "LAMMPS (bpm/rotational)",
+               "max": "Yade (CohFrictPhys) and MUSEN (criterion 2)"}
+
+
+def _rule_note(rule) -> str:
+    others = ", ".join(v for k, v in _RULE_CODES.items() if k != rule)
+    return (f"Strengths calibrated under the failure rule '{rule}': they hold as they are in {_RULE_CODES[rule]}; "
+            f"{others} break bonds under mixed loads by another rule (calibrate again with that code's "
+            "failure_rule for its strengths).")
 
 
 def _translations(sample, params) -> dict:

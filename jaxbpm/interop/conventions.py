@@ -42,9 +42,12 @@ MUSEN         elastic solid bond: the same law (Jarolin & Dosta's model is MUSEN
 
 Strength, and where it cannot be exact (u_* are utilisations: force or moment over its single-mode limit)::
 
-    jaxbpm, MUSEN (criterion 1), PFC (pb_mcf 1, pb_fa 0):   max(u_n + u_b, u_s + u_t) >= 1
-    LAMMPS bpm/rotational:                                  u_n + u_b + u_s + u_t >= 1       (Fr/Fcr signed)
-    Yade CohFrictPhys, MUSEN (criterion 2):                 max(u_n, u_b, u_s, u_t) >= 1
+    jaxbpm "separate", MUSEN (criterion 1), PFC (pb_mcf 1, pb_fa 0):   max(u_n + u_b, u_s + u_t) >= 1
+    jaxbpm "summed", LAMMPS bpm/rotational:                            u_n + u_b + u_s + u_t >= 1   (u_n signed)
+    jaxbpm "max", Yade CohFrictPhys, MUSEN (criterion 2):              max(u_n, u_b, u_s, u_t) >= 1
+
+jaxbpm's scenes break bonds by any of the three (``failure_rule=``, default ``"separate"``): calibrate strengths
+under the rule of the code they are for, and the translation below is exact for them as well.
 
 The thresholds are translated so that every single-mode load (pure tension, pure shear, pure bending, pure twist)
 breaks at the same force or moment in both codes: Fcr = sigma_t A, Tcb = sigma_t I / r_b, Fcs = tau_c A,
@@ -91,6 +94,15 @@ class InexactTranslationWarning(UserWarning):
 
 def _f(x) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
+
+
+def _rule(failure_rule) -> str:
+    from jaxbpm.physics.bond import check_failure_rule
+
+    try:
+        return check_failure_rule(failure_rule)
+    except ValueError as exc:
+        raise ConventionError(str(exc)) from None
 
 
 def _warn(msg: str) -> None:
@@ -311,28 +323,34 @@ _SUMMED_RULE = ("LAMMPS bpm/rotational breaks a bond when Fr/Fcr + Fs/Fcs + Tb/T
                 "thresholds are set so that pure tension, pure shear, pure bending and pure twist break at the same "
                 "load in both (0 % difference); under mixed loading LAMMPS breaks earlier: at equal tensile and shear "
                 "utilisation at half the load (-50 %), in general at max(a+b, c+d)/(a+b+c+d) of jaxbpm's failure "
-                "load (0.5 to 1), and compression (Fr < 0) lets LAMMPS bonds carry more shear")
+                "load (0.5 to 1), and compression (Fr < 0) lets LAMMPS bonds carry more shear. jaxbpm's scenes break "
+                "bonds by LAMMPS's rule with failure_rule='summed': strengths calibrated so hold in LAMMPS as they "
+                "are (pass failure_rule='summed' here to say so)")
 
 
-def to_lammps(bond: JaxbpmBond, length, *, normalize: bool = False) -> LammpsBpmRotational:
-    """jaxbpm -> LAMMPS ``bpm/rotational`` (stiffness exact; the summed failure rule is warned about when a
-    strength is finite)."""
+def to_lammps(bond: JaxbpmBond, length, *, normalize: bool = False,
+              failure_rule: str = "separate") -> LammpsBpmRotational:
+    """jaxbpm -> LAMMPS ``bpm/rotational`` (stiffness exact; strengths exact when they were calibrated under
+    ``failure_rule="summed"``, LAMMPS's rule; under another rule the difference is warned about when a strength is
+    finite)."""
     k = bond.stiffness(length)
     length = _f(length)
     scale = length if normalize else 1.0
     sig, tau, rb = bond.tensile_strength, bond.shear_strength, bond.bond_radius
-    if np.any(np.isfinite(sig)) or np.any(np.isfinite(tau)):
+    if (np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))) and _rule(failure_rule) != "summed":
         _warn(_SUMMED_RULE)
     return LammpsBpmRotational(Kr=k.kn * scale, Ks=k.kt * scale, Kt=k.ktw, Kb=k.kb, Fcr=sig * bond.area,
                                Fcs=tau * bond.area, Tct=tau * bond.polar / rb, Tcb=sig * bond.inertia / rb,
                                normalize=normalize)
 
 
-def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True) -> JaxbpmBond:
+def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True,
+                failure_rule: str = "separate") -> JaxbpmBond:
     """LAMMPS ``bpm/rotational`` -> jaxbpm. ``breaking=False`` (LAMMPS's ``break no``) ignores the thresholds.
 
     Warned: a Kt that jaxbpm's law cannot match (see :func:`from_stiffness`), thresholds whose bending/twisting
-    limits disagree with the tensile/shear ones, and the summed failure rule.
+    limits disagree with the tensile/shear ones, and the summed failure rule unless ``failure_rule="summed"`` (the
+    rule the jaxbpm scenes will break these bonds by).
     """
     k = p.stiffness(length)
     E, nu, rb = from_stiffness(k.kn, k.kt, k.ktw, k.kb, length, what="LAMMPS bpm/rotational")
@@ -348,7 +366,8 @@ def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True) -> Jax
                   f"{'sigma_t I / r_b = Fcr r_b / 4' if name == 'Tcb' else 'tau_c J / r_b = Fcs r_b / 2'}, which "
                   f"differs from the given one by up to {100 * off:.3g} % (pure "
                   f"{'bending' if name == 'Tcb' else 'twist'} breaks at that moment in jaxbpm)")
-    _warn(_SUMMED_RULE)
+    if _rule(failure_rule) != "summed":
+        _warn(_SUMMED_RULE)
     return JaxbpmBond(E, nu, rb, sig, tau)
 
 
@@ -398,10 +417,11 @@ _MAX_RULE = ("Yade checks tension, shear, bending and twist separately (max(u_n,
              "bending and twist break at the same load (0 %); tension plus bending at equal utilisation breaks at "
              "twice the load in Yade (+100 %), in general at max(a+b, c+d)/max(a, b, c, d) of jaxbpm's failure load "
              "(1 to 2). Yade's shear limit also grows by F_n tan(frictionAngle) unless frictionAngle = 0 or "
-             "cohesionDisablesFriction")
+             "cohesionDisablesFriction. jaxbpm's scenes break bonds by Yade's rule with failure_rule='max' (pass "
+             "failure_rule='max' here to say the strengths were calibrated so)")
 
 
-def to_yade(bond: JaxbpmBond, length, radius1, radius2) -> YadeCohFrict:
+def to_yade(bond: JaxbpmBond, length, radius1, radius2, *, failure_rule: str = "separate") -> YadeCohFrict:
     """jaxbpm -> Yade CohFrictMat values for each bond (stiffness exact per bond; Yade's materials belong to
     particles, so one material reproduces all bonds only where the per-bond values agree)."""
     k = bond.stiffness(length)
@@ -410,7 +430,7 @@ def to_yade(bond: JaxbpmBond, length, radius1, radius2) -> YadeCohFrict:
     poisson = k.kt / k.kn
     rmin, rb = np.minimum(r1, r2), bond.bond_radius
     sig, tau = bond.tensile_strength, bond.shear_strength
-    if np.any(np.isfinite(sig)) or np.any(np.isfinite(tau)):
+    if (np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))) and _rule(failure_rule) != "max":
         _warn(_MAX_RULE)
     return YadeCohFrict(young=young, poisson=poisson, alphaKr=k.kb / (r1 * r2 * k.kt),
                         alphaKtw=k.ktw / (r1 * r2 * k.kt), normalCohesion=sig * bond.area / rmin**2,
@@ -419,8 +439,9 @@ def to_yade(bond: JaxbpmBond, length, radius1, radius2) -> YadeCohFrict:
                         twistingCohesion=2.0 * tau * bond.polar / rb / rmin**3)
 
 
-def from_yade(p: YadeCohFrict, radius1, radius2, length) -> JaxbpmBond:
-    """Yade CohFrictMat (one material for both particles) -> jaxbpm, per bond."""
+def from_yade(p: YadeCohFrict, radius1, radius2, length, *, failure_rule: str = "separate") -> JaxbpmBond:
+    """Yade CohFrictMat (one material for both particles) -> jaxbpm, per bond (the separate-checks rule is warned
+    about unless ``failure_rule="max"``, the rule the jaxbpm scenes will break these bonds by)."""
     ph = p.phys(_positive("radius1", radius1), _positive("radius2", radius2))
     E, nu, rb = from_stiffness(ph["kn"], ph["ks"], ph["ktw"], ph["kr"], length, what="Yade CohFrictMat")
     area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
@@ -433,7 +454,7 @@ def from_yade(p: YadeCohFrict, radius1, radius2, length) -> JaxbpmBond:
             _warn(f"Yade {name} cannot be represented exactly: jaxbpm's strengths fix the "
                   f"{'bending' if name.startswith('rolling') else 'twisting'} failure moment, which differs from "
                   f"Yade's by up to {100 * off:.3g} %")
-    if np.any(np.isfinite(sig)) or np.any(np.isfinite(tau)):
+    if (np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))) and _rule(failure_rule) != "max":
         _warn(_MAX_RULE)
     return JaxbpmBond(E, nu, rb, sig, tau)
 

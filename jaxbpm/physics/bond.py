@@ -38,7 +38,7 @@ from jaxbpm.physics.vec import cross, dot, stack
 
 __all__ = ["law_components",
            "BondStiffness", "BondForces", "BondStrength", "stiffness", "bond_law", "bond_forces", "bond_energy",
-           "bond_stresses", "bond_failure", "TENSILE", "SHEAR"]
+           "bond_stresses", "bond_failure", "check_failure_rule", "FAILURE_RULES", "TENSILE", "SHEAR"]
 
 TENSILE, SHEAR = 1, 2  # break modes (0: intact)
 
@@ -89,24 +89,69 @@ def bond_stresses(normal, shear, twist, bend, s: BondStrength):
     sigma = F_n / A + |M_b| r_b / I (tension > 0), tau = |F_t| / A + |M_t| r_b / J. ``shear`` and ``bend`` are
     ``(x, y, z)`` component tuples (or ``[..., 3]`` rows).
     """
-    def norm(v):
-        if isinstance(v, tuple):
-            return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        return jnp.linalg.norm(v, axis=-1)
-
     sigma_n = normal / s.area
-    sigma = sigma_n + norm(bend) * s.radius / s.inertia
-    tau = norm(shear) / s.area + jnp.abs(twist) * s.radius / s.polar
+    sigma = sigma_n + _norm(bend) * s.radius / s.inertia
+    tau = _norm(shear) / s.area + jnp.abs(twist) * s.radius / s.polar
     return sigma, tau, sigma_n
 
 
-def bond_failure(normal, shear, twist, bend, s: BondStrength):
-    """Break mode per bond: 0 intact, :data:`TENSILE` (sigma > sigma_c) or :data:`SHEAR` (tau > tau_c =
-    c - sigma_n tan(phi)); tension is checked first. Returns ``(mode, sigma, tau, tau_c)``."""
+#: the failure rules (``u_*`` are utilisations, a force or moment over its single-mode limit: ``u_n = F_n / (sigma_c
+#: A)`` signed (tension > 0), ``u_b = |M_b| r_b / (sigma_c I)``, ``u_s = |F_t| / (tau_c A)``, ``u_t = |M_tw| r_b /
+#: (tau_c J)``): a bond breaks when its rule's value reaches 1
+FAILURE_RULES = {
+    "separate": "max(u_n + u_b, u_s + u_t): tension and shear checked apart (parallel bond: Potyondy & Cundall "
+                "2004, PFC with pb_mcf 1, MUSEN's first criterion)",
+    "summed": "u_n + u_b + u_s + u_t, u_n signed (LAMMPS bond_style bpm/rotational: Fr/Fcr + Fs/Fcs + Tb/Tcb + "
+              "Tt/Tct >= 1)",
+    "max": "max(u_n, u_b, u_s, u_t): each load on its own (Yade's CohFrictPhys, MUSEN's second criterion)",
+}
+
+
+def check_failure_rule(rule) -> str:
+    """``rule`` if it names a failure rule (:data:`FAILURE_RULES`), else ``ValueError`` naming the choices."""
+    if not isinstance(rule, str) or rule not in FAILURE_RULES:
+        raise ValueError(f"unknown bond failure rule {rule!r}; use one of "
+                         + "; ".join(f"{k!r}: {v}" for k, v in FAILURE_RULES.items()))
+    return rule
+
+
+def bond_failure(normal, shear, twist, bend, s: BondStrength, rule: str = "separate"):
+    """Break mode per bond: 0 intact, :data:`TENSILE` or :data:`SHEAR`, by the failure ``rule``
+    (:data:`FAILURE_RULES`; the shear strength is tau_c = c - sigma_n tan(phi)).
+
+    ``"separate"`` (default): sigma > sigma_c (tension, checked first) or tau > tau_c (shear), with the rim stresses
+    of :func:`bond_stresses`. ``"summed"``: sigma / sigma_c + tau / tau_c >= 1, which is LAMMPS's Fr/Fcr + Fs/Fcs +
+    Tb/Tcb + Tt/Tct with Fcr = sigma_c A, Tcb = sigma_c I / r_b, Fcs = tau_c A, Tct = tau_c J / r_b (a compressed
+    bond carries more shear). ``"max"``: any single load at its limit. Under the two last rules the mode is the
+    larger of the tensile (normal and bending) and shear (shear and twist) parts. A bond whose shear strength
+    tau_c is not positive (tension beyond c / tan(phi)) breaks in shear under every rule.
+    Returns ``(mode, sigma, tau, tau_c)``."""
+    check_failure_rule(rule)
     sigma, tau, sigma_n = bond_stresses(normal, shear, twist, bend, s)
     tau_c = s.cohesion - sigma_n * s.tan_phi
-    mode = jnp.where(sigma > s.tensile, TENSILE, jnp.where(tau > tau_c, SHEAR, 0)).astype(jnp.int8)
-    return mode, sigma, tau, tau_c
+    if rule == "separate":
+        mode = jnp.where(sigma > s.tensile, TENSILE, jnp.where(tau > tau_c, SHEAR, 0)).astype(jnp.int8)
+        return mode, sigma, tau, tau_c
+    gone = tau_c <= 0
+    tau_c_safe = jnp.where(gone, 1.0, tau_c)
+    if rule == "summed":
+        u_tension, u_shear = sigma / s.tensile, tau / tau_c_safe
+        breaks = u_tension + u_shear >= 1.0
+    else:
+        u_n = sigma_n / s.tensile
+        u_b = (sigma - sigma_n) / s.tensile
+        u_s = _norm(shear) / s.area / tau_c_safe
+        u_t = (tau - _norm(shear) / s.area) / tau_c_safe
+        u_tension, u_shear = jnp.maximum(u_n, u_b), jnp.maximum(u_s, u_t)
+        breaks = jnp.maximum(u_tension, u_shear) >= 1.0
+    mode = jnp.where(gone, SHEAR, jnp.where(breaks, jnp.where(u_tension >= u_shear, TENSILE, SHEAR), 0))
+    return mode.astype(jnp.int8), sigma, tau, tau_c
+
+
+def _norm(v):
+    if isinstance(v, tuple):
+        return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return jnp.linalg.norm(v, axis=-1)
 
 
 def stiffness(E, nu, area, inertia, polar, length) -> BondStiffness:
@@ -173,9 +218,10 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
     return bond_forces_breaking(positions, orientations, bonds, r0, k, intact, strength)[:3]
 
 
-def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None):
+def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None,
+                         rule: str = "separate"):
     """:func:`bond_forces` plus the new ``intact`` mask and the break mode of each bond in this evaluation
-    ``[nb]`` int8 (0: none; None without ``strength``)."""
+    ``[nb]`` int8 (0: none; None without ``strength``), by the failure ``rule`` (see :func:`bond_failure`)."""
     i, j = bonds[:, 0], bonds[:, 1]
     # the law runs on [nb] component arrays: gather columns of the transposed [3, n] and [4, n] arrays
     x_t = positions.T
@@ -188,7 +234,7 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
     out = law_components(tuple(d), tuple(r0.T), q_i, q_j, k.kn, k.kt, k.ktw, k.kb)
     mode = None
     if strength is not None:
-        mode, *_ = bond_failure(out.normal, out.shear, out.twist, out.bend, strength)
+        mode, *_ = bond_failure(out.normal, out.shear, out.twist, out.bend, strength, rule)
         was = jnp.ones(bonds.shape[0], bool) if intact is None else intact
         mode = jnp.where(was, mode, 0).astype(jnp.int8)
         intact = was & (mode == 0)

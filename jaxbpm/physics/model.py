@@ -199,6 +199,7 @@ class Model:
     bond_contact: str = "superimpose"
     breakage: bool = False
     cohesive: Any = None  # cohesive_mod.CohesiveParams with contact_law="cohesive"
+    failure_rule: str = "separate"  # how a bond's stresses break it (jaxbpm.physics.bond.FAILURE_RULES)
     contact_law: str = "hertz"
 
     @property
@@ -308,7 +309,7 @@ class Model:
         k = self.stiffness(params)
         force, moment, bf, intact, broken = bond_mod.bond_forces_breaking(
             positions, orientations if self.rotations else None, self.bonds, self.r0, k, intact,
-            self.strength(params))
+            self.strength(params), self.failure_rule)
         parts = {"bonds": bf, "contacts": None, "walls": None, "intact": intact, "broken": broken}
         if self.contacts and contacts is not None and self.contact_law == "cohesive":
             pairs, valid, spring, dxi, v_rel = contacts[:5]
@@ -336,13 +337,14 @@ jax.tree_util.register_dataclass(
     data_fields=["positions0", "radii", "mass", "inertia", "bonds", "r0", "bond_material", "bond_area", "bond_I",
                  "bond_J", "bond_length", "bond_keys", "bond_key_index", "bond_radius", "bond_tensile",
                  "bond_cohesion", "contact", "wall_stiffness", "cohesive"],
-    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage", "contact_law"],
+    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage", "contact_law", "failure_rule"],
 )
 
 
 def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = None, rotations: bool | None = None,
                 contact_damping: bool = False, wall_stiffness: float | None = None,
-                breakage: bool = False, contact_law="hertz", cohesive=None, pad_to=None) -> Model:
+                breakage: bool = False, contact_law="hertz", cohesive=None, pad_to=None,
+                failure_rule: str = "separate") -> Model:
     """A :class:`Model` of ``sample`` with just the interactions asked for.
 
     rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
@@ -350,6 +352,9 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
     ``"linear"`` (give ``wall_stiffness`` in N/m).
     breakage: bonds break when their stresses exceed the strengths of the material table (or of the params); off
     by default (the static solvers model the elastic range).
+    failure_rule: how the stresses combine when bonds break (:data:`jaxbpm.physics.bond.FAILURE_RULES`):
+    ``"separate"`` (default: tension and shear checked apart, the parallel bond), ``"summed"`` (LAMMPS
+    ``bpm/rotational``) or ``"max"`` (Yade's ``CohFrictPhys``).
     contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw`;
     cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
     ``contact_law="cohesive"``. Particles with cohesive contacts and no bonds do not rotate by default (Irazabal et al.
@@ -421,6 +426,7 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         walls=walls,
         bond_contact=sample.bond_contact,
         breakage=bool(breakage) and sample.n_bonds > 0,
+        failure_rule=bond_mod.check_failure_rule(failure_rule),
         cohesive=None if law is None else law.params(pm, dtype),
         contact_law="hertz" if law is None else "cohesive",
     )
