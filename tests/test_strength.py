@@ -234,3 +234,27 @@ def test_the_summed_rule_breaks_a_specimen_earlier_and_is_reported(rock):
     assert 1.1 < ratio < 1.6, ratio
     # the elastic part is the same
     np.testing.assert_allclose(runs["summed"].stiffness, runs["separate"].stiffness, rtol=1e-6)
+
+
+def test_the_moment_factor_scales_the_moments_in_the_rim_stresses():
+    # PFC's pb_mcf: sigma = F_n / A + beta |M_b| r_b / I; pure bending breaks at 1 / beta times the moment
+    s = _section_strength(1e6, 1e6)._replace(moment_factor=jnp.array(0.5))
+    limit = 1e6 * float(s.inertia) / float(s.radius)
+    zero = (0.0, 0.0, 0.0)
+    for rule in ("separate", "summed", "max"):
+        assert int(bond_mod.bond_failure(0.0, zero, 0.0, (1.99 * limit, 0.0, 0.0), s, rule)[0]) == 0, rule
+        assert int(bond_mod.bond_failure(0.0, zero, 0.0, (2.01 * limit, 0.0, 0.0), s, rule)[0]) == bond_mod.TENSILE
+    twist_limit = 1e6 * float(s.polar) / float(s.radius)
+    assert int(bond_mod.bond_failure(0.0, zero, 1.99 * twist_limit, zero, s)[0]) == 0
+    assert int(bond_mod.bond_failure(0.0, zero, 2.01 * twist_limit, zero, s)[0]) == bond_mod.SHEAR
+    # forces are not scaled
+    assert int(bond_mod.bond_failure(1.01e6 * A, zero, 0.0, zero, s)[0]) == bond_mod.TENSILE
+    # through the params, checked
+    sample = _pair(1e6, 1e6)
+    model = build_model(sample, breakage=True)
+    strength = model.strength({**default_params(sample), "bond_moment_factor": jnp.array([0.25])})
+    np.testing.assert_allclose(np.asarray(strength.moment_factor), [0.25])
+    from jaxbpm.physics.model import check_params
+
+    with pytest.raises(SceneError, match="bond_moment_factor"):
+        check_params({**default_params(sample), "bond_moment_factor": [1.5]}, sample)

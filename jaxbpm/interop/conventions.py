@@ -64,7 +64,8 @@ loading then differs:
   F_n tan(frictionAngle) (set frictionAngle 0 or cohesionDisablesFriction to match).
 * PFC: exact for pb_mcf = 1 and pb_fa = 0. pb_mcf = beta < 1 scales the moment terms: pure bending and pure twist
   break at 1/beta times jaxbpm's moment. pb_fa = phi != 0 makes the shear strength c - sigma_n tan(phi): pure
-  shear 0 %, shear under a normal stress sigma_n differs by -sigma_n tan(phi) / c.
+  shear 0 %, shear under a normal stress sigma_n differs by -sigma_n tan(phi) / c. Both are params of jaxbpm's DEM
+  (``bond_moment_factor`` = pb_mcf, ``bond_friction_angle`` = phi in radians), not fields of :class:`JaxbpmBond`.
 """
 
 from __future__ import annotations
@@ -261,7 +262,8 @@ def to_pfc(bond: JaxbpmBond, length, radius1, radius2) -> PFCParallelBond:
 def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, emod=None, kratio=None,
              pb_ten=np.inf, pb_coh=np.inf, pb_fa=0.0, pb_mcf=1.0) -> JaxbpmBond:
     """PFC linear parallel bond -> jaxbpm. Give ``pb_kn``/``pb_ks`` or ``emod``/``kratio`` (deformability method,
-    L_pfc = R1 + R2). pb_fa != 0 or pb_mcf != 1 cannot be represented (warned, with the size of the difference)."""
+    L_pfc = R1 + R2). pb_fa != 0 or pb_mcf != 1 are not part of the translated bond (warned, with the size of the
+    difference); the DEM models them through its params ``bond_friction_angle`` and ``bond_moment_factor``."""
     r1, r2, length = _positive("radius1", radius1), _positive("radius2", radius2), _positive("length", length)
     if emod is not None or kratio is not None:
         if emod is None or kratio is None or pb_kn is not None or pb_ks is not None:
@@ -276,15 +278,16 @@ def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, e
     fa, mcf, coh = _f(pb_fa), _f(pb_mcf), _strength("pb_coh", pb_coh)
     if np.any(fa != 0) and np.any(np.isfinite(coh)):
         tan = float(np.max(np.abs(np.tan(np.radians(fa)))))
-        _warn(f"PFC pb_fa = {float(np.max(np.abs(fa))):.6g} deg cannot be represented: jaxbpm's shear strength does "
-              f"not depend on the normal stress. Pure tension and pure shear are exact; shear under a normal stress "
-              f"sigma_n differs by -sigma_n tan(pb_fa) / pb_coh = -{tan:.4g} sigma_n / pb_coh (a tensile stress of "
-              f"half pb_coh: {-50 * tan:.3g} %)")
+        _warn(f"PFC pb_fa = {float(np.max(np.abs(fa))):.6g} deg is not part of the translated bond: its shear "
+              f"strength does not depend on the normal stress. Pure tension and pure shear are exact; shear under a "
+              f"normal stress sigma_n differs by -sigma_n tan(pb_fa) / pb_coh = -{tan:.4g} sigma_n / pb_coh (a "
+              f"tensile stress of half pb_coh: {-50 * tan:.3g} %). The DEM models it: params "
+              f"bond_friction_angle = radians(pb_fa)")
     if np.any(mcf != 1):
         beta = float(np.min(mcf))
-        _warn(f"PFC pb_mcf = {beta:.6g} cannot be represented: jaxbpm counts the full moments (pb_mcf = 1). Pure "
-              f"tension and pure shear are exact; pure bending and pure twist break at {beta:.4g} x PFC's moment "
-              f"in jaxbpm ({100 * (beta - 1):.3g} %)")
+        _warn(f"PFC pb_mcf = {beta:.6g} is not part of the translated bond, which counts the full moments (pb_mcf = "
+              f"1). Pure tension and pure shear are exact; pure bending and pure twist break at {beta:.4g} x PFC's "
+              f"moment ({100 * (beta - 1):.3g} %). The DEM models it: params bond_moment_factor = pb_mcf")
     return JaxbpmBond(pb_kn * length, nu, rb, _strength("pb_ten", pb_ten), coh)
 
 

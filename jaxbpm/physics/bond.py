@@ -72,7 +72,8 @@ class BondForces(NamedTuple):
 class BondStrength(NamedTuple):
     """Per-bond strengths ``[nb]`` (parallel-bond style, Potyondy & Cundall 2004): tensile strength sigma_c [Pa],
     cohesion c [Pa] and tan(phi) of the shear strength tau_c = c - sigma_n tan(phi) (phi = 0: constant tau_c = c),
-    and the bond's cross-section: radius r_b [m], area A, second moments I and J."""
+    and the bond's cross-section: radius r_b [m], area A, second moments I and J; the moment contribution factor
+    beta in [0, 1] (PFC's ``pb_mcf``: the share of the bending and twisting moments in the rim stresses; 1: all)."""
 
     tensile: jnp.ndarray
     cohesion: jnp.ndarray
@@ -81,17 +82,19 @@ class BondStrength(NamedTuple):
     area: jnp.ndarray
     inertia: jnp.ndarray
     polar: jnp.ndarray
+    moment_factor: jnp.ndarray | float = 1.0
 
 
 def bond_stresses(normal, shear, twist, bend, s: BondStrength):
     """Largest normal and shear stress at the bond's rim [Pa] and the mean normal stress sigma_n = F_n / A.
 
-    sigma = F_n / A + |M_b| r_b / I (tension > 0), tau = |F_t| / A + |M_t| r_b / J. ``shear`` and ``bend`` are
-    ``(x, y, z)`` component tuples (or ``[..., 3]`` rows).
+    sigma = F_n / A + beta |M_b| r_b / I (tension > 0), tau = |F_t| / A + beta |M_t| r_b / J, beta the moment
+    contribution factor (1 unless set). ``shear`` and ``bend`` are ``(x, y, z)`` component tuples (or ``[..., 3]``
+    rows).
     """
     sigma_n = normal / s.area
-    sigma = sigma_n + _norm(bend) * s.radius / s.inertia
-    tau = _norm(shear) / s.area + jnp.abs(twist) * s.radius / s.polar
+    sigma = sigma_n + s.moment_factor * _norm(bend) * s.radius / s.inertia
+    tau = _norm(shear) / s.area + s.moment_factor * jnp.abs(twist) * s.radius / s.polar
     return sigma, tau, sigma_n
 
 

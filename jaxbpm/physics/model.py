@@ -60,6 +60,7 @@ _PER_MATERIAL = {  # params keys with one entry per bond material: (check, what 
     "bond_tensile_strength": (lambda v: v >= 0, ">= 0 [Pa] (inf: never breaks)"),  # NaN fails it too
     "bond_shear_strength": (lambda v: v >= 0, ">= 0 [Pa] (inf: never breaks)"),
     "bond_friction_angle": (lambda v: np.isfinite(v) & (v >= 0) & (v < np.pi / 2), "finite and in [0, pi/2) [rad]"),
+    "bond_moment_factor": (lambda v: np.isfinite(v) & (v >= 0) & (v <= 1), "finite and in [0, 1]"),
 }
 _SCALAR = {  # params keys of the contact laws (Hertz-Mindlin, cohesive): scalars
     "contact_E": (lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
@@ -81,7 +82,7 @@ def check_params(params, sample: Sample) -> dict:
     finite and > 0 [Pa], ``bond_nu`` finite and in (-1, 0.5), the range :class:`~jaxbpm.sample.BondMaterials`
     accepts (at -1 the shear stiffness is infinite; at 0.5 and above the bond is not an elastic solid). Optional,
     per material: ``bond_tensile_strength`` and ``bond_shear_strength`` >= 0 [Pa] (``inf``: never breaks),
-    ``bond_friction_angle`` in [0, pi/2) [rad]. Optional scalars of the contact laws: ``contact_E`` > 0 [Pa],
+    ``bond_friction_angle`` in [0, pi/2) [rad], ``bond_moment_factor`` in [0, 1]. Optional scalars of the contact laws: ``contact_E`` > 0 [Pa],
     ``contact_nu`` in (-1, 0.5), ``friction`` >= 0, ``restitution`` in (0, 1], ``cohesion_initial`` and
     ``cohesion_max`` >= 0 [Pa] (``cohesion_max`` >= ``cohesion_initial`` when both are given),
     ``cohesion_from_stress`` >= 0. Any other key is an error (a misspelt key would otherwise be ignored). Values
@@ -220,7 +221,9 @@ class Model:
     def strength(self, params) -> bond_mod.BondStrength | None:
         """Per-bond strengths (``None`` when the model does not break bonds). ``params`` may override the material
         table with ``"bond_tensile_strength"``, ``"bond_shear_strength"`` (cohesion c) [Pa] and
-        ``"bond_friction_angle"`` phi [rad] of the Mohr-Coulomb shear strength (default 0: constant)."""
+        ``"bond_friction_angle"`` phi [rad] of the Mohr-Coulomb shear strength (default 0: constant) and
+        ``"bond_moment_factor"`` beta in [0, 1], the share of the bending and twisting moments in the rim stresses
+        (PFC's ``pb_mcf``; default 1: the full moments)."""
         if not self.breakage:
             return None
         if isinstance(params, dict) and "_strength" in params:
@@ -231,13 +234,16 @@ class Model:
         cohesion = jnp.asarray(get("bond_shear_strength", self.bond_cohesion))[mat]
         phi = get("bond_friction_angle", None)
         tan_phi = jnp.zeros_like(cohesion) if phi is None else jnp.tan(jnp.asarray(phi))[mat]
+        beta = get("bond_moment_factor", None)
+        beta = jnp.ones_like(cohesion) if beta is None else jnp.asarray(beta, cohesion.dtype)[mat]
         # a bond without cross-section (the padding of a size class) carries nothing and never breaks: infinite
         # strengths, and a unit section so that its (zero) stresses are not 0 / 0
         solid = self.bond_area > 0
         area, inertia, polar = (jnp.where(solid, a, 1.0) for a in (self.bond_area, self.bond_I, self.bond_J))
         return bond_mod.BondStrength(tensile=jnp.where(solid, tensile, jnp.inf),
                                      cohesion=jnp.where(solid, cohesion, jnp.inf), tan_phi=tan_phi,
-                                     radius=self.bond_radius, area=area, inertia=inertia, polar=polar)
+                                     radius=self.bond_radius, area=area, inertia=inertia, polar=polar,
+                                     moment_factor=beta)
 
     #: params keys that override the cohesive law's scalars (see :meth:`cohesive_params`)
     COHESIVE_KEYS = {"contact_E": "E", "contact_nu": "nu", "friction": "friction", "restitution": "restitution",
