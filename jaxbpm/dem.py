@@ -15,9 +15,11 @@ Contacts: a neighbour list gives the candidate pairs (rebuilt when a particle ha
 a k-d tree on the host, rebuilt between chunks (a chunk stops before the step that would make it stale and goes on
 after the rebuild); on accelerators jax-md's cell list, rebuilt inside the step (its rebuild fills a dense candidate
 array that took a 1M-particle run on the CPU past 22 GiB). Inside the list, the pairs
-within reach (surfaces closer than ``NEAR_MARGIN`` x skin; bonded pairs left out where bonds replace contacts) are
-found again when a particle has moved half that margin or such a bond breaks, and each step runs the contact law on
-those only (on an 8k dense box 1.6x faster per step than testing and packing every candidate each step).
+within reach (surfaces closer than ``NEAR_MARGIN`` x skin) that are not bonded pairs are found again when a particle
+has moved half that margin, and each step runs the contact law on those only (on an 8k dense box 1.6x faster per
+step than testing and packing every candidate each step). The bonded pairs have their contact law evaluated on the
+bond list, in one pass with the bond law and one scatter to the particles (superimposed on every bonded pair, or on
+broken bonds only where bonds replace contacts; springs by bond: ``DEMState.bond_spring``).
 
 Damping ``F_d`` is local non-viscous damping as in PFC and MUSEN: ``F_d = -alpha |F| sign(v)`` per component
 (and the same for moments). It removes kinetic energy where a particle accelerates, without slowing a uniform
@@ -67,7 +69,9 @@ class DEMState:
     (``broken`` ``[nb]`` int8: 0 intact, 1 tensile, 2 shear; ``broken_time`` ``[nb]`` [s], NaN while intact),
     contact ``spring`` ``[C, 3]`` and the jax-md neighbour list (``None`` without contacts), simulated ``time``;
     with the cohesive contact law the per-contact cohesion history ``cohesion`` ``[C]`` [Pa] (see
-    :mod:`jaxbpm.physics.cohesive`; ``None`` otherwise) and ``spring`` holds the elastic tangential force [N]."""
+    :mod:`jaxbpm.physics.cohesive`; ``None`` otherwise) and ``spring`` holds the elastic tangential force [N]. With
+    Hertz contacts, the contacts of bonded pairs keep their springs by bond, ``bond_spring`` ``[nb, 3]`` (``spring``
+    then holds those of the other pairs)."""
 
     positions: Any
     velocities: Any
@@ -82,11 +86,12 @@ class DEMState:
     broken: Any = None
     broken_time: Any = None
     cohesion: Any = None
+    bond_spring: Any = None
 
 
 jax.tree_util.register_dataclass(DEMState, data_fields=["positions", "velocities", "orientations", "omegas", "force",
                                                         "moment", "intact", "spring", "nbrs", "time", "broken",
-                                                        "broken_time", "cohesion"],
+                                                        "broken_time", "cohesion", "bond_spring"],
                                  meta_fields=[])
 
 
@@ -94,7 +99,8 @@ def _walls(load: Loading, t):
     return load.wall_points0 + t * load.wall_velocity, load.wall_normals
 
 
-def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, pairs_valid=None):
+def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, pairs_valid=None,
+              bond_contacts=None):
     contacts = None
     if model.contacts:
         pairs, valid = _contact_pairs(model, state.nbrs, state.intact) if pairs_valid is None else pairs_valid
@@ -103,7 +109,7 @@ def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, 
             contacts = contacts + (state.cohesion,)
     points, normals = _walls(load, state.time)
     return model.forces(state.positions, state.orientations, params, state.intact, contacts,
-                        points if model.walls else None, normals if model.walls else None)
+                        points if model.walls else None, normals if model.walls else None, bond_contacts)
 
 
 def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, dt, cohesion=None):
@@ -138,36 +144,44 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
     return jax.lax.cond(jnp.sum(touching.astype(jnp.int32)) <= size, packed, lambda: evaluate(pairs, valid, spring))
 
 
-def _contact_forces(model: Model, params, load: Loading, state: DEMState, pairs, valid, spring, dt):
+def _contact_forces(model: Model, params, load: Loading, state: DEMState, pairs, valid, spring, dt,
+                    bond_contacts=False):
     """Forces and moments, wall reactions, the pairs' new springs, the new intact mask and break modes, with the
-    contact law on ``pairs`` only."""
+    contact law on ``pairs`` only; with ``bond_contacts`` on the bonded pairs as well (:func:`_near_step`), whose new
+    springs come last."""
     dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
+    bonded = None
+    if bond_contacts:
+        # superimposed: every bonded pair has the contact law too; where bonds replace contacts, a broken one only
+        on = (jnp.ones_like(state.intact) if model.bond_contact != "replace" else ~state.intact)
+        bonded = (state.bond_spring, *_contact_motion(model, state, model.bonds, on, dt), on)
     force, moment, parts = _evaluate(model, params, dataclasses.replace(state, spring=spring), load, dxi, v_rel,
-                                     (pairs, valid))
-    return force, moment, parts["walls"], parts["contacts"].spring, parts["intact"], parts["broken"]
+                                     (pairs, valid), bonded)
+    out = (force, moment, parts["walls"], parts["contacts"].spring, parts["intact"], parts["broken"])
+    return out + (parts["bond_contacts"].spring,) if bond_contacts else out
 
 
 def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMState, near: _Near, rebuilt, dt,
                margin):
-    """:func:`_contact_step` on the pairs within reach (:class:`jaxbpm.neighbors._Near`), found again when stale
-    (the candidate list was rebuilt, a particle moved more than ``margin / 2``, a bond broke where bonds replace
-    contacts). Returns the step's
-    forces, moments, wall reactions, intact mask and break modes, and the pairs within reach (their ``overflow``
-    set when they did not fit their slots: the chunk is then run again with more)."""
+    """The contact law on the bonded pairs (on the bond list, with the bond law: one pass, one scatter) and on the
+    other pairs within reach (:class:`jaxbpm.neighbors._Near`), found again when stale (the candidate list was
+    rebuilt, a particle moved more than ``margin / 2``). Returns the step's forces, moments, wall reactions, intact
+    mask and break modes, the pairs within reach (their ``overflow`` set when they did not fit their slots: the chunk
+    is then run again with more) and the bonded pairs' new springs."""
     capacity = new.nbrs.idx.shape[1]
 
     def refresh():
         spring = near_springs(near, capacity)
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, spring, new.nbrs.idx.T, model.n),
                               lambda: spring)
-        found = near_build(model, new.positions, new.nbrs, new.intact, spring, margin, near.slot.shape[0])
+        found = near_build(model, new.positions, new.nbrs, spring, margin, near.slot.shape[0])
         return found._replace(overflow=found.overflow | near.overflow, count=jnp.maximum(found.count, near.count),
                               found=near.found + 1)
 
-    near = jax.lax.cond(rebuilt | near_stale(model, near, new.positions, new.intact, margin), refresh, lambda: near)
-    force, moment, walls, spring, intact, broken = _contact_forces(model, params, load, new, near.pairs,
-                                                                   near.slot < capacity, near.spring, dt)
-    return force, moment, walls, intact, broken, near._replace(spring=spring)
+    near = jax.lax.cond(rebuilt | near_stale(near, new.positions, margin), refresh, lambda: near)
+    force, moment, walls, spring, intact, broken, bond_spring = _contact_forces(
+        model, params, load, new, near.pairs, near.slot < capacity, near.spring, dt, bond_contacts=True)
+    return force, moment, walls, intact, broken, near._replace(spring=spring), bond_spring
 
 
 def _cohesive_step(model: Model, params, load, state, spring, cohesion, dt, pairs, valid, touching, size):
@@ -251,6 +265,8 @@ def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
     )
     if model.contacts and model.contact_law == "cohesive":
         state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
+    elif model.contacts:
+        state = dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], 3), dtype))
     zeros = jnp.zeros((capacity, 3), dtype)
     force, moment, _ = _evaluate(model, params, state, load, zeros, zeros)
     return dataclasses.replace(state, force=force, moment=moment)
@@ -296,7 +312,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
 
     new = DEMState(positions=x, velocities=v, orientations=q, omegas=w, force=state.force, moment=state.moment,
                    intact=state.intact, spring=state.spring, nbrs=state.nbrs, time=t, broken=state.broken,
-                   broken_time=state.broken_time, cohesion=state.cohesion)
+                   broken_time=state.broken_time, cohesion=state.cohesion, bond_spring=state.bond_spring)
     if model.contacts:
         # the pairs gather x, v and w about 20 times each: an exact division by a run-time one makes XLA compute them
         # once, not again inside every gather
@@ -317,8 +333,9 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, alpha, origin
                                                                                    dt, cohesion)
             new = dataclasses.replace(new, cohesion=cohesion)
         elif near is not None:
-            force, moment, walls, intact, broken, near = _near_step(model, params, load, state, new, near, rebuilt,
-                                                                    dt, margin)
+            force, moment, walls, intact, broken, near, bond_spring = _near_step(model, params, load, state, new, near,
+                                                                                 rebuilt, dt, margin)
+            new = dataclasses.replace(new, bond_spring=bond_spring)
             spring = state.spring  # (the pairs within reach carry the springs; the chunk hands them back at its end)
         else:
             spring = jax.lax.cond(rebuilt,
@@ -371,7 +388,7 @@ def _run_chunk(model, params, load, state, dt, alpha, origin, n_steps, margin=No
             s, rec, near = step(model, params, load, carry[0], dt, alpha, origin, near=carry[1], margin=margin)
             return (s, near), rec
 
-        near = near_build(model, state.positions, state.nbrs, state.intact, state.spring, margin, near_slots)
+        near = near_build(model, state.positions, state.nbrs, state.spring, margin, near_slots)
     else:
         def advance(carry):
             s, rec = step(model, params, load, carry[0], dt, alpha, origin)
@@ -628,9 +645,11 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
         nbrs = nb_owner.allocate(model.positions0 if state is None else state.positions)
         if NEAR_MARGIN is not None and model.contact_law != "cohesive":
             margin = NEAR_MARGIN * settings.skin
-            within = near_count(model, model.positions0 if state is None else state.positions, nbrs,
-                                None if state is None else state.intact, margin)
-            margin, near_slots = jnp.asarray(margin, dtype), near_size(within, nbrs.idx.shape[1])
+            within = near_count(model, model.positions0 if state is None else state.positions, nbrs, margin)
+            # the bonded pairs' contacts run on the bond list; the slots hold the others, which a breaking sample
+            # makes more of as it goes: room for a tenth of the bonds from the start, so that few chunks run again
+            margin = jnp.asarray(margin, dtype)
+            near_slots = near_size(max(within, model.bonds.shape[0] // 10), nbrs.idx.shape[1])
             clock["contact_slots"], clock["near_count"] = near_slots, within
         origin = jnp.asarray(nb_owner.origin, dtype)
         if state is not None and state.nbrs is not None:
@@ -640,6 +659,8 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             state = dataclasses.replace(state, nbrs=nbrs, spring=jnp.zeros((nbrs.idx.shape[1], 3), dtype))
             if model.contact_law == "cohesive":
                 state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
+        if state is not None and state.bond_spring is None and model.contact_law != "cohesive":
+            state = dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], 3), dtype))
     else:
         nbrs = None
     if state is None:
@@ -690,7 +711,7 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             if near_overflow and not overflow:
                 # more pairs within reach than slots: the chunk again with more (a new size compiles it again)
                 near_slots = clock["contact_slots"] = min(max(near_size(within, state.nbrs.idx.shape[1]),
-                                                              near_slots + near_slots // 4 + 1),
+                                                              2 * near_slots),
                                                           state.nbrs.idx.shape[1])
                 continue
             if model.contacts and (overflow or not nb_owner.inside(pmin, pmax)):

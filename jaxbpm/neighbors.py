@@ -218,21 +218,21 @@ def _remap_index(old_pairs, new_pairs, n):
 
 
 class _Near(NamedTuple):
-    """The pairs within reach: the candidates (bonded pairs with an intact bond left out) whose surfaces are closer
-    than ``margin`` when the list was built. While no particle has moved more than ``margin / 2`` since then and no
-    bond has broken (where bonds replace contacts), no other candidate can touch, so each step's contact law runs on these pairs only, without
-    testing and packing the whole candidate list (a second, tighter Verlet list inside jax-md's).
+    """The pairs within reach: the candidates that are not bonded pairs (those have their contact evaluated on the
+    bond list, see :func:`jaxbpm.dem.step`) whose surfaces are closer than ``margin`` when the list was built. While
+    no particle has moved more than ``margin / 2`` since then, no other such candidate can touch, so each step's
+    contact law runs on these pairs only, without testing and packing the whole candidate list (a second, tighter
+    Verlet list inside the candidate list).
 
     ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
-    ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``intact`` (intact bonds
-    then), ``overflow`` (more pairs within reach than ``S``: the run needs more slots), ``count`` (the most pairs
-    within reach found so far), ``found`` (how often they were found: passes over the candidate list)."""
+    ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``overflow`` (more pairs
+    within reach than ``S``: the run needs more slots), ``count`` (the most pairs within reach found so far),
+    ``found`` (how often they were found: passes over the candidate list)."""
 
     pairs: jnp.ndarray
     slot: jnp.ndarray
     spring: jnp.ndarray
     ref: jnp.ndarray
-    intact: jnp.ndarray
     overflow: jnp.ndarray
     count: jnp.ndarray
     found: jnp.ndarray
@@ -248,20 +248,16 @@ def near_size(count: int, capacity: int) -> int:
     return max(min(-(-want // grain) * grain, capacity), 1)
 
 
-def near_count(model: Model, positions, nbrs, intact, margin: float) -> int:
-    """How many candidate pairs of ``nbrs`` are within ``margin`` of touching at ``positions`` (bonded pairs with an
-    intact bond left out where bonds replace contacts), counted on the host: what :func:`near_size` sizes the slots
-    for at the start of a run."""
+def near_count(model: Model, positions, nbrs, margin: float) -> int:
+    """How many candidate pairs of ``nbrs`` that are not bonded pairs are within ``margin`` of touching at
+    ``positions``, counted on the host: what :func:`near_size` sizes the slots for at the start of a run."""
     x, idx = np.asarray(positions), np.asarray(nbrs.idx)
     pairs = idx[:, idx[0] < model.n].T
-    if model.bond_contact == "replace" and pairs.size and model.bond_keys.shape[0]:
+    if pairs.size and model.bond_keys.shape[0]:
         keys = np.asarray(model.bond_keys)
         key = pairs[:, 0].astype(keys.dtype) * model.n + pairs[:, 1].astype(keys.dtype)
         pos = np.clip(np.searchsorted(keys, key), 0, keys.shape[0] - 1)
-        bonded = keys[pos] == key
-        if intact is not None:
-            bonded &= np.asarray(intact)[np.asarray(model.bond_key_index)[pos]]
-        pairs = pairs[~bonded]
+        pairs = pairs[keys[pos] != key]
     r = np.asarray(model.radii)
     gap = np.linalg.norm(x[pairs[:, 1]] - x[pairs[:, 0]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
     return int(np.count_nonzero(gap < margin))
@@ -277,19 +273,20 @@ def pack(mask, size: int):
     return take, slot[-1] + 1
 
 
-def near_build(model: Model, positions, nbrs, intact, spring, margin, size: int) -> _Near:
-    """The pairs within ``margin`` of touching in ``size`` slots (see :class:`_Near`), with their springs taken from
-    ``spring [C, 3]`` (the candidate list's layout)."""
+def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Near:
+    """The candidate pairs that are not bonded pairs within ``margin`` of touching, in ``size`` slots (see
+    :class:`_Near`), with their springs taken from ``spring [C, 3]`` (the candidate list's layout)."""
     from jaxbpm.physics.contact import pair_vectors
 
-    pairs, valid = _contact_pairs(model, nbrs, intact)
+    pairs = nbrs.idx.T
+    valid = pairs[:, 0] < model.n
+    valid = valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0))
     i, j, d = pair_vectors(positions, pairs, valid)
     close = valid & (model.radii[i] + model.radii[j] + margin - jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0)
     take, count = pack(close, size)
     return _Near(pairs=pairs.at[take].get(mode="fill", fill_value=model.n), slot=take,
-                 spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions,
-                 intact=jnp.sum(intact.astype(jnp.int32)), overflow=count > size, count=count,
-                 found=jnp.ones((), jnp.int32))
+                 spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions, overflow=count > size,
+                 count=count, found=jnp.ones((), jnp.int32))
 
 
 def near_springs(near: _Near, capacity: int):
@@ -298,10 +295,6 @@ def near_springs(near: _Near, capacity: int):
     return jnp.zeros((capacity, 3), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
 
 
-def near_stale(model: Model, near: _Near, positions, intact, margin):
-    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2``, or a bond broke
-    where bonds replace contacts (its pair becomes a candidate; where they superimpose, it always was one)."""
-    moved = jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1)) > 0.25 * margin * margin
-    if model.bond_contact != "replace":
-        return moved
-    return moved | (jnp.sum(intact.astype(jnp.int32)) != near.intact)
+def near_stale(near: _Near, positions, margin):
+    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2``."""
+    return jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1)) > 0.25 * margin * margin

@@ -222,9 +222,14 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
 
 
 def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None,
-                         rule: str = "separate"):
+                         rule: str = "separate", extra=None):
     """:func:`bond_forces` plus the new ``intact`` mask and the break mode of each bond in this evaluation
-    ``[nb]`` int8 (0: none; None without ``strength``), by the failure ``rule`` (see :func:`bond_failure`)."""
+    ``[nb]`` int8 (0: none; None without ``strength``), by the failure ``rule`` (see :func:`bond_failure`).
+
+    ``extra``: ``None``, or a function of the bond vectors ``d = x_j - x_i`` (an ``(x, y, z)`` tuple of ``[nb]``
+    arrays) returning ``(f_i, m_i, m_j, aux)``: more forces and moments on the same pairs (component tuples; the
+    contact law of the bonded pairs), added to the bonds' before the one scatter to the particles (whatever the bond's
+    state); ``aux`` is returned as a sixth value."""
     i, j = bonds[:, 0], bonds[:, 1]
     # the law runs on [nb] component arrays: gather columns of the transposed [3, n] and [4, n] arrays
     x_t = positions.T
@@ -243,13 +248,18 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
         intact = was & (mode == 0)
     if intact is not None:
         out = jax.tree_util.tree_map(lambda a: _mask(a, intact), out)
+    f_i, m_i, m_j, aux = out.f_i, out.m_i, out.m_j, None
+    if extra is not None:
+        e_f, e_mi, e_mj, aux = extra(tuple(d))
+        f_i, m_i, m_j = (tuple(a + b for a, b in zip(u, w)) for u, w in ((f_i, e_f), (m_i, e_mi), (m_j, e_mj)))
     # one scatter of (force, 0, moment, 0) rows for both ends: XLA's CPU scatter is several times faster for rows of
     # 4 or 8 doubles than for rows of 3 or 6
     zero = jnp.zeros_like(out.normal)
-    rows_i = jnp.stack(out.f_i + (zero,) + out.m_i + (zero,), axis=1)
-    rows_j = jnp.stack(tuple(-f for f in out.f_i) + (zero,) + out.m_j + (zero,), axis=1)
+    rows_i = jnp.stack(f_i + (zero,) + m_i + (zero,), axis=1)
+    rows_j = jnp.stack(tuple(-f for f in f_i) + (zero,) + m_j + (zero,), axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), positions.shape[0])
-    return total[:, :3], total[:, 4:7], stack(out), intact, mode
+    result = (total[:, :3], total[:, 4:7], stack(out), intact, mode)
+    return result if extra is None else result + (aux,)
 
 
 def _mask(a, intact):

@@ -31,6 +31,7 @@ from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import cohesive as cohesive_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import wall as wall_mod
+from jaxbpm.physics.vec import stack
 from jaxbpm.sample import Sample
 
 __all__ = ["Model", "build_model", "default_params", "check_params"]
@@ -301,22 +302,27 @@ class Model:
         return found
 
     def forces(self, positions, orientations, params, intact=None, contacts=None, wall_points=None,
-               wall_normals=None):
+               wall_normals=None, bond_contacts=None):
         """Forces ``[n, 3]`` and moments ``[n, 3]`` on every particle, and the parts they came from.
 
         contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``; the
           cohesive law takes a sixth entry, the cohesion history ``[C]`` (zeros, i.e. new contacts, when absent).
         wall_points, wall_normals: ``[W, 3]`` when the model has walls.
+        bond_contacts: ``None`` or ``(spring [nb, 3], dxi, v_rel, valid [nb])``: the Hertz-Mindlin law also on the
+          bonded pairs (``valid``: where it applies), evaluated with the bond law and summed with it before the
+          scatter to the particles (the DEM's contacts of bonded pairs); ``contacts`` then hold the other pairs.
         Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
         "walls": [W, 3] reactions or None, "intact": the new intact mask (bonds that broke in this evaluation
         removed; the given one without breakage), "broken": break mode of each bond in this evaluation (0: none,
-        1: tensile, 2: shear; None without breakage)}``.
+        1: tensile, 2: shear; None without breakage), "bond_contacts": the bonded pairs' ContactForces or None}``.
         """
         k = self.stiffness(params)
-        force, moment, bf, intact, broken = bond_mod.bond_forces_breaking(
+        extra = None if bond_contacts is None else self._bond_contact_law(params, *bond_contacts)
+        force, moment, bf, intact, broken, *more = bond_mod.bond_forces_breaking(
             positions, orientations if self.rotations else None, self.bonds, self.r0, k, intact,
-            self.strength(params), self.failure_rule)
-        parts = {"bonds": bf, "contacts": None, "walls": None, "intact": intact, "broken": broken}
+            self.strength(params), self.failure_rule, extra)
+        parts = {"bonds": bf, "contacts": None, "walls": None, "intact": intact, "broken": broken,
+                 "bond_contacts": stack(more[0]) if more else None}
         if self.contacts and contacts is not None and self.contact_law == "cohesive":
             pairs, valid, spring, dxi, v_rel = contacts[:5]
             history = contacts[5] if len(contacts) > 5 else jnp.zeros(pairs.shape[0], positions.dtype)
@@ -336,6 +342,21 @@ class Model:
             force = force + fw
             parts["walls"] = reaction
         return force, moment, parts
+
+
+    def _bond_contact_law(self, params, spring, dxi, v_rel, valid):
+        """The ``extra`` of :func:`jaxbpm.physics.bond.bond_forces_breaking`: the Hertz-Mindlin law on the bonded
+        pairs."""
+        i, j = self.bonds[:, 0], self.bonds[:, 1]
+        p = self.hertz_params(params)
+        comps = contact_mod._components
+
+        def law(d):
+            cf = contact_mod.law_components(d, self.radii[i], self.radii[j], self.mass[i], self.mass[j], comps(spring),
+                                            comps(dxi), comps(v_rel), p, valid)
+            return cf.f_i, cf.m_i, cf.m_j, cf
+
+        return law
 
 
 jax.tree_util.register_dataclass(
