@@ -375,14 +375,14 @@ def test_pairs_within_reach_through_breakage(bond_contact, monkeypatch):
 def test_pairs_within_reach_overflow_runs_the_chunk_again(contact_box, monkeypatch):
     """Too few slots for the pairs within reach: the chunk runs again with more, and nothing is lost. By default the
     slots are sized to the pairs within reach that are not bonded pairs at the start (a quarter more; room for a
-    tenth of the bonds at least), not to the candidate list. Half the bonds of the box removed, so that many
+    32nd of the bonds at least), not to the candidate list. Half the bonds of the box removed, so that many
     touching pairs are not bonded."""
     half = contact_box.replace(bonds=contact_box.bonds[::2], bond_radius=contact_box.bond_radius[::2],
                                bond_material=contact_box.bond_material[::2])
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.005, contacts=True)
     roomy = jaxbpm.solve(half, scene, "dem", transits=20)
     within, slots = roomy.stats["contacts_within_reach"], roomy.stats["contact_slots"]
-    assert 100 < within <= slots <= dem.near_size(max(within, half.n_bonds // 10), roomy.stats["contact_capacity"])
+    assert 100 < within <= slots <= dem.near_size(max(within, half.n_bonds // 32), roomy.stats["contact_capacity"])
     assert slots < 1.5 * within + 64
     _with_near(monkeypatch, dem.NEAR_MARGIN, lambda count, capacity: max(count // 4, 1))
     tight = jaxbpm.solve(half, scene, "dem", transits=20)

@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxbpm.physics.vec import cross, dot, once, safe_sqrt, stack
 
@@ -30,12 +31,13 @@ __all__ = ["law_components", "ContactParams", "ContactForces", "contact_params",
 
 
 class ContactParams(NamedTuple):
-    """Scalars of the particle material: E* and G* of a like pair [Pa], friction mu, damping factor beta."""
+    """Scalars of the particle material: E* and G* of a like pair [Pa], friction mu, damping factor beta (``None``:
+    no damping, and the law computes none of its terms)."""
 
     E_star: jnp.ndarray
     G_star: jnp.ndarray
     friction: jnp.ndarray
-    beta: jnp.ndarray
+    beta: jnp.ndarray | None
 
 
 class ContactForces(NamedTuple):
@@ -49,10 +51,14 @@ class ContactForces(NamedTuple):
 
 
 def contact_params(E, nu, friction, restitution, damping: bool = False) -> ContactParams:
-    """Contact parameters of a particle material; ``damping=False`` gives beta = 0."""
+    """Contact parameters of a particle material; ``damping=False`` gives no damping (beta ``None``; a traced
+    ``damping`` gives beta = 0 where it is false)."""
     G = E / (2.0 * (1.0 + nu))
-    log_e = jnp.log(restitution)
-    beta = jnp.where(damping, -log_e / jnp.sqrt(log_e**2 + jnp.pi**2), 0.0)
+    if isinstance(damping, (bool, np.bool_)) and not damping:
+        beta = None
+    else:
+        log_e = jnp.log(restitution)
+        beta = jnp.where(damping, -log_e / jnp.sqrt(log_e**2 + jnp.pi**2), 0.0)
     return ContactParams(E_star=E / (2.0 * (1.0 - nu**2)), G_star=G / (2.0 * (2.0 - nu)),
                          friction=jnp.asarray(friction), beta=beta)
 
@@ -81,10 +87,12 @@ def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, 
     delta = once(jnp.where((overlap > 0) & valid, overlap, 0.0), one)
     active = delta > 0
     sqrt_rd = safe_sqrt(r_i * r_j / (r_i + r_j) * delta)  # sqrt(R* delta)
-    # Tsuji damping: c_n = damp sqrt(2 E* sqrt(R* delta) m*), c_t = damp sqrt(k_t m*), one square root for both
-    damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta * safe_sqrt(sqrt_rd * (m_i * m_j / (m_i + m_j)))
-    v_n = dot(v_rel, n)
-    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta - damp * jnp.sqrt(2.0 * p.E_star) * v_n
+    fn = 4.0 / 3.0 * p.E_star * sqrt_rd * delta
+    if p.beta is not None:
+        # Tsuji damping: c_n = damp sqrt(2 E* sqrt(R* delta) m*), c_t = damp sqrt(k_t m*), one square root for both
+        damp = 2.0 * jnp.sqrt(5.0 / 6.0) * p.beta * safe_sqrt(sqrt_rd * (m_i * m_j / (m_i + m_j)))
+        v_n = dot(v_rel, n)
+        fn = fn - damp * jnp.sqrt(2.0 * p.E_star) * v_n
     fn = once(jnp.where(active, jnp.maximum(fn, 0.0), 0.0), one)
 
     # tangential spring: keep it in the current tangent plane (same length), then add this step's slip
@@ -96,8 +104,10 @@ def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, 
     dxi_n = dot(dxi, n)
     xi = tuple(once(old[k] * stretch + dxi[k] - dxi_n * n[k], one) for k in range(3))
     kt = 8.0 * p.G_star * sqrt_rd
-    c_t = damp * jnp.sqrt(8.0 * p.G_star)
-    ft_j = tuple(-kt * xi[k] - c_t * (v_rel[k] - v_n * n[k]) for k in range(3))
+    ft_j = tuple(-kt * xi[k] for k in range(3))
+    if p.beta is not None:
+        c_t = damp * jnp.sqrt(8.0 * p.G_star)
+        ft_j = tuple(ft_j[k] - c_t * (v_rel[k] - v_n * n[k]) for k in range(3))
     ft_len = safe_sqrt(dot(ft_j, ft_j))
     limit = p.friction * fn
     sliding = (ft_len > limit) & active
