@@ -349,8 +349,9 @@ def test_pairs_within_reach_match_packing_every_step(contact_box, monkeypatch):
 
 @pytest.mark.parametrize("bond_contact", ["superimpose", "replace"])
 def test_pairs_within_reach_through_breakage(bond_contact, monkeypatch):
-    """To failure: where bonds replace contacts, a broken bond's pair joins the pairs within reach (they are found
-    again); where they superimpose, it always was a candidate. Either way the run is the per-step packing's, to
+    """To failure: the bonded pairs' contacts run on the bond list (where bonds replace contacts, a broken bond's
+    only; where they superimpose, every bond's), the other pairs within reach on their slots. Either way the run is
+    the per-step packing of the whole candidate list's, to
     round-off before the breaks and within the chaos of breakage after them. Without local damping: its
     ``-alpha |F| sign(v)`` jumps where a velocity component changes sign, so it turns a last-bit difference in the
     order the two programs sum forces into a jump (1e-13 to 1e-9 of the force within three records on one XLA
