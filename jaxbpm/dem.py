@@ -99,14 +99,18 @@ def _walls(load: Loading, t):
     return load.wall_points0 + t * load.wall_velocity, load.wall_normals
 
 
-def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, pairs_valid=None,
-              bond_contacts=None):
+def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, pairs_valid=None):
     contacts = None
     if model.contacts:
         pairs, valid = _contact_pairs(model, state.nbrs, state.intact) if pairs_valid is None else pairs_valid
         contacts = (pairs, valid, state.spring, dxi, v_rel)
         if model.contact_law == "cohesive":
             contacts = contacts + (state.cohesion,)
+    return _forces(model, params, state, load, contacts)
+
+
+def _forces(model: Model, params, state: DEMState, load: Loading, contacts, bond_contacts=None):
+    """:meth:`Model.forces` at ``state``, with the walls where ``load`` has them at its time."""
     points, normals = _walls(load, state.time)
     return model.forces(state.positions, state.orientations, params, state.intact, contacts,
                         points if model.walls else None, normals if model.walls else None, bond_contacts)
@@ -160,9 +164,7 @@ def _near_forces(model: Model, params, load: Loading, state: DEMState, pairs, va
     springs."""
     on = jnp.ones_like(state.intact) if model.bond_contact != "replace" else ~state.intact
     bonded = (state.bond_spring, *_contact_motion(model, state, model.bonds, on, dt), on)
-    points, normals = _walls(load, state.time)
-    force, moment, parts = model.forces(state.positions, state.orientations, params, state.intact, None,
-                                        points if model.walls else None, normals if model.walls else None, bonded)
+    force, moment, parts = _forces(model, params, state, load, None, bonded)
 
     def others():
         dxi, v_rel = _contact_motion(model, state, pairs, valid, dt)
@@ -280,11 +282,18 @@ def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
     )
     if model.contacts and model.contact_law == "cohesive":
         state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
-    elif model.contacts:
-        state = dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], 3), dtype))
+    state = _with_bond_springs(model, state)
     zeros = jnp.zeros((capacity, 3), dtype)
     force, moment, _ = _evaluate(model, params, state, load, zeros, zeros)
     return dataclasses.replace(state, force=force, moment=moment)
+
+
+def _with_bond_springs(model: Model, state: DEMState) -> DEMState:
+    """``state`` with empty springs for the contacts of the bonded pairs (Hertz contacts; see :func:`_near_forces`)
+    where it has none."""
+    if not model.contacts or model.contact_law == "cohesive" or state.bond_spring is not None:
+        return state
+    return dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], 3), state.positions.dtype))
 
 
 #: the pairs within reach (see :func:`step`): within this fraction of the neighbour list's skin of touching
@@ -677,8 +686,8 @@ def _simulate(model, params, load, dt, n_steps, alpha, chunk, neighbors, progres
             state = dataclasses.replace(state, nbrs=nbrs, spring=jnp.zeros((nbrs.idx.shape[1], 3), dtype))
             if model.contact_law == "cohesive":
                 state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
-        if state is not None and state.bond_spring is None and model.contact_law != "cohesive":
-            state = dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], 3), dtype))
+        if state is not None:
+            state = _with_bond_springs(model, state)
     else:
         nbrs = None
     if state is None:

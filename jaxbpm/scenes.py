@@ -31,10 +31,7 @@ def sample_breaks(sample: Sample, breakage) -> bool:
 def _check_failure_rule(rule):
     from jaxbpm.physics.bond import check_failure_rule
 
-    try:
-        check_failure_rule(rule)
-    except ValueError as exc:
-        raise SceneError(f"failure_rule: {exc}") from None
+    check_failure_rule(rule, SceneError)
 
 
 def lateral_stats(scene, sample: Sample, displacement) -> dict:

@@ -191,10 +191,7 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
     if failure_rule is not None:
         from jaxbpm.physics.bond import check_failure_rule
 
-        try:
-            check_failure_rule(failure_rule)
-        except ValueError as exc:
-            raise CalibrationError(str(exc)) from None
+        check_failure_rule(failure_rule, CalibrationError)
         scene_of = {k: (dataclasses.replace(v, failure_rule=failure_rule) if k in _SCENE_OF else v)
                     for k, v in scene_of.items()}
     rules = sorted({getattr(scene_of[k], "failure_rule", "separate") for k in _SCENE_OF if k in targets})

@@ -78,7 +78,7 @@ import numpy as np
 
 from jaxbpm.errors import ConventionError
 from jaxbpm.interop._registry import CONVENTIONS  # (kept JAX-free for the CLI's help)
-from jaxbpm.physics.bond import BondStiffness, stiffness
+from jaxbpm.physics.bond import BondStiffness, check_failure_rule, stiffness
 
 __all__ = [
     "InexactTranslationWarning", "JaxbpmBond", "PFCParallelBond", "LammpsBpmRotational", "YadeCohFrict",
@@ -95,15 +95,6 @@ class InexactTranslationWarning(UserWarning):
 
 def _f(x) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
-
-
-def _rule(failure_rule) -> str:
-    from jaxbpm.physics.bond import check_failure_rule
-
-    try:
-        return check_failure_rule(failure_rule)
-    except ValueError as exc:
-        raise ConventionError(str(exc)) from None
 
 
 def _warn(msg: str) -> None:
@@ -340,7 +331,8 @@ def to_lammps(bond: JaxbpmBond, length, *, normalize: bool = False,
     length = _f(length)
     scale = length if normalize else 1.0
     sig, tau, rb = bond.tensile_strength, bond.shear_strength, bond.bond_radius
-    if (np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))) and _rule(failure_rule) != "summed":
+    finite = np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))
+    if finite and check_failure_rule(failure_rule, ConventionError) != "summed":
         _warn(_SUMMED_RULE)
     return LammpsBpmRotational(Kr=k.kn * scale, Ks=k.kt * scale, Kt=k.ktw, Kb=k.kb, Fcr=sig * bond.area,
                                Fcs=tau * bond.area, Tct=tau * bond.polar / rb, Tcb=sig * bond.inertia / rb,
@@ -369,7 +361,7 @@ def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True,
                   f"{'sigma_t I / r_b = Fcr r_b / 4' if name == 'Tcb' else 'tau_c J / r_b = Fcs r_b / 2'}, which "
                   f"differs from the given one by up to {100 * off:.3g} % (pure "
                   f"{'bending' if name == 'Tcb' else 'twist'} breaks at that moment in jaxbpm)")
-    if _rule(failure_rule) != "summed":
+    if check_failure_rule(failure_rule, ConventionError) != "summed":
         _warn(_SUMMED_RULE)
     return JaxbpmBond(E, nu, rb, sig, tau)
 
@@ -433,7 +425,8 @@ def to_yade(bond: JaxbpmBond, length, radius1, radius2, *, failure_rule: str = "
     poisson = k.kt / k.kn
     rmin, rb = np.minimum(r1, r2), bond.bond_radius
     sig, tau = bond.tensile_strength, bond.shear_strength
-    if (np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))) and _rule(failure_rule) != "max":
+    finite = np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))
+    if finite and check_failure_rule(failure_rule, ConventionError) != "max":
         _warn(_MAX_RULE)
     return YadeCohFrict(young=young, poisson=poisson, alphaKr=k.kb / (r1 * r2 * k.kt),
                         alphaKtw=k.ktw / (r1 * r2 * k.kt), normalCohesion=sig * bond.area / rmin**2,
@@ -457,7 +450,8 @@ def from_yade(p: YadeCohFrict, radius1, radius2, length, *, failure_rule: str = 
             _warn(f"Yade {name} cannot be represented exactly: jaxbpm's strengths fix the "
                   f"{'bending' if name.startswith('rolling') else 'twisting'} failure moment, which differs from "
                   f"Yade's by up to {100 * off:.3g} %")
-    if (np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))) and _rule(failure_rule) != "max":
+    finite = np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))
+    if finite and check_failure_rule(failure_rule, ConventionError) != "max":
         _warn(_MAX_RULE)
     return JaxbpmBond(E, nu, rb, sig, tau)
 

@@ -110,11 +110,12 @@ FAILURE_RULES = {
 }
 
 
-def check_failure_rule(rule) -> str:
-    """``rule`` if it names a failure rule (:data:`FAILURE_RULES`), else ``ValueError`` naming the choices."""
+def check_failure_rule(rule, error=ValueError) -> str:
+    """``rule`` if it names a failure rule (:data:`FAILURE_RULES`), else ``error`` (the caller's error class) naming
+    the choices."""
     if not isinstance(rule, str) or rule not in FAILURE_RULES:
-        raise ValueError(f"unknown bond failure rule {rule!r}; use one of "
-                         + "; ".join(f"{k!r}: {v}" for k, v in FAILURE_RULES.items()))
+        raise error(f"failure_rule: unknown bond failure rule {rule!r}; use one of "
+                    + "; ".join(f"{k!r}: {v}" for k, v in FAILURE_RULES.items()))
     return rule
 
 
@@ -141,10 +142,11 @@ def bond_failure(normal, shear, twist, bend, s: BondStrength, rule: str = "separ
         u_tension, u_shear = sigma / s.tensile, tau / tau_c_safe
         breaks = u_tension + u_shear >= 1.0
     else:
+        tau_s = _norm(shear) / s.area
         u_n = sigma_n / s.tensile
         u_b = (sigma - sigma_n) / s.tensile
-        u_s = _norm(shear) / s.area / tau_c_safe
-        u_t = (tau - _norm(shear) / s.area) / tau_c_safe
+        u_s = tau_s / tau_c_safe
+        u_t = (tau - tau_s) / tau_c_safe
         u_tension, u_shear = jnp.maximum(u_n, u_b), jnp.maximum(u_s, u_t)
         breaks = jnp.maximum(u_tension, u_shear) >= 1.0
     mode = jnp.where(gone, SHEAR, jnp.where(breaks, jnp.where(u_tension >= u_shear, TENSILE, SHEAR), 0))
