@@ -110,10 +110,12 @@ def _evaluate(model: Model, params, state: DEMState, load: Loading, dxi, v_rel, 
 
 
 def _forces(model: Model, params, state: DEMState, load: Loading, contacts, bond_contacts=None):
-    """:meth:`Model.forces` at ``state``, with the walls where ``load`` has them at its time."""
+    """:meth:`Model.forces` at ``state``, with the walls where ``load`` has them at its time (the bonds in blocks of
+    ``model.bond_block``)."""
     points, normals = _walls(load, state.time)
     return model.forces(state.positions, state.orientations, params, state.intact, contacts,
-                        points if model.walls else None, normals if model.walls else None, bond_contacts)
+                        points if model.walls else None, normals if model.walls else None, bond_contacts,
+                        model.bond_block)
 
 
 def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, dt, cohesion=None):
@@ -163,7 +165,7 @@ def _near_forces(model: Model, params, load: Loading, state: DEMState, pairs, va
     on ``pairs`` (skipped in a step where none is within reach). Returns the same and the bonded pairs' new
     springs."""
     on = jnp.ones_like(state.intact) if model.bond_contact != "replace" else ~state.intact
-    bonded = (state.bond_spring, *_contact_motion(model, state, model.bonds, on, dt), on)
+    bonded = (state.bond_spring, lambda i, j, d: _motion(model, state, i, j, d, dt), on)
     force, moment, parts = _forces(model, params, state, load, None, bonded)
 
     def others():
@@ -175,7 +177,7 @@ def _near_forces(model: Model, params, load: Loading, state: DEMState, pairs, va
     fc, mc, spring = jax.lax.cond(jnp.any(valid), others,
                                   lambda: (jnp.zeros_like(force), jnp.zeros_like(moment), jnp.zeros_like(spring)))
     return (force + fc, moment + mc, parts["walls"], spring, parts["intact"], parts["broken"],
-            parts["bond_contacts"].spring)
+            parts["bond_contacts"])
 
 
 def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMState, near: _Near, rebuilt, dt,
@@ -241,8 +243,13 @@ def initial_cohesion(model: Model, state: DEMState):
 def _contact_motion(model: Model, state: DEMState, pairs, valid, dt):
     """Relative displacement in this step and relative velocity of the contact points of the pairs, as ``(x, y, z)``
     tuples of ``[C]`` arrays: ``v_rel = v_j - v_i - (r_j w_j + r_i w_i) x n``, ``dxi = dt v_rel``."""
-    i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)
-    dist = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])  # > 0: padding has d = (1, 1, 1)
+    i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)  # padding has d = (1, 1, 1)
+    return _motion(model, state, i, j, d, dt)
+
+
+def _motion(model: Model, state: DEMState, i, j, d, dt):
+    """:func:`_contact_motion` of the pairs ``i, j`` whose vectors are ``d`` (``|d| > 0``)."""
+    dist = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     v_t, w_t, r_i, r_j = state.velocities.T, state.omegas.T, model.radii[i], model.radii[j]
     s = tuple(r_j * w_t[k][j] + r_i * w_t[k][i] for k in range(3))
     spin = (s[1] * d[2] - s[2] * d[1], s[2] * d[0] - s[0] * d[2], s[0] * d[1] - s[1] * d[0])

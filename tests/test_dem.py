@@ -425,3 +425,28 @@ def test_bonded_pairs_replace_or_superimpose_contacts():
     delta = 2 * R - (1.98 * R - 0.01 * R)
     hertz = 4 / 3 * (1e9 / (2 * (1 - 0.25**2))) * np.sqrt(R / 2) * delta**1.5
     np.testing.assert_allclose(out["superimpose"], out["replace"] + hertz, rtol=1e-9)
+
+
+def test_bond_pass_in_blocks_through_breakage(monkeypatch):
+    """Large samples pass over their bonds in blocks (``Model.bond_block``): forced here on a small cylinder with
+    contacts (the bonded pairs' Hertz law runs in the same blocks), blocks of 64 bonds that do not divide the bond
+    count, the run is the one-pass run's to round-off before the first break and as strong after it."""
+    from jaxbpm.physics import model as model_mod
+
+    s = jaxbpm.generate.cylinder(250, seed=0,
+                                 materials={"E": 1e9, "nu": 0.25, "tensile_strength": 5e6, "shear_strength": 5e6},
+                                 particle_material={"E": 1e9, "nu": 0.25, "density": 2500.0, "friction": 0.5,
+                                                    "restitution": 0.5}).largest_cluster()
+    scene = jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02)
+    assert build_model(s).bond_block is None
+    one = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
+    monkeypatch.setattr(model_mod, "BLOCKED_FROM", 0)
+    monkeypatch.setattr(model_mod, "BOND_BLOCK", 64)
+    assert build_model(s).bond_block == 64 and s.n_bonds % 64 != 0
+    blocks = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
+    curve = np.sum(one.stats["broken_curve"], axis=1)
+    first = int(np.argmax(curve > 0))
+    assert 0 < first and curve[-1] > 20
+    scale = np.max(np.abs(one.force))
+    np.testing.assert_allclose(blocks.force[:first], one.force[:first], rtol=0, atol=1e-10 * scale)
+    assert abs(blocks.stats["strength"] / one.stats["strength"] - 1) < 0.02

@@ -160,3 +160,45 @@ def test_float32_model_warns():
     with jax.enable_x64(False):
         with pytest.warns(UserWarning, match="float32"):
             build_model(s)
+
+
+@pytest.mark.parametrize("rule", ["separate", "summed"])
+def test_bond_pass_in_blocks_is_the_one_pass(rule):
+    """:func:`bond.bond_forces_breaking` over blocks of 50 bonds (the last block overlapping the one before) gives
+    the one pass's forces, moments, intact mask, break modes and the ``extra`` law's per-bond values."""
+    s = jaxbpm.generate.box(200, seed=1, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 1e6,
+                                                    "shear_strength": 1e6})
+    m = build_model(s, breakage=True)
+    params = default_params(s)
+    nb = m.bonds.shape[0]
+    assert nb % 50 != 0 and nb >= 100
+    key = jax.random.PRNGKey(3)
+    x = m.positions0 + 0.01 * float(np.mean(s.radii)) * jax.random.normal(key, m.positions0.shape)
+    q = jax.vmap(lambda k: rotation.from_rotation_vector(0.01 * jax.random.normal(k, (3,))))(
+        jax.random.split(key, m.n))
+    intact = jnp.arange(nb) % 7 != 0
+    # strengths at the median stresses of this state: about half the bonds break
+    bf = bond.bond_forces(x, q, m.bonds, m.r0, m.stiffness(params))[2]
+    sigma, tau, _ = bond.bond_stresses(bf.normal, bf.shear, bf.twist, bf.bend, m.strength(params))
+    strength = m.strength(params)._replace(tensile=jnp.full(nb, jnp.median(sigma)),
+                                           cohesion=jnp.full(nb, 1.5 * jnp.median(tau)))
+    weight = jnp.linspace(1.0, 2.0, nb)
+
+    def extra(i, j, d, take):
+        w = take(weight)
+        f = tuple(w * c for c in d)
+        return f, tuple(0.5 * c for c in f), tuple(-c for c in f), (w * d[0] + (i - j).astype(w.dtype),)
+
+    def run(block):
+        return bond.bond_forces_breaking(x, q, m.bonds, m.r0, m.stiffness(params), intact, strength, rule, extra,
+                                         block)
+
+    f1, m1, bf, in1, mode1, aux1 = run(None)
+    f2, m2, none, in2, mode2, aux2 = run(50)
+    assert bf is not None and none is None
+    assert 0.2 * nb < int(jnp.sum(mode1 > 0)) < 0.8 * nb  # bonds break in this evaluation
+    np.testing.assert_allclose(f2, f1, rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(f1))))
+    np.testing.assert_allclose(m2, m1, rtol=0, atol=1e-12 * float(jnp.max(jnp.abs(m1))))
+    np.testing.assert_array_equal(in2, in1)
+    np.testing.assert_array_equal(mode2, mode1)
+    np.testing.assert_array_equal(aux2[0], aux1[0])

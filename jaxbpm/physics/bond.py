@@ -224,44 +224,107 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
 
 
 def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None,
-                         rule: str = "separate", extra=None):
+                         rule: str = "separate", extra=None, block: int | None = None):
     """:func:`bond_forces` plus the new ``intact`` mask and the break mode of each bond in this evaluation
     ``[nb]`` int8 (0: none; None without ``strength``), by the failure ``rule`` (see :func:`bond_failure`).
 
-    ``extra``: ``None``, or a function of the bond vectors ``d = x_j - x_i`` (an ``(x, y, z)`` tuple of ``[nb]``
-    arrays) returning ``(f_i, m_i, m_j, aux)``: more forces and moments on the same pairs (component tuples; the
-    contact law of the bonded pairs), added to the bonds' before the one scatter to the particles (whatever the bond's
-    state); ``aux`` is returned as a sixth value."""
-    i, j = bonds[:, 0], bonds[:, 1]
+    ``extra``: ``None``, or a function ``extra(i, j, d, take)`` of the bonds' particle indices ``i, j`` and vectors
+    ``d = x_j - x_i`` (an ``(x, y, z)`` tuple) returning ``(f_i, m_i, m_j, aux)``: more forces and moments on the
+    same pairs (component tuples; the contact law of the bonded pairs), added to the bonds' before the one scatter to
+    the particles (whatever the bond's state); ``take(a)`` gives the rows of a per-bond array ``[nb, ...]`` that
+    ``i, j, d`` are for. ``aux`` (a pytree of per-bond arrays) is returned as a sixth value.
+
+    ``block``: ``None`` (default), or pass over the bonds in blocks of this many (:func:`_blocked`: the same forces
+    to round-off, several times less memory traffic on large samples; the per-bond forces, third value, are then
+    ``None``).
+    """
+    nb = bonds.shape[0]
+    if block is not None and nb >= 2 * block:
+        return _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extra, int(block))
     # the law runs on [nb] component arrays: gather columns of the transposed [3, n] and [4, n] arrays
     x_t = positions.T
+    q_t = None if orientations is None else orientations.T
+    rows, out, intact, mode, aux = _bond_pass(x_t, q_t, bonds[:, 0], bonds[:, 1], r0, k, intact, strength, rule,
+                                              extra, lambda a: a)
+    total = jax.ops.segment_sum(rows, jnp.concatenate([bonds[:, 0], bonds[:, 1]]), positions.shape[0])
+    result = (total[:, :3], total[:, 4:7], stack(out), intact, mode)
+    return result if extra is None else result + (aux,)
+
+
+def _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take):
+    """The bond law, breakage and ``extra`` on the bonds ``i, j`` (the rows ``take`` gives of the per-bond arrays):
+    the ``[2 nb, 8]`` rows of (force, 0, moment, 0) for the scatter to ``i`` then ``j``, the per-bond forces, the new
+    intact mask, the break modes and ``extra``'s aux."""
     d = x_t[:, j] - x_t[:, i]
-    if orientations is None:
+    if q_t is None:
         q_i = q_j = (1.0, 0.0, 0.0, 0.0)
     else:
-        q_t = orientations.T
         q_i, q_j = tuple(q_t[:, i]), tuple(q_t[:, j])
-    out = law_components(tuple(d), tuple(r0.T), q_i, q_j, k.kn, k.kt, k.ktw, k.kb)
+    out = law_components(tuple(d), tuple(take(r0).T), q_i, q_j, *(take(a) for a in k))
     mode = None
+    if intact is not None:
+        intact = take(intact)
     if strength is not None:
-        mode, *_ = bond_failure(out.normal, out.shear, out.twist, out.bend, strength, rule)
-        was = jnp.ones(bonds.shape[0], bool) if intact is None else intact
+        mode, *_ = bond_failure(out.normal, out.shear, out.twist, out.bend,
+                                jax.tree_util.tree_map(take, strength), rule)
+        was = jnp.ones(i.shape[0], bool) if intact is None else intact
         mode = jnp.where(was, mode, 0).astype(jnp.int8)
         intact = was & (mode == 0)
     if intact is not None:
         out = jax.tree_util.tree_map(lambda a: _mask(a, intact), out)
     f_i, m_i, m_j, aux = out.f_i, out.m_i, out.m_j, None
     if extra is not None:
-        e_f, e_mi, e_mj, aux = extra(tuple(d))
+        e_f, e_mi, e_mj, aux = extra(i, j, tuple(d), take)
         f_i, m_i, m_j = (tuple(a + b for a, b in zip(u, w)) for u, w in ((f_i, e_f), (m_i, e_mi), (m_j, e_mj)))
     # one scatter of (force, 0, moment, 0) rows for both ends: XLA's CPU scatter is several times faster for rows of
     # 4 or 8 doubles than for rows of 3 or 6
     zero = jnp.zeros_like(out.normal)
     rows_i = jnp.stack(f_i + (zero,) + m_i + (zero,), axis=1)
     rows_j = jnp.stack(tuple(-f for f in f_i) + (zero,) + m_j + (zero,), axis=1)
-    total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), positions.shape[0])
-    result = (total[:, :3], total[:, 4:7], stack(out), intact, mode)
+    return jnp.concatenate([rows_i, rows_j]), out, intact, mode, aux
+
+
+def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extra, block):
+    """:func:`bond_forces_breaking` in a loop over blocks of ``block`` bonds, each scattered into the particle sums
+    as it is done. On a large sample the all-bonds pass keeps every intermediate of the law (some 40 values a bond)
+    in memory between its loops; a block's stay in the caches (a 100k-particle box: 26 -> 18 ms a force evaluation,
+    one core). The last block is the last ``block`` bonds: the bonds it shares with the one before are computed again
+    (to the same values) and scattered once."""
+    nb = bonds.shape[0]
+    count = -(-nb // block)
+    x_t = positions.T
+    q_t = None if orientations is None else orientations.T
+
+    def run(b, carry):
+        total, per_bond = carry
+        start = jnp.minimum(b * block, nb - block)
+        take = _taker(nb, lambda a: jax.lax.dynamic_slice_in_dim(a, start, block))
+        pair = take(bonds)
+        i, j = pair[:, 0], pair[:, 1]
+        rows, _, new_intact, mode, aux = _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take)
+        fresh = start + jnp.arange(block) >= b * block
+        rows = jnp.where(jnp.concatenate([fresh, fresh])[:, None], rows, 0.0)
+        total = total.at[jnp.concatenate([i, j])].add(rows)
+        per_bond = jax.tree_util.tree_map(lambda whole, part: jax.lax.dynamic_update_slice_in_dim(whole, part, start, 0),
+                                          per_bond, (new_intact, mode, aux))
+        return total, per_bond
+
+    # the per-bond outputs (intact mask, break modes, aux), shaped after one block's
+    first = _taker(nb, lambda a: a[:block])
+    shapes = jax.eval_shape(lambda: _bond_pass(x_t, q_t, bonds[:block, 0], bonds[:block, 1], r0, k, intact, strength,
+                                               rule, extra, first)[2:])
+    per_bond = jax.tree_util.tree_map(lambda a: jnp.zeros((nb,) + a.shape[1:], a.dtype), shapes)
+    total = jnp.zeros((positions.shape[0], 8), positions.dtype)
+    total, (intact, mode, aux) = jax.lax.fori_loop(0, count, run, (total, per_bond))
+    result = (total[:, :3], total[:, 4:7], None, intact, mode)
     return result if extra is None else result + (aux,)
+
+
+def _taker(nb, pick):
+    """``take`` for :func:`_bond_pass`: ``pick`` on per-bond arrays (leading dimension ``nb``), others as they are."""
+    def take(a):
+        return pick(a) if jnp.ndim(a) > 0 and a.shape[0] == nb else a
+    return take
 
 
 def _mask(a, intact):

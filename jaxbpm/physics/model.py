@@ -31,10 +31,14 @@ from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import cohesive as cohesive_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import wall as wall_mod
-from jaxbpm.physics.vec import stack
 from jaxbpm.sample import Sample
 
 __all__ = ["Model", "build_model", "default_params", "check_params"]
+
+#: the DEM's bond pass runs over blocks of BOND_BLOCK bonds on models of at least BLOCKED_FROM bonds
+#: (:func:`jaxbpm.physics.bond.bond_forces_breaking`: a block's intermediates of the law stay in the caches, where
+#: one pass over all bonds keeps them in memory); below, in one pass (``Model.bond_block``)
+BOND_BLOCK, BLOCKED_FROM = 4096, 65536
 
 
 def default_params(sample: Sample) -> dict:
@@ -203,6 +207,7 @@ class Model:
     cohesive: Any = None  # cohesive_mod.CohesiveParams with contact_law="cohesive"
     failure_rule: str = "separate"  # how a bond's stresses break it (jaxbpm.physics.bond.FAILURE_RULES)
     contact_law: str = "hertz"
+    bond_block: int | None = None  # the DEM's bond pass in blocks of this many bonds (None: one pass)
 
     @property
     def n(self) -> int:
@@ -302,27 +307,31 @@ class Model:
         return found
 
     def forces(self, positions, orientations, params, intact=None, contacts=None, wall_points=None,
-               wall_normals=None, bond_contacts=None):
+               wall_normals=None, bond_contacts=None, block=None):
         """Forces ``[n, 3]`` and moments ``[n, 3]`` on every particle, and the parts they came from.
 
         contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``; the
           cohesive law takes a sixth entry, the cohesion history ``[C]`` (zeros, i.e. new contacts, when absent).
         wall_points, wall_normals: ``[W, 3]`` when the model has walls.
-        bond_contacts: ``None`` or ``(spring [nb, 3], dxi, v_rel, valid [nb])``: the Hertz-Mindlin law also on the
+        bond_contacts: ``None`` or ``(spring [nb, 3], motion, valid [nb])``: the Hertz-Mindlin law also on the
           bonded pairs (``valid``: where it applies), evaluated with the bond law and summed with it before the
-          scatter to the particles (the DEM's contacts of bonded pairs); ``contacts`` then hold the other pairs.
+          scatter to the particles (the DEM's contacts of bonded pairs); ``motion(i, j, d)`` gives the pairs'
+          ``(dxi, v_rel)`` from their particle indices and vectors ``d = x_j - x_i`` (component tuples);
+          ``contacts`` then hold the other pairs.
+        block: pass over the bonds in blocks of this many (see :func:`jaxbpm.physics.bond.bond_forces_breaking`;
+          ``parts["bonds"]`` is then ``None``).
         Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
         "walls": [W, 3] reactions or None, "intact": the new intact mask (bonds that broke in this evaluation
         removed; the given one without breakage), "broken": break mode of each bond in this evaluation (0: none,
-        1: tensile, 2: shear; None without breakage), "bond_contacts": the bonded pairs' ContactForces or None}``.
+        1: tensile, 2: shear; None without breakage), "bond_contacts": the bonded pairs' new springs ``[nb, 3]`` or None}``.
         """
         k = self.stiffness(params)
         extra = None if bond_contacts is None else self._bond_contact_law(params, *bond_contacts)
         force, moment, bf, intact, broken, *more = bond_mod.bond_forces_breaking(
             positions, orientations if self.rotations else None, self.bonds, self.r0, k, intact,
-            self.strength(params), self.failure_rule, extra)
+            self.strength(params), self.failure_rule, extra, block)
         parts = {"bonds": bf, "contacts": None, "walls": None, "intact": intact, "broken": broken,
-                 "bond_contacts": stack(more[0]) if more else None}
+                 "bond_contacts": jnp.stack(more[0], axis=-1) if more else None}
         if self.contacts and contacts is not None and self.contact_law == "cohesive":
             pairs, valid, spring, dxi, v_rel = contacts[:5]
             history = contacts[5] if len(contacts) > 5 else jnp.zeros(pairs.shape[0], positions.dtype)
@@ -344,17 +353,16 @@ class Model:
         return force, moment, parts
 
 
-    def _bond_contact_law(self, params, spring, dxi, v_rel, valid):
+    def _bond_contact_law(self, params, spring, motion, valid):
         """The ``extra`` of :func:`jaxbpm.physics.bond.bond_forces_breaking`: the Hertz-Mindlin law on the bonded
-        pairs."""
-        i, j = self.bonds[:, 0], self.bonds[:, 1]
+        pairs (their new springs as aux)."""
         p = self.hertz_params(params)
-        comps = contact_mod._components
 
-        def law(d):
-            cf = contact_mod.law_components(d, self.radii[i], self.radii[j], self.mass[i], self.mass[j], comps(spring),
-                                            comps(dxi), comps(v_rel), p, valid)
-            return cf.f_i, cf.m_i, cf.m_j, cf
+        def law(i, j, d, take):
+            dxi, v_rel = motion(i, j, d)
+            cf = contact_mod.law_components(d, self.radii[i], self.radii[j], self.mass[i], self.mass[j],
+                                            contact_mod._components(take(spring)), dxi, v_rel, p, take(valid))
+            return cf.f_i, cf.m_i, cf.m_j, cf.spring
 
         return law
 
@@ -364,7 +372,8 @@ jax.tree_util.register_dataclass(
     data_fields=["positions0", "radii", "mass", "inertia", "bonds", "r0", "bond_material", "bond_area", "bond_I",
                  "bond_J", "bond_length", "bond_keys", "bond_key_index", "bond_radius", "bond_tensile",
                  "bond_cohesion", "contact", "wall_stiffness", "cohesive"],
-    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage", "contact_law", "failure_rule"],
+    meta_fields=["rotations", "contacts", "walls", "bond_contact", "breakage", "contact_law", "failure_rule",
+                 "bond_block"],
 )
 
 
@@ -456,6 +465,7 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         failure_rule=bond_mod.check_failure_rule(failure_rule),
         cohesive=None if law is None else law.params(pm, dtype),
         contact_law="hertz" if law is None else "cohesive",
+        bond_block=BOND_BLOCK if bonds.shape[0] >= BLOCKED_FROM else None,
     )
 
 
