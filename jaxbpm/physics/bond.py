@@ -28,6 +28,7 @@ the displacements the law is the incremental law of Eq. 1-4.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -305,8 +306,8 @@ def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extr
         fresh = start + jnp.arange(block) >= b * block
         rows = jnp.where(jnp.concatenate([fresh, fresh])[:, None], rows, 0.0)
         total = total.at[jnp.concatenate([i, j])].add(rows)
-        per_bond = jax.tree_util.tree_map(lambda whole, part: jax.lax.dynamic_update_slice_in_dim(whole, part, start, 0),
-                                          per_bond, (new_intact, mode, aux))
+        put = functools.partial(jax.lax.dynamic_update_slice_in_dim, start_index=start, axis=0)
+        per_bond = jax.tree_util.tree_map(lambda whole, part: put(whole, part), per_bond, (new_intact, mode, aux))
         return total, per_bond
 
     # the per-bond outputs (intact mask, break modes, aux), shaped after one block's

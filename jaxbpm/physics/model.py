@@ -323,7 +323,8 @@ class Model:
         Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
         "walls": [W, 3] reactions or None, "intact": the new intact mask (bonds that broke in this evaluation
         removed; the given one without breakage), "broken": break mode of each bond in this evaluation (0: none,
-        1: tensile, 2: shear; None without breakage), "bond_contacts": the bonded pairs' new springs ``[nb, 3]`` or None}``.
+        1: tensile, 2: shear; None without breakage), "bond_contacts": the bonded pairs' new springs ``[nb, 3]`` or
+        None}``.
         """
         k = self.stiffness(params)
         extra = None if bond_contacts is None else self._bond_contact_law(params, *bond_contacts)
