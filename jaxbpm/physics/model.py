@@ -35,9 +35,10 @@ from jaxbpm.sample import Sample
 
 __all__ = ["Model", "build_model", "default_params", "check_params"]
 
-#: the DEM's bond pass runs over blocks of BOND_BLOCK bonds on models of at least BLOCKED_FROM bonds
+#: on the CPU the DEM's bond pass runs over blocks of BOND_BLOCK bonds on models of at least BLOCKED_FROM bonds
 #: (:func:`jaxbpm.physics.bond.bond_forces_breaking`: a block's intermediates of the law stay in the caches, where
-#: one pass over all bonds keeps them in memory); below, in one pass (``Model.bond_block``)
+#: one pass over all bonds keeps them in memory); below, and on accelerators (where a loop of blocks would run its
+#: kernels one block after another), in one pass (``Model.bond_block``)
 BOND_BLOCK, BLOCKED_FROM = 4096, 65536
 
 
@@ -466,7 +467,7 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         failure_rule=bond_mod.check_failure_rule(failure_rule),
         cohesive=None if law is None else law.params(pm, dtype),
         contact_law="hertz" if law is None else "cohesive",
-        bond_block=BOND_BLOCK if bonds.shape[0] >= BLOCKED_FROM else None,
+        bond_block=BOND_BLOCK if bonds.shape[0] >= BLOCKED_FROM and jax.default_backend() == "cpu" else None,
     )
 
 
