@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import jaxbpm
-import test_interop
+from tests import test_interop
 from jaxbpm import io
 from jaxbpm.errors import JaxbpmError, SceneError
 from jaxbpm.interop import formats
