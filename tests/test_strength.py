@@ -1,4 +1,4 @@
-"""Bond breakage (tensile, shear, Mohr-Coulomb), compression to failure and three-point bending."""
+"""Bond breakage (tensile, shear, Mohr-Coulomb) and compression to failure."""
 
 import dataclasses
 
@@ -188,32 +188,6 @@ def test_ucs_grows_with_the_shear_strength(rock):
     strong = jaxbpm.solve(_with_strengths(rock, 8e6, 6e6), scene, "dem", transits=30)
     assert strong.stats["strength"] > 1.3 * weak.stats["strength"]
     assert weak.stats["broken_shear"] > weak.stats["broken_tensile"]
-
-
-@pytest.fixture(scope="module")
-def beam():
-    return jaxbpm.generate.beam(300, seed=1, packing_fraction=0.52, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 5e6,
-                                                        "shear_strength": 1e7}).largest_cluster()
-
-
-def test_flexural_strength_grows_with_the_tensile_strength(beam):
-    scene = ThreePointBending(strain=0.1)
-    low = jaxbpm.solve(_with_strengths(beam, 2e6, 1e7), scene, "dem", transits=30)
-    high = jaxbpm.solve(_with_strengths(beam, 6e6, 1e7), scene, "dem", transits=30)
-    ratio = high.stats["strength"] / low.stats["strength"]
-    assert 1.8 < ratio < 3.6, ratio  # nearly proportional (Qu et al. 2020 observes a near-linear relation)
-    assert low.stats["past_peak"] and low.stats["broken_tensile"] > low.stats["broken_shear"]
-    span, b, h = scene.dimensions(beam)
-    np.testing.assert_allclose(low.stats["strength"], 3 * low.stats["peak_force"] * span / (2 * b * h**2))
-
-
-def test_bending_scene_errors_are_named(beam):
-    with pytest.raises(SceneError, match="span"):
-        ThreePointBending(span=1.0).dimensions(beam)
-    with pytest.raises(SceneError, match="axis"):
-        ThreePointBending(axis=0, span_axis=0)
-    with pytest.raises(SceneError, match="punch"):
-        ThreePointBending(punch_width=1e-9).layers(beam)
 
 
 def test_elastic_solvers_do_not_break_bonds(rock):

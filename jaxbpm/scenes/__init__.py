@@ -1,7 +1,23 @@
-"""Scenes: a lab test = boundary conditions + loading + observables, applied to a sample."""
+"""Scenes: a lab test = boundary conditions + loading + observables, applied to a sample.
 
-from jaxbpm.scenes.uniaxial import (
-    BrazilianDisc, ThreePointBending, UniaxialCompression, _build_model, _check_failure_rule, _is_axis, _loading,
-    lateral_stats, sample_breaks)
+A scene tells the solvers what to clamp or press, how far, and how to read the force-displacement curve:
+:class:`Scene` (in :mod:`jaxbpm.scenes.base`) is the protocol every solver relies on; any class with its members is a
+scene. The scenes of the package:
 
-__all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "sample_breaks", "lateral_stats"]
+* :class:`UniaxialCompression` (:mod:`~jaxbpm.scenes.uniaxial`): squeezed along one axis between clamped layers or
+  plane walls; stiffness, Young's modulus E = K l / A, Poisson ratio, compressive strength. Every solver.
+* :class:`ThreePointBending` (:mod:`~jaxbpm.scenes.bending`): a beam on two supports under a punch; beam modulus and
+  flexural strength. DEM and DSM.
+* :class:`BrazilianDisc` (:mod:`~jaxbpm.scenes.brazilian`): a disc squeezed across a diameter; Brazilian tensile
+  strength. DEM only.
+"""
+
+from jaxbpm.scenes.base import (
+    METHODS, AxialScene, BaseScene, Scene, _build_model, _check_failure_rule, _is_axis, _loading, lateral_stats,
+    sample_breaks)
+from jaxbpm.scenes.bending import ThreePointBending
+from jaxbpm.scenes.brazilian import BrazilianDisc
+from jaxbpm.scenes.uniaxial import UniaxialCompression
+
+__all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "Scene", "BaseScene", "AxialScene", "METHODS",
+           "sample_breaks", "lateral_stats"]
