@@ -132,7 +132,7 @@ def expected_errors(scene, share, geometric=None) -> dict:
     :func:`geometric_error` stands in)."""
     g = geometric_error(scene.strain) if geometric is None else abs(float(geometric))
     gc = corrected_error(scene.strain)
-    walls = bool(getattr(scene, "uses_walls", False))
+    walls = bool(scene.uses_walls)
     if share is None:
         return {"ste": math.inf if walls else STE_BONDS_ERROR, "dsm_bonds": math.inf if walls else g,
                 "dsm_bonds_corrected": math.inf if walls else gc, "dsm_linearised": math.inf,
@@ -176,17 +176,17 @@ def _linearised_best_case(s) -> float:
 
 def _dem_only(sample, scene) -> str | None:
     """Why ``scene`` needs the DEM (``None``: an elastic compression the static methods model)."""
-    from jaxbpm.scenes import UniaxialCompression, sample_breaks
+    from jaxbpm.scenes import sample_breaks
 
-    allowed = getattr(scene, "methods", None)
-    if allowed is not None and not ({"dsm", "ste"} & set(allowed)):
+    allowed = scene.methods
+    if not ({"dsm", "ste"} & set(allowed)):
         return f"{type(scene).__name__} is modelled by the DEM only (methods={tuple(allowed)})"
-    if not isinstance(scene, UniaxialCompression):
+    if not {"dsm", "ste"} <= set(allowed):
         return (f"the static methods were validated on uniaxial compression only, not on {type(scene).__name__}: "
                 "the DEM")
-    if sample_breaks(sample, getattr(scene, "breakage", None)):
+    if sample_breaks(sample, scene.breakage):
         return "the scene breaks bonds (breakage, or finite bond strengths): past elasticity, the DEM only"
-    if getattr(scene, "contacts", False) and getattr(scene, "cohesive_law", None) is not None:
+    if scene.contacts and scene.cohesive_law is not None:
         return "cohesive contacts depend on the loading history: the DEM only"
     return None
 

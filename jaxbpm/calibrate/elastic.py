@@ -78,7 +78,7 @@ def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None
     from jaxbpm.calibrate.objective import base_params
 
     base = base_params(sample)
-    if dataclasses.is_dataclass(scene) and getattr(scene, "breakage", None) is not True:
+    if dataclasses.is_dataclass(scene) and scene.breakage is not True:
         scene = dataclasses.replace(scene, breakage=False)  # elastic properties: no bond may break on the way
     space = ParameterSpace(parameters, base, scaling="log" if nu is None else "target")
     fwd = forward_model(sample, scene, model, **dict(solve_options or {}))

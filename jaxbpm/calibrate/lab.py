@@ -194,7 +194,7 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
         check_failure_rule(failure_rule, CalibrationError)
         scene_of = {k: (dataclasses.replace(v, failure_rule=failure_rule) if k in _SCENE_OF else v)
                     for k, v in scene_of.items()}
-    rules = sorted({getattr(scene_of[k], "failure_rule", "separate") for k in _SCENE_OF if k in targets})
+    rules = sorted({scene_of[k].failure_rule for k in _SCENE_OF if k in targets})
     if len(rules) > 1:
         raise CalibrationError(f"the strength scenes break bonds by different failure rules {rules}: one set of bond "
                                "strengths holds under one rule; give failure_rule=")

@@ -28,6 +28,7 @@ import numpy as np
 
 from jaxbpm.calibrate.space import (as_targets, CalibrationError, DEFAULT_SCENE, ELASTIC_OBSERVABLES, Parameter,
                                     ParameterSpace, Target)
+from jaxbpm.scenes import Scene
 
 __all__ = ["CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward", "forward_model", "Problem",
            "ELASTIC_OBSERVABLES", "STRENGTH_OBSERVABLES", "as_targets", "base_params"]
@@ -146,7 +147,7 @@ def base_params(sample, keys=(), scene=None) -> dict:
             out[key] = jnp.asarray(np.float64(getattr(sample.particle_material, particle[key])))
         elif key in cohesive:
             scenes = list(scene.values()) if isinstance(scene, Mapping) else [scene]
-            laws = [sc.cohesive_law for sc in scenes if getattr(sc, "cohesive_law", None) is not None]
+            laws = [sc.cohesive_law for sc in scenes if sc.cohesive_law is not None]
             if not laws:
                 raise CalibrationError(f"{key!r} is a parameter of the cohesive contact law, but no scene has "
                                        "contact_law='cohesive'")
@@ -157,7 +158,7 @@ def base_params(sample, keys=(), scene=None) -> dict:
 
 
 def _linear_scene(scene) -> bool:
-    return not (getattr(scene, "contacts", False) or getattr(scene, "uses_walls", False))
+    return not (scene.contacts or scene.uses_walls)
 
 
 _FORWARDS: dict = {}  # recent forward models: repeated calibrations of one sample share their compiled functions
@@ -182,7 +183,7 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
     if not scene_map:
         raise CalibrationError("no scene given")
     for key, sc in scene_map.items():
-        if not hasattr(sc, "geometry") or not hasattr(sc, "model"):
+        if not isinstance(sc, Scene):
             raise CalibrationError(f"scene {key!r} is not a jaxbpm scene (got {type(sc).__name__})")
     if isinstance(sample, Mapping):
         if set(sample) != set(scene_map):

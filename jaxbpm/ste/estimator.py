@@ -166,7 +166,7 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
     if precision not in ("float64", "float32"):
         raise SceneError(f"precision must be 'float64' or 'float32', got {precision!r}")
     axis = 2 if scene is None else int(scene.axis)
-    use_contacts = bool(getattr(scene, "contacts", False)) if contacts is None else bool(contacts)
+    use_contacts = (scene is not None and bool(scene.contacts)) if contacts is None else bool(contacts)
     pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
     n = sample.n_particles
     model = _bond_model(sample, dofs)
