@@ -157,7 +157,9 @@ def scene_stiffness(est: Estimator, params, sample: Sample, scene, *, layered: b
 
 
 def _check_scene(scene):
-    if "ste" not in scene.methods:
+    from jaxbpm.scenes import Scene
+
+    if not isinstance(scene, Scene) or "ste" not in scene.methods:
         raise SceneError(f"the STE knows the UniaxialCompression scene, got {type(scene).__name__}")
 
 
