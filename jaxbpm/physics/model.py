@@ -456,8 +456,8 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         bond_key_index=_put(key_index, np.int32),
         bond_tensile=_put(mats.tensile_strength, dtype),
         bond_cohesion=_put(mats.shear_strength, dtype),
-        contact=_contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
-                                bool(contact_damping)),
+        contact=material_contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution),
+                                        dtype.name, bool(contact_damping)),
         wall_stiffness=_put(ws, dtype),
         rotations=bool(rotations),
         contacts=bool(contacts),
@@ -501,9 +501,21 @@ def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:
 
 
 @functools.lru_cache(maxsize=16)
-def _contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str, damping: bool):
-    """:func:`jaxbpm.physics.contact.contact_params` as one small program (not a dozen eager operations), once per
-    material."""
+def material_contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str,
+                            damping: bool) -> contact_mod.ContactParams:
+    """:func:`jaxbpm.physics.contact.contact_params` as one small compiled program, cached per material.
+
+    Args:
+        E: the particles' Young's modulus (Pa).
+        nu: the particles' Poisson's ratio.
+        friction: the contacts' friction coefficient (``inf``: no sliding).
+        restitution: the coefficient of restitution.
+        dtype: the name of the floating-point type of the parameters (``"float64"``).
+        damping: whether the normal force has its viscous part.
+
+    Returns:
+        The contact parameters, arrays of ``dtype``.
+    """
     a = lambda v: np.asarray(v, dtype)  # noqa: E731
     return _contact_params_jit(a(E), a(nu), a(friction), a(restitution), damping=damping)
 
