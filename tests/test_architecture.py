@@ -240,8 +240,8 @@ CLEAN = {
     "a/high.py": "from toy.a.low import _helper, public\n",  # private name within its own package
     "_compile.py": "def put(x):\n    return x\n",
     "b/__init__.py": "from toy import _compile\n",  # a private module with public names
-    "b/user.py": "from toy._compile import put\nfrom toy.a import low\n\n\ndef f():\n    from toy.a.high import public\n"
-                 "    return public, put, low\n",
+    "b/user.py": "from toy._compile import put\nfrom toy.a import low\n\n\n"
+                 "def f():\n    from toy.a.high import public\n    return public, put, low\n",
     "c.py": "from toy.a.low import __doc__ as doc\nfrom . import b\n",  # a dunder; a relative import
 }
 
@@ -265,7 +265,8 @@ def test_an_import_circle_is_caught(tmp_path):
     # `from P import name` is the module P.name where that is a module, else P
     root = _package(tmp_path / "2", {"m.py": "from toy.n import thing\n", "n/__init__.py": "thing = 1\n",
                                      "n/other.py": "import toy.m\n",
-                                     "p/__init__.py": "from toy.p.low import x\n", "p/low.py": "from toy.p import _sib\nx = 1\n",
+                                     "p/__init__.py": "from toy.p.low import x\n",
+                                     "p/low.py": "from toy.p import _sib\nx = 1\n",
                                      "p/_sib.py": ""})
     assert graph(root)["toy.p.low"] == {"toy.p._sib"}
     assert import_circles(graph(root)) == []
@@ -290,8 +291,8 @@ def test_a_long_function_is_caught(tmp_path):
     body = "    x = 1\n" * 99
     doc = '    """' + "A docstring.\n" * 30 + '    """\n'
     nested = "def outer():\n    def inner():\n" + "        x = 1\n" * 100 + "    return inner\n"
+    method = "class C:\n    @staticmethod\n    def m():\n" + "        x = 1\n" * 99 + "        return 1\n"
     root = _package(tmp_path, {**CLEAN, "f.py": f"def ok():\n{doc}{body}\n\ndef long():\n{body}    x = 2\n",
-                               "g.py": f"class C:\n    @staticmethod\n    def m():\n{'    ' + body.replace(chr(10), chr(10) + '    ')[:-4]}"
-                                       f"        return 1\n\n\n{nested}"})
+                               "g.py": f"{method}\n\n{nested}"})
     assert long_functions(root) == [("toy.f:long", 101), ("toy.g:C.m", 101), ("toy.g:outer", 103),
                                     ("toy.g:outer.inner", 101)]
