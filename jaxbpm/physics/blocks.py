@@ -4,17 +4,18 @@ block to block.
 
 A block is a count of pairs, and only that: the DEM's ``chunk`` (steps per compiled program) is another idea.
 
->>> import jax.numpy as jnp
->>> from jaxbpm.physics import blocks
->>> blocks.block_length(7 * blocks.BLOCK) == blocks.BLOCK  # a whole number of blocks
-True
->>> blocks.block_length(100, block=32)  # 100 = 4 x 25: the largest power-of-two divisor of 32 down to 32 / 8
-4
->>> blocks.block_length(99, block=32)  # no divisor: the last block is padded
-32
->>> x = jnp.arange(10.0)
->>> float(blocks.sum_blocks(lambda idx, w: jnp.sum(jnp.where(w, x[idx], 0.0)), 10, block=4))
-45.0
+Examples:
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import blocks
+    >>> blocks.block_length(7 * blocks.BLOCK) == blocks.BLOCK  # a whole number of blocks
+    True
+    >>> blocks.block_length(100, block=32)  # 100 = 4 x 25: the largest power-of-two divisor of 32 down to 32 / 8
+    4
+    >>> blocks.block_length(99, block=32)  # no divisor: the last block is padded
+    32
+    >>> x = jnp.arange(10.0)
+    >>> float(blocks.sum_blocks(lambda idx, w: jnp.sum(jnp.where(w, x[idx], 0.0)), 10, block=4))
+    45.0
 """
 
 from __future__ import annotations

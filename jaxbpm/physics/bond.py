@@ -28,27 +28,28 @@ the displacements the law is the incremental law of Eq. 1-4.
 A walkthrough: a bond of radius 0.5 mm between two spheres 2 mm apart has the axial stiffness k_n = E A / L, and a
 stretch of 1 um pulls particle i towards j with k_n times the stretch; a rigid turn of the pair gives no force.
 
->>> import math
->>> import jax
->>> jax.config.update("jax_enable_x64", True)  # stiffness work wants float64
->>> import jax.numpy as jnp
->>> from jaxbpm.physics import bond, rotation
->>> E, nu, r_b, L = 1e9, 0.25, 0.5e-3, 2e-3
->>> A, I = math.pi * r_b**2, math.pi * r_b**4 / 4
->>> k = bond.stiffness(E, nu, A, I, 2 * I, L)
->>> math.isclose(k.kn, E * A / L)
-True
->>> print(f"k_n = {k.kn:.4g} N/m, k_t = {k.kt:.4g} N/m")
-k_n = 3.927e+05 N/m, k_t = 1.571e+05 N/m
->>> r0 = jnp.array([L, 0.0, 0.0])
->>> still = rotation.identity(1)[0]
->>> out = bond.bond_law(r0 + jnp.array([1e-6, 0.0, 0.0]), r0, still, still, *k)
->>> print(f"{float(out.f_i[0]) / (k.kn * 1e-6):.6f}")  # pulled along +x, towards j
-1.000000
->>> turn = rotation.from_rotation_vector(jnp.array([0.0, 0.0, 0.3]))
->>> out = bond.bond_law(rotation.rotate(turn, r0), r0, turn, turn, *k)
->>> bool(jnp.max(jnp.abs(out.f_i)) < 1e-9 * k.kn * 1e-6)
-True
+Examples:
+    >>> import math
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)  # stiffness work wants float64
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import bond, rotation
+    >>> E, nu, r_b, L = 1e9, 0.25, 0.5e-3, 2e-3
+    >>> A, I = math.pi * r_b**2, math.pi * r_b**4 / 4
+    >>> k = bond.stiffness(E, nu, A, I, 2 * I, L)
+    >>> math.isclose(k.kn, E * A / L)
+    True
+    >>> print(f"k_n = {k.kn:.4g} N/m, k_t = {k.kt:.4g} N/m")
+    k_n = 3.927e+05 N/m, k_t = 1.571e+05 N/m
+    >>> r0 = jnp.array([L, 0.0, 0.0])
+    >>> still = rotation.identity(1)[0]
+    >>> out = bond.bond_law(r0 + jnp.array([1e-6, 0.0, 0.0]), r0, still, still, *k)
+    >>> print(f"{float(out.f_i[0]) / (k.kn * 1e-6):.6f}")  # pulled along +x, towards j
+    1.000000
+    >>> turn = rotation.from_rotation_vector(jnp.array([0.0, 0.0, 0.3]))
+    >>> out = bond.bond_law(rotation.rotate(turn, r0), r0, turn, turn, *k)
+    >>> bool(jnp.max(jnp.abs(out.f_i)) < 1e-9 * k.kn * 1e-6)
+    True
 """
 
 from __future__ import annotations

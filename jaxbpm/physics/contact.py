@@ -17,21 +17,22 @@ The DEM passes each step's relative displacement of the contact points; a static
 A walkthrough: two spheres of radius 1 mm pressed 1 um into each other push apart with Hertz's force; a small
 tangential displacement is held by Mindlin's spring, a large one slides at the Coulomb limit.
 
->>> import jax
->>> jax.config.update("jax_enable_x64", True)
->>> import jax.numpy as jnp
->>> from jaxbpm.physics import contact
->>> p = contact.contact_params(E=1e9, nu=0.25, friction=0.5, restitution=0.5)
->>> r, delta = 1e-3, 1e-6
->>> d = jnp.array([2 * r - delta, 0.0, 0.0])              # x_j - x_i
->>> zero = jnp.zeros(3)
->>> out = contact.hertz_mindlin(d, r, r, 1.0, 1.0, zero, zero, zero, p)
->>> hertz = 4 / 3 * float(p.E_star) * (r / 2) ** 0.5 * delta**1.5
->>> print(f"{float(out.normal) / hertz:.9f}, f_i along -x: {float(out.f_i[0]) < 0}")
-1.000000000, f_i along -x: True
->>> slide = contact.hertz_mindlin(d, r, r, 1.0, 1.0, zero, jnp.array([0.0, 1e-4, 0.0]), zero, p)
->>> print(bool(slide.sliding), f"{float(jnp.linalg.norm(slide.f_i[1:]) / slide.normal):.9f}")
-True 0.500000000
+Examples:
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import contact
+    >>> p = contact.contact_params(E=1e9, nu=0.25, friction=0.5, restitution=0.5)
+    >>> r, delta = 1e-3, 1e-6
+    >>> d = jnp.array([2 * r - delta, 0.0, 0.0])              # x_j - x_i
+    >>> zero = jnp.zeros(3)
+    >>> out = contact.hertz_mindlin(d, r, r, 1.0, 1.0, zero, zero, zero, p)
+    >>> hertz = 4 / 3 * float(p.E_star) * (r / 2) ** 0.5 * delta**1.5
+    >>> print(f"{float(out.normal) / hertz:.9f}, f_i along -x: {float(out.f_i[0]) < 0}")
+    1.000000000, f_i along -x: True
+    >>> slide = contact.hertz_mindlin(d, r, r, 1.0, 1.0, zero, jnp.array([0.0, 1e-4, 0.0]), zero, p)
+    >>> print(bool(slide.sliding), f"{float(jnp.linalg.norm(slide.f_i[1:]) / slide.normal):.9f}")
+    True 0.500000000
 """
 
 from __future__ import annotations

@@ -3,16 +3,17 @@
 that ``grad``, ``vmap`` and optax all see one thing. :func:`default_params` gives a sample's; :func:`check_params`
 is the one check every solver's ``params`` goes through.
 
->>> import jaxbpm
->>> from jaxbpm.physics.params import check_params, default_params
->>> sample = jaxbpm.generate.lattice("sc", (2, 2, 2), materials={"E": 2e9, "nu": 0.2})
->>> params = default_params(sample)
->>> sorted(params), [float(v) for v in params["bond_E"]]
-(['bond_E', 'bond_nu'], [2000000000.0])
->>> check_params({**params, "bond_e": [1e9]}, sample)  # doctest: +ELLIPSIS
-Traceback (most recent call last):
-...
-jaxbpm.errors.SceneError: params has an unknown key 'bond_e'; did you mean 'bond_E' or 'bond_nu'? ...
+Examples:
+    >>> import jaxbpm
+    >>> from jaxbpm.physics.params import check_params, default_params
+    >>> sample = jaxbpm.generate.lattice("sc", (2, 2, 2), materials={"E": 2e9, "nu": 0.2})
+    >>> params = default_params(sample)
+    >>> sorted(params), [float(v) for v in params["bond_E"]]
+    (['bond_E', 'bond_nu'], [2000000000.0])
+    >>> check_params({**params, "bond_e": [1e9]}, sample)  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    jaxbpm.errors.SceneError: params has an unknown key 'bond_e'; did you mean 'bond_E' or 'bond_nu'? ...
 """
 
 from __future__ import annotations

@@ -15,19 +15,20 @@ Forms (``nd`` DOF per particle, 3 or 6; DOF order of a pair ``(u_i, theta_i, u_j
 A walkthrough: the stiffness of one bond along x, without rotations, has k_n along the bond and k_t across it, is
 symmetric, and a rigid translation of the pair costs nothing.
 
->>> import jax
->>> jax.config.update("jax_enable_x64", True)
->>> import jax.numpy as jnp
->>> from jaxbpm.physics import bond, tangent
->>> r0 = jnp.array([[2e-3, 0.0, 0.0]])
->>> k = bond.BondStiffness(*(jnp.array([v]) for v in (4e5, 1.6e5, 1e-3, 2e-3)))
->>> K = tangent.bond_full(r0, k, rotations=False)[0]      # [6, 6], DOF order (u_i, u_j)
->>> K.shape
-(6, 6)
->>> [round(float(v) / 1e5, 9) for v in jnp.diag(K)[:3]]
-[4.0, 1.6, 1.6]
->>> bool(jnp.allclose(K, K.T)), bool(jnp.allclose(K @ jnp.tile(jnp.array([1.0, 2.0, 3.0]), 2), 0.0))
-(True, True)
+Examples:
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import bond, tangent
+    >>> r0 = jnp.array([[2e-3, 0.0, 0.0]])
+    >>> k = bond.BondStiffness(*(jnp.array([v]) for v in (4e5, 1.6e5, 1e-3, 2e-3)))
+    >>> K = tangent.bond_full(r0, k, rotations=False)[0]      # [6, 6], DOF order (u_i, u_j)
+    >>> K.shape
+    (6, 6)
+    >>> [round(float(v) / 1e5, 9) for v in jnp.diag(K)[:3]]
+    [4.0, 1.6, 1.6]
+    >>> bool(jnp.allclose(K, K.T)), bool(jnp.allclose(K @ jnp.tile(jnp.array([1.0, 2.0, 3.0]), 2), 0.0))
+    (True, True)
 """
 
 from __future__ import annotations
