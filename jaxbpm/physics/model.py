@@ -33,7 +33,7 @@ from jaxbpm.physics import wall as wall_mod
 from jaxbpm.physics.params import _float_dtype, _put, check_params, default_params  # noqa: F401
 from jaxbpm.sample import Sample
 
-__all__ = ["Model", "build_model", "material_contact_params"]
+__all__ = ["Model", "build_model", "contact_params"]
 
 #: on the CPU the DEM's bond pass runs over blocks of BOND_BLOCK bonds on models of at least BLOCKED_FROM bonds
 #: (:func:`jaxbpm.physics.bond.bond_forces_breaking`: a block's intermediates of the law stay in the caches, where
@@ -417,8 +417,8 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         bond_key_index=_put(key_index, np.int32),
         bond_tensile=_put(mats.tensile_strength, dtype),
         bond_cohesion=_put(mats.shear_strength, dtype),
-        contact=material_contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution),
-                                        dtype.name, bool(contact_damping)),
+        contact=contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
+                               bool(contact_damping)),
         wall_stiffness=_put(ws, dtype),
         rotations=bool(rotations),
         contacts=bool(contacts),
@@ -462,8 +462,8 @@ def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:
 
 
 @functools.lru_cache(maxsize=16)
-def material_contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str,
-                            damping: bool) -> contact_mod.ContactParams:
+def contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str,
+                   damping: bool) -> contact_mod.ContactParams:
     """:func:`jaxbpm.physics.contact.contact_params` as one small compiled program, cached per material.
 
     Args:
