@@ -1,4 +1,4 @@
-"""The component-tuple helpers of the force laws (jaxbpm.physics.vec) against NumPy."""
+"""The component-tuple functions of the force laws (jaxbpm.physics.vec) against NumPy."""
 
 from typing import NamedTuple
 
