@@ -1,6 +1,6 @@
-"""Small functions the force laws share, which work on ``(x, y, z)`` tuples of component arrays (one array per component,
-so that XLA keeps every intermediate a flat ``[P]`` array): dot and cross products, a square root with a finite
-derivative at zero, and the conversion of a law's component tuples to ``[..., 3]`` arrays.
+"""Small functions the force laws share, which work on ``(x, y, z)`` tuples of component arrays (one array per
+component, so that XLA keeps every intermediate a flat ``[P]`` array): dot and cross products, a square root with a
+finite derivative at zero, and the conversion of a law's component tuples to ``[..., 3]`` arrays.
 """
 
 from __future__ import annotations
