@@ -5,6 +5,7 @@ docstring the API pages cannot render)."""
 
 import ast
 import importlib
+import importlib.util
 import inspect
 import os
 import re
@@ -99,3 +100,33 @@ def test_site_builds_strictly(tmp_path):
                          cwd=ROOT, capture_output=True, text=True, env=env, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
     assert (tmp_path / "site" / "api" / "core" / "index.html").is_file()
+
+
+def test_benchmark_figures_are_traceable():
+    """Every results file that docs/benchmarks.md names is committed, and every image it shows exists."""
+    text = (ROOT / "docs" / "benchmarks.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"`(?:results/)?((?:gpu/)?[\w.]+\.json)`", text))
+    committed = set(subprocess.run(["git", "ls-files", "results"], cwd=ROOT, capture_output=True, text=True,
+                                   check=True).stdout.split())
+    missing = sorted(n for n in named if f"results/{n}" not in committed and not (ROOT / "results" / n).is_file())
+    assert named and not missing, f"docs/benchmarks.md names results files that do not exist: {missing}"
+    images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)
+    assert images and all((ROOT / "docs" / im).is_file() for im in images), images
+
+
+def test_charts_are_drawn_from_the_results_there_are(tmp_path):
+    """benchmarks/charts.py draws a chart per results file set that exists, and skips those that do not."""
+    spec = importlib.util.spec_from_file_location("charts", ROOT / "benchmarks" / "charts.py")
+    charts = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(charts)
+    results = tmp_path / "results"
+    (results / "gpu").mkdir(parents=True)
+    for name in ("vs_lammps.json", "dem_throughput_3k_100k_1core.json", "gpu/dem_throughput_float64.json"):
+        (results / name).write_bytes((ROOT / "results" / name).read_bytes())
+    written = charts.main(["--results", str(results), "--out", str(tmp_path / "img")])
+    assert sorted(p.name for p in written) == ["dem_throughput.png", "vs_lammps.png"]  # no scaling file: skipped
+    assert all(p.stat().st_size > 10_000 for p in written)
+    points = charts.throughput_points(results)
+    assert points["CPU, one core, float64, bonds only"] == [(3000, pytest.approx(2.4275e7, rel=1e-4)),
+                                                           (100000, pytest.approx(1.1689e7, rel=1e-4))]
+    assert [p[0] for p in charts.lammps_pairs(results)] == ["3k box, compression,\nbonds only"]

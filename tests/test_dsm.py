@@ -10,7 +10,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import ConvergenceError, SceneError, dsm
-from jaxbpm.physics import chunks
+from jaxbpm.physics import blocks
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
@@ -346,14 +346,14 @@ def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, 
 def test_setup_over_bond_chunks_equals_the_whole_sample(packing, dofs, monkeypatch):
     # large samples build the bonds' geometric parts chunk by chunk (lax.map over padded chunks): same numbers as
     # one pass over all bonds, the padding cut off
-    chunk = chunks.CHUNK
-    assert chunks.chunk_length(7 * chunk) == chunk and chunks.chunk_length(11 * chunk // 4) == chunk // 4
-    assert chunks.chunk_length(7 * chunk + 1) == chunk  # no divisor: padded
+    chunk = blocks.BLOCK
+    assert blocks.block_length(7 * chunk) == chunk and blocks.block_length(11 * chunk // 4) == chunk // 4
+    assert blocks.block_length(7 * chunk + 1) == chunk  # no divisor: padded
     model = UniaxialCompression(strain=0.002).model(packing, rotations=dofs == 6)
     nb = model.bonds.shape[0]
     whole = jax.jit(dsm.operator._geometry_chunk)(model)
-    chunked = jax.jit(lambda m: dsm.operator.over_bonds(dsm.operator._geometry_chunk, m, chunk=97))(model)
-    assert nb % chunks.chunk_length(nb, 97) != 0 and nb > 2 * 97  # padded
+    chunked = jax.jit(lambda m: dsm.operator.over_bonds(dsm.operator._geometry_chunk, m, block=97))(model)
+    assert nb % blocks.block_length(nb, 97) != 0 and nb > 2 * 97  # padded
     for a, b in zip(whole, chunked):
         assert a.shape == b.shape and a.shape[-1] == nb
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-14 * float(jnp.abs(a).max()))
@@ -365,7 +365,7 @@ def test_setup_over_bond_chunks_equals_the_whole_sample(packing, dofs, monkeypat
     reduced = dsm.operator._geometry_parts(model)[0]
     parts = dsm.preconditioner._preconditioner_parts.__wrapped__
     ref = jax.jit(parts, static_argnums=3)(model, reduced, coarse, 2)
-    monkeypatch.setattr(chunks, "CHUNK", 53)
+    monkeypatch.setattr(blocks, "BLOCK", 53)
     assert coarse.bonds.shape[0] > 2 * 53
     got = jax.jit(parts, static_argnums=3)(model, reduced, coarse, 2)
     for a, b in zip(ref, got):

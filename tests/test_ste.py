@@ -8,7 +8,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import SampleError, SceneError, ste
-from jaxbpm.physics import chunks
+from jaxbpm.physics import blocks
 from jaxbpm.physics.bond import BondStiffness
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
@@ -254,8 +254,8 @@ def test_pair_sums_over_chunks_equal_one_pass(packing, monkeypatch, first_neighb
 
     one, g_one = jax.jit(tensor_and_grad)(est, p)
     pairs = est.pairs.shape[0]
-    monkeypatch.setattr(chunks, "CHUNK", 97)
-    assert pairs > 2 * 97 and pairs % chunks.chunk_length(pairs) != 0  # several chunks, the last padded
+    monkeypatch.setattr(blocks, "BLOCK", 97)
+    assert pairs > 2 * 97 and pairs % blocks.block_length(pairs) != 0  # several chunks, the last padded
     folded, g_folded = jax.jit(lambda e, q: tensor_and_grad(e, q))(est, p)  # a new function: traced again
     np.testing.assert_allclose(folded, one, rtol=0, atol=1e-12 * float(jnp.abs(one).max()))
     for name in ("bond_E", "bond_nu"):

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 
 from jaxbpm._compile import setup_jit
 from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation, tangent, vec
-from jaxbpm.physics.chunks import chunk_length, fold_chunks
+from jaxbpm.physics.blocks import block_length, fold_blocks
 from jaxbpm.physics.model import Model
 
 
@@ -137,15 +137,15 @@ def bond_subset(model: Model, idx) -> Model:
     return dataclasses.replace(model, **{k: getattr(model, k)[idx] for k in _BOND_FIELDS})
 
 
-def over_bonds(fn, model: Model, chunk: int | None = None):
+def over_bonds(fn, model: Model, block: int | None = None):
     """``fn(model)`` for a per-bond function whose outputs have the bond axis last, run over chunks of bonds
-    (:func:`~jaxbpm.physics.chunks.fold_chunks`; each chunk's outputs written in place) when the model has more:
+    (:func:`~jaxbpm.physics.blocks.fold_blocks`; each chunk's outputs written in place) when the model has more:
     each chunk's temporaries (the bond law's forward-mode derivatives, tens of numbers per bond) are then reused
     from chunk to chunk instead of being allocated for every bond at once -- on a million-particle sample that
     allocation cost more than the arithmetic (82 s against 6 s in chunks). Within a chunk the model holds that
     chunk's bonds only (:func:`bond_subset`; the last chunk's padding repeats the last bond)."""
     nb = model.bonds.shape[0]
-    length = chunk_length(nb, chunk)
+    length = block_length(nb, block)
     if nb <= length:
         return fn(model)
     size = -(-nb // length) * length
@@ -156,7 +156,7 @@ def over_bonds(fn, model: Model, chunk: int | None = None):
         return jax.tree_util.tree_map(lambda o, r: jax.lax.dynamic_update_slice_in_dim(o, r, idx[0], axis=o.ndim - 1),
                                       acc, fn(bond_subset(model, idx)))
 
-    out = fold_chunks(step, out, nb, chunk)
+    out = fold_blocks(step, out, nb, block)
     return jax.tree_util.tree_map(lambda o: o[..., :nb], out) if size != nb else out
 
 

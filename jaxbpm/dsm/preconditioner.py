@@ -16,7 +16,7 @@ from jaxbpm._compile import put, setup_jit
 from jaxbpm.dsm.operator import (
     _geometry_parts, _packed_all, _uses_geometry, block_diagonal, bond_subset, BondGeometry, full_jacobians,
     material_weights, reduced_jacobians)
-from jaxbpm.physics.chunks import sum_chunks
+from jaxbpm.physics.blocks import sum_blocks
 from jaxbpm.physics.model import Model
 
 
@@ -41,7 +41,7 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
             sub = bond_subset(model, idx)
             return block_diagonal(sub, None, jacobians(sub, idx, w))
 
-        blocks = sum_chunks(blocks_of, model.bonds.shape[0])
+        blocks = sum_blocks(blocks_of, model.bonds.shape[0])
         if coarse is None:
             return blocks, None
 
@@ -51,7 +51,7 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
             local = dataclasses.replace(coarse, bonds=jnp.arange(sel.shape[0], dtype=coarse.bonds.dtype))
             return coarse_matrix(sub, jacobians(sub, sel, w), local)
 
-        return blocks, sum_chunks(coarse_of, coarse.bonds.shape[0])
+        return blocks, sum_blocks(coarse_of, coarse.bonds.shape[0])
 
     blocks, mats = jax.lax.map(one, jnp.arange(2 * n_materials))
     blocks = blocks.reshape((n_materials, 2) + blocks.shape[1:])

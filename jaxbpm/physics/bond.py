@@ -24,6 +24,32 @@ Forces and moments on particle i: ``f_i = F_n n + F_t``, ``m_i = (d/2) x F_t + M
 ``f_j = -f_i``, ``m_j = (d/2) x F_t - M_tw - M_b``. Linear and angular momentum are conserved exactly, and any rigid
 translation and rotation of the pair (q_i = q_j, d = q r0) gives exactly zero force and moment. To first order in
 the displacements the law is the incremental law of Eq. 1-4.
+
+A walkthrough: a bond of radius 0.5 mm between two spheres 2 mm apart has the axial stiffness k_n = E A / L, and a
+stretch of 1 um pulls particle i towards j with k_n times the stretch; a rigid turn of the pair gives no force.
+
+Examples:
+    >>> import math
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)  # stiffness work wants float64
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import bond, rotation
+    >>> E, nu, r_b, L = 1e9, 0.25, 0.5e-3, 2e-3
+    >>> A, I = math.pi * r_b**2, math.pi * r_b**4 / 4
+    >>> k = bond.stiffness(E, nu, A, I, 2 * I, L)
+    >>> math.isclose(k.kn, E * A / L)
+    True
+    >>> print(f"k_n = {k.kn:.4g} N/m, k_t = {k.kt:.4g} N/m")
+    k_n = 3.927e+05 N/m, k_t = 1.571e+05 N/m
+    >>> r0 = jnp.array([L, 0.0, 0.0])
+    >>> still = rotation.identity(1)[0]
+    >>> out = bond.bond_law(r0 + jnp.array([1e-6, 0.0, 0.0]), r0, still, still, *k)
+    >>> print(f"{float(out.f_i[0]) / (k.kn * 1e-6):.6f}")  # pulled along +x, towards j
+    1.000000
+    >>> turn = rotation.from_rotation_vector(jnp.array([0.0, 0.0, 0.3]))
+    >>> out = bond.bond_law(rotation.rotate(turn, r0), r0, turn, turn, *k)
+    >>> bool(jnp.max(jnp.abs(out.f_i)) < 1e-9 * k.kn * 1e-6)
+    True
 """
 
 from __future__ import annotations
@@ -45,7 +71,14 @@ TENSILE, SHEAR = 1, 2  # break modes (0: intact)
 
 
 class BondStiffness(NamedTuple):
-    """Per-bond stiffnesses ``[nb]``: normal and tangential [N/m], twisting and bending [N m/rad]."""
+    """Per-bond stiffnesses (see the module docstring for their formulas).
+
+    Attributes:
+        kn: ``[nb]`` normal stiffness [N/m].
+        kt: ``[nb]`` tangential stiffness [N/m].
+        ktw: ``[nb]`` twisting stiffness [N m/rad].
+        kb: ``[nb]`` bending stiffness [N m/rad].
+    """
 
     kn: jnp.ndarray
     kt: jnp.ndarray
@@ -54,11 +87,16 @@ class BondStiffness(NamedTuple):
 
 
 class BondForces(NamedTuple):
-    """Output of :func:`bond_law` for one bond (or ``[nb, ...]`` after vmap).
+    """Forces and moments of a bond: :func:`bond_law`'s output for one bond, ``[nb, ...]`` for all of them.
 
-    f_i: force on particle i [N] (on j it is -f_i); m_i, m_j: moments on i and j [N m];
-    normal: normal force, tension > 0 [N]; shear: tangential force vector on i [N];
-    twist: twisting moment (signed, about the bond axis) [N m]; bend: bending moment vector on i [N m].
+    Attributes:
+        f_i: ``[3]`` force on particle i [N] (on j it is ``-f_i``).
+        m_i: ``[3]`` moment on particle i [N m].
+        m_j: ``[3]`` moment on particle j [N m].
+        normal: normal force, tension > 0 [N].
+        shear: ``[3]`` tangential force on i [N].
+        twist: twisting moment, signed about the bond axis [N m].
+        bend: ``[3]`` bending moment on i [N m].
     """
 
     f_i: jnp.ndarray
@@ -71,10 +109,21 @@ class BondForces(NamedTuple):
 
 
 class BondStrength(NamedTuple):
-    """Per-bond strengths ``[nb]`` (parallel-bond style, Potyondy & Cundall 2004): tensile strength sigma_c [Pa],
-    cohesion c [Pa] and tan(phi) of the shear strength tau_c = c - sigma_n tan(phi) (phi = 0: constant tau_c = c),
-    and the bond's cross-section: radius r_b [m], area A, second moments I and J; the moment contribution factor
-    beta in [0, 1] (PFC's ``pb_mcf``: the share of the bending and twisting moments in the rim stresses; 1: all)."""
+    """Per-bond strengths (parallel-bond style, Potyondy & Cundall 2004) and the bond's cross-section.
+
+    The shear strength is tau_c = c - sigma_n tan(phi) (phi = 0: a constant tau_c = c).
+
+    Attributes:
+        tensile: ``[nb]`` tensile strength sigma_c [Pa].
+        cohesion: ``[nb]`` cohesion c [Pa].
+        tan_phi: ``[nb]`` tan(phi) of the shear strength.
+        radius: ``[nb]`` bond radius r_b [m].
+        area: ``[nb]`` cross-section A [m^2].
+        inertia: ``[nb]`` second moment of area I [m^4].
+        polar: ``[nb]`` polar moment of area J [m^4].
+        moment_factor: the moment contribution factor beta in [0, 1] (PFC's ``pb_mcf``: the share of the bending and
+            twisting moments in the rim stresses; 1: all), a scalar or ``[nb]``.
+    """
 
     tensile: jnp.ndarray
     cohesion: jnp.ndarray
@@ -87,11 +136,20 @@ class BondStrength(NamedTuple):
 
 
 def bond_stresses(normal, shear, twist, bend, s: BondStrength):
-    """Largest normal and shear stress at the bond's rim [Pa] and the mean normal stress sigma_n = F_n / A.
+    """Largest normal and shear stress at the bond's rim and the mean normal stress.
 
     sigma = F_n / A + beta |M_b| r_b / I (tension > 0), tau = |F_t| / A + beta |M_t| r_b / J, beta the moment
-    contribution factor (1 unless set). ``shear`` and ``bend`` are ``(x, y, z)`` component tuples (or ``[..., 3]``
-    rows).
+    contribution factor (1 unless set), sigma_n = F_n / A.
+
+    Args:
+        normal: ``[nb]`` normal forces [N], tension > 0.
+        shear: tangential forces [N], an ``(x, y, z)`` tuple of ``[nb]`` arrays or ``[nb, 3]`` rows.
+        twist: ``[nb]`` twisting moments [N m].
+        bend: bending moments [N m], an ``(x, y, z)`` tuple of ``[nb]`` arrays or ``[nb, 3]`` rows.
+        s: the bonds' strengths and cross-sections.
+
+    Returns:
+        ``(sigma, tau, sigma_n)``, each ``[nb]`` [Pa].
     """
     sigma_n = normal / s.area
     sigma = sigma_n + s.moment_factor * _norm(bend) * s.radius / s.inertia
@@ -112,8 +170,18 @@ FAILURE_RULES = {
 
 
 def check_failure_rule(rule, error=ValueError) -> str:
-    """``rule`` if it names a failure rule (:data:`FAILURE_RULES`), else ``error`` (the caller's error class) naming
-    the choices."""
+    """Check a bond failure rule's name.
+
+    Args:
+        rule: the name to check, one of :data:`FAILURE_RULES`.
+        error: the exception class to raise (the caller's).
+
+    Returns:
+        ``rule``.
+
+    Raises:
+        error: ``rule`` names no failure rule (the message lists the choices).
+    """
     if not isinstance(rule, str) or rule not in FAILURE_RULES:
         raise error(f"failure_rule: unknown bond failure rule {rule!r}; use one of "
                     + "; ".join(f"{k!r}: {v}" for k, v in FAILURE_RULES.items()))
@@ -121,16 +189,27 @@ def check_failure_rule(rule, error=ValueError) -> str:
 
 
 def bond_failure(normal, shear, twist, bend, s: BondStrength, rule: str = "separate"):
-    """Break mode per bond: 0 intact, :data:`TENSILE` or :data:`SHEAR`, by the failure ``rule``
-    (:data:`FAILURE_RULES`; the shear strength is tau_c = c - sigma_n tan(phi)).
+    """Break mode per bond by a failure rule: 0 intact, :data:`TENSILE` or :data:`SHEAR`.
 
-    ``"separate"`` (default): sigma > sigma_c (tension, checked first) or tau > tau_c (shear), with the rim stresses
-    of :func:`bond_stresses`. ``"summed"``: sigma / sigma_c + tau / tau_c >= 1, which is LAMMPS's Fr/Fcr + Fs/Fcs +
-    Tb/Tcb + Tt/Tct with Fcr = sigma_c A, Tcb = sigma_c I / r_b, Fcs = tau_c A, Tct = tau_c J / r_b (a compressed
-    bond carries more shear). ``"max"``: any single load at its limit. Under the two last rules the mode is the
-    larger of the tensile (normal and bending) and shear (shear and twist) parts. A bond whose shear strength
-    tau_c is not positive (tension beyond c / tan(phi)) breaks in shear under every rule.
-    Returns ``(mode, sigma, tau, tau_c)``."""
+    The shear strength is tau_c = c - sigma_n tan(phi). ``"separate"`` (default): sigma > sigma_c (tension, checked
+    first) or tau > tau_c (shear), with the rim stresses of :func:`bond_stresses`. ``"summed"``: sigma / sigma_c + tau /
+    tau_c >= 1, which is LAMMPS's Fr/Fcr + Fs/Fcs + Tb/Tcb + Tt/Tct with Fcr = sigma_c A, Tcb = sigma_c I / r_b, Fcs =
+    tau_c A, Tct = tau_c J / r_b (a compressed bond carries more shear). ``"max"``: any single load at its limit. Under
+    the two last rules the mode is the larger of the tensile (normal and bending) and shear (shear and twist) parts. A
+    bond whose shear strength tau_c is not positive (tension beyond c / tan(phi)) breaks in shear under every rule.
+
+    Args:
+        normal, shear, twist, bend: the bonds' forces and moments, as for :func:`bond_stresses`.
+        s: the bonds' strengths and cross-sections.
+        rule: the failure rule, a key of :data:`FAILURE_RULES`.
+
+    Returns:
+        ``(mode, sigma, tau, tau_c)``: ``[nb]`` int8 break modes, the rim stresses of :func:`bond_stresses` and the
+        shear strengths [Pa].
+
+    Raises:
+        ValueError: ``rule`` names no failure rule.
+    """
     check_failure_rule(rule)
     sigma, tau, sigma_n = bond_stresses(normal, shear, twist, bend, s)
     tau_c = s.cohesion - sigma_n * s.tan_phi
@@ -161,21 +240,42 @@ def _norm(v):
 
 
 def stiffness(E, nu, area, inertia, polar, length) -> BondStiffness:
-    """Bond stiffnesses (Eq. 1-4) from per-bond material and geometry arrays (all broadcastable)."""
+    """Bond stiffnesses (Eq. 1-4) from per-bond material and geometry.
+
+    Args:
+        E: Young's modulus of the bond material [Pa].
+        nu: Poisson's ratio of the bond material.
+        area: cross-section A [m^2].
+        inertia: second moment of area I [m^4].
+        polar: polar moment of area J [m^4].
+        length: initial bond length L [m].
+
+    All are scalars or ``[nb]`` arrays (broadcastable).
+
+    Returns:
+        The bonds' :class:`BondStiffness`, shaped as the arguments broadcast.
+    """
     shear_factor = 1.0 / (2.0 * length * (1.0 + nu))
     return BondStiffness(kn=E * area / length, kt=E * area * shear_factor, ktw=E * polar * shear_factor,
                          kb=E * inertia / length)
 
 
 def law_components(d, r0, q_i, q_j, kn, kt, ktw, kb):
-    """The bond law on components: ``d, r0`` are ``(x, y, z)`` and ``q_i, q_j`` ``(w, x, y, z)`` tuples of scalars
-    (one bond) or of ``[nb]`` arrays (all bonds at once); returns the fields of :class:`BondForces`, vectors as
-    component tuples.
+    """The bond law on components, for one bond (scalars) or all bonds at once (``[nb]`` arrays).
 
     Written on components rather than on ``[..., 3]`` rows (see :mod:`jaxbpm.physics.rotation`), and it divides by
     ``|d|`` in the two axial projections instead of multiplying by ``n``: XLA on CPU copies cheap intermediates into
     every consumer it fuses them with, so the six force and moment components would each recompute the rotations,
     while it keeps a division as a separate loop, computing the rotations and projections once per bond.
+
+    Args:
+        d: ``(x, y, z)``, the current vector x_j - x_i [m].
+        r0: ``(x, y, z)``, the same vector in the reference state [m].
+        q_i, q_j: ``(w, x, y, z)``, the particles' orientations relative to the reference state (unit quaternions).
+        kn, kt, ktw, kb: the stiffnesses.
+
+    Returns:
+        A :class:`BondForces` whose vectors are ``(x, y, z)`` component tuples.
     """
     h = tuple(0.5 * c for c in r0)
     length0 = jnp.sqrt(dot(r0, r0))
@@ -200,44 +300,62 @@ def law_components(d, r0, q_i, q_j, kn, kt, ktw, kb):
 
 
 
-
-
 def bond_law(d, r0, q_i, q_j, kn, kt, ktw, kb) -> BondForces:
-    """Forces and moments of ONE bond.
+    """Forces and moments of one bond.
 
     Args:
-      d: ``[3]`` current vector x_j - x_i [m]. r0: ``[3]`` the same vector in the reference state.
-      q_i, q_j: ``[4]`` orientations of the particles relative to the reference state (unit quaternions).
-      kn, kt, ktw, kb: scalar stiffnesses.
+        d: ``[3]`` current vector x_j - x_i [m].
+        r0: ``[3]`` the same vector in the reference state [m].
+        q_i: ``[4]`` orientation of particle i relative to the reference state (a unit quaternion).
+        q_j: ``[4]`` the same for particle j.
+        kn, kt, ktw, kb: the bond's stiffnesses (scalars).
+
+    Returns:
+        The bond's :class:`BondForces`, vectors ``[3]``.
     """
     return stack(law_components(tuple(d), tuple(r0), tuple(q_i), tuple(q_j), kn, kt, ktw, kb))
 
 
 def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None):
-    """Per-particle force and moment sums ``([n, 3], [n, 3])`` of all intact bonds, and the per-bond forces.
+    """Per-particle sums of the forces and moments of all intact bonds, and the per-bond forces.
 
-    positions ``[n, 3]``, orientations ``[n, 4]`` (or ``None``: no rotational degrees of freedom, particles keep their
-    reference orientation), bonds ``[nb, 2]``, r0 ``[nb, 3]`` reference bond vectors, intact ``[nb]`` bool or None.
-    strength: a :class:`BondStrength` to break bonds: a bond whose stresses exceed its strength in this evaluation
-    carries no force from it on (use :func:`bond_forces_breaking` to get the new ``intact`` mask and break modes).
+    Args:
+        positions: ``[n, 3]`` particle positions [m].
+        orientations: ``[n, 4]`` orientations (unit quaternions), or ``None``: no rotational degrees of freedom,
+            particles keep their reference orientation.
+        bonds: ``[nb, 2]`` particle indices of the bonds.
+        r0: ``[nb, 3]`` reference bond vectors [m].
+        k: the bonds' stiffnesses.
+        intact: ``[nb]`` bool, or ``None``: all bonds intact.
+        strength: a :class:`BondStrength` to break bonds: a bond whose stresses exceed its strength in this
+            evaluation carries no force from it on (:func:`bond_forces_breaking` gives the new ``intact`` mask and
+            the break modes); ``None``: bonds never break.
+
+    Returns:
+        ``(forces, moments, per_bond)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] and the bonds' :class:`BondForces`
+        (``[nb, ...]``).
     """
     return bond_forces_breaking(positions, orientations, bonds, r0, k, intact, strength)[:3]
 
 
 def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, intact=None, strength=None,
                          rule: str = "separate", extra=None, block: int | None = None):
-    """:func:`bond_forces` plus the new ``intact`` mask and the break mode of each bond in this evaluation
-    ``[nb]`` int8 (0: none; None without ``strength``), by the failure ``rule`` (see :func:`bond_failure`).
+    """:func:`bond_forces` plus the new ``intact`` mask and the break mode of each bond in this evaluation.
 
-    ``extra``: ``None``, or a function ``extra(i, j, d, take)`` of the bonds' particle indices ``i, j`` and vectors
-    ``d = x_j - x_i`` (an ``(x, y, z)`` tuple) returning ``(f_i, m_i, m_j, aux)``: more forces and moments on the
-    same pairs (component tuples; the contact law of the bonded pairs), added to the bonds' before the one scatter to
-    the particles (whatever the bond's state); ``take(a)`` gives the rows of a per-bond array ``[nb, ...]`` that
-    ``i, j, d`` are for. ``aux`` (a pytree of per-bond arrays) is returned as a sixth value.
+    Args:
+        positions, orientations, bonds, r0, k, intact, strength: as for :func:`bond_forces`.
+        rule: the failure rule (see :func:`bond_failure`).
+        extra: ``None``, or a function ``extra(i, j, d, take)`` of the bonds' particle indices ``i, j`` and vectors
+            ``d = x_j - x_i`` (an ``(x, y, z)`` tuple) returning ``(f_i, m_i, m_j, aux)``: more forces and moments
+            on the same pairs (component tuples; the contact law of the bonded pairs), added to the bonds' before the
+            one scatter to the particles (whatever the bond's state); ``take(a)`` gives the rows of a per-bond array
+            ``[nb, ...]`` that ``i, j, d`` are for.
+        block: ``None`` (one pass over all bonds), or pass over the bonds in blocks of this many: the same forces to
+            round-off with less memory traffic on large samples; the per-bond forces are then ``None``.
 
-    ``block``: ``None`` (default), or pass over the bonds in blocks of this many (:func:`_blocked`: the same forces
-    to round-off, several times less memory traffic on large samples; the per-bond forces, third value, are then
-    ``None``).
+    Returns:
+        ``(forces, moments, per_bond, intact, mode)``, and ``aux`` (``extra``'s pytree of per-bond arrays) sixth
+        when ``extra`` is given: ``mode`` is ``[nb]`` int8 (0: none; ``None`` without ``strength``).
     """
     nb = bonds.shape[0]
     if block is not None and nb >= 2 * block:
@@ -287,9 +405,9 @@ def _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take):
 
 def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extra, block):
     """:func:`bond_forces_breaking` in a loop over blocks of ``block`` bonds, each scattered into the particle sums
-    as it is done. On a large sample the all-bonds pass keeps every intermediate of the law (some 40 values a bond)
-    in memory between its loops; a block's stay in the caches (a 100k-particle box: 26 -> 18 ms a force evaluation,
-    one core). The last block is the last ``block`` bonds: the bonds it shares with the one before are computed again
+    as it is done. On a large sample the all-bonds pass keeps every intermediate of the law (some 40 values a bond) in
+    memory between its loops; a block's stay in the caches. The last block is the last ``block`` bonds: the bonds it
+    shares with the one before are computed again
     (to the same values) and scattered once."""
     nb = bonds.shape[0]
     count = -(-nb // block)
@@ -334,7 +452,14 @@ def _mask(a, intact):
 
 
 def bond_energy(positions, orientations, bonds, r0, k: BondStiffness, intact=None):
-    """Elastic energy stored in the bonds [J]: 1/2 (F_n^2/k_n + |F_t|^2/k_t + M_tw^2/k_tw + |M_b|^2/k_b)."""
+    """Elastic energy stored in the bonds: 1/2 (F_n^2/k_n + |F_t|^2/k_t + M_tw^2/k_tw + |M_b|^2/k_b) summed.
+
+    Args:
+        positions, orientations, bonds, r0, k, intact: as for :func:`bond_forces`.
+
+    Returns:
+        The energy [J], a scalar.
+    """
     _, _, bf = bond_forces(positions, orientations, bonds, r0, k, intact)
     e = 0.5 * (bf.normal**2 / k.kn + jnp.sum(bf.shear**2, axis=-1) / k.kt + bf.twist**2 / k.ktw
                + jnp.sum(bf.bend**2, axis=-1) / k.kb)

@@ -34,9 +34,8 @@ Tangential force (Eq. 15-17), regularised Coulomb::
 
 limited by ``|F_T| <= mu max(k_N delta + d_N d(delta)/dt, 0)``; when the limit is reached the force is scaled onto
 it and the stored elastic force becomes the limit force. The stored elastic force is kept in the current tangent
-plane (same length) as the contact turns. Particles do not rotate in Irazabal et al. 2023 (models with this law default
-to 3
-DOF per particle); when they do, the tangential force gives moments as in :mod:`jaxbpm.physics.contact`.
+plane (same length) as the contact turns. Particles do not rotate in Irazabal et al. 2023 (models with this law
+default to 3 DOF per particle); when they do, the tangential force gives moments as in :mod:`jaxbpm.physics.contact`.
 
 Per-contact state carried by the DEM: the elastic tangential force ``spring`` ``[C, 3]`` [N] and the cohesion
 history ``cohesion`` ``[C]`` [Pa]. A negative value ``-c_0`` marks an initial contact that has not touched yet (it
@@ -64,12 +63,22 @@ __all__ = ["law_components",
 class CohesiveLaw:
     """Parameters of the stress-dependent cohesive contact law (Irazabal et al. 2023, Table 1 names them).
 
-    c0: initial cohesion c_0 [Pa] of the contacts present at the start. kc: amount of cohesion from stress k_c [-].
-    c_max: maximum cohesion [Pa] (``>= c0``). E, nu, friction, restitution: Young's modulus [Pa], Poisson ratio,
-    local friction coefficient mu and coefficient of restitution (COR) of the particles; ``None`` takes them from the
-    sample's :class:`~jaxbpm.sample.ParticleMaterial`. initial_gap: [m] pairs whose surface gap is at most this when
-    the run starts count as initial contacts (default 0: only overlapping pairs).
     With ``c0 = kc = c_max = 0`` the law is the plain linear spring-dashpot law with Coulomb friction.
+
+    Attributes:
+        c0: initial cohesion c_0 [Pa] of the contacts present at the start.
+        kc: amount of cohesion from stress k_c [-].
+        c_max: maximum cohesion [Pa] (``>= c0``).
+        E: Young's modulus of the particles [Pa]; ``None`` takes it from the sample's
+            :class:`~jaxbpm.sample.ParticleMaterial`, like the three below.
+        nu: Poisson's ratio of the particles.
+        friction: local friction coefficient mu.
+        restitution: coefficient of restitution (COR).
+        initial_gap: pairs whose surface gap is at most this [m] when the run starts count as initial contacts
+            (default 0: only overlapping pairs).
+
+    Raises:
+        SceneError: a parameter out of its range (negative, not finite, ``c_max < c0``, ...).
     """
 
     c0: float = 0.0
@@ -100,7 +109,15 @@ class CohesiveLaw:
                            "restitution": "must lie in (0, 1]"}[name])
 
     def params(self, particle_material, dtype=None) -> "CohesiveParams":
-        """The law's scalars as JAX arrays, missing material values from ``particle_material``."""
+        """The law's scalars as JAX arrays.
+
+        Args:
+            particle_material: the sample's :class:`~jaxbpm.sample.ParticleMaterial`, for the values left ``None``.
+            dtype: the arrays' type (default JAX's).
+
+        Returns:
+            The :class:`CohesiveParams`.
+        """
         pm = particle_material
         get = lambda name: float(getattr(pm, name) if getattr(self, name) is None else getattr(self, name))  # noqa
         a = lambda v: jnp.asarray(v, dtype)  # noqa: E731
@@ -110,10 +127,18 @@ class CohesiveLaw:
 
 
 def resolve_contact_law(contact_law: Any = "hertz", cohesive: CohesiveLaw | Mapping | None = None):
-    """``None`` for Hertz-Mindlin contacts, else the :class:`CohesiveLaw`.
+    """The contact law a scene asks for.
 
-    contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`CohesiveLaw`. cohesive: the law's parameters
-    (a :class:`CohesiveLaw` or a mapping of its fields) for ``contact_law="cohesive"``.
+    Args:
+        contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`CohesiveLaw`.
+        cohesive: the law's parameters (a :class:`CohesiveLaw` or a mapping of its fields) for
+            ``contact_law="cohesive"``.
+
+    Returns:
+        ``None`` for Hertz-Mindlin contacts, else the :class:`CohesiveLaw`.
+
+    Raises:
+        SceneError: an unknown law or parameter, or parameters given twice or for the Hertz law.
     """
     if isinstance(contact_law, CohesiveLaw):
         if cohesive is not None:
@@ -141,57 +166,133 @@ def resolve_contact_law(contact_law: Any = "hertz", cohesive: CohesiveLaw | Mapp
 
 
 class CohesiveParams(NamedTuple):
-    """The law's scalars (a pytree; calibrators may override any of them through the Model's params)."""
+    """The law's scalars (a pytree; calibrators may override any of them through the Model's params).
 
-    E: Any             # particle Young's modulus [Pa] (E^ = E / 2)
-    nu: Any            # Poisson ratio (kappa = 2 (1 - nu) / (2 - nu))
-    friction: Any      # mu
-    restitution: Any   # COR
-    c0: Any            # initial cohesion [Pa]
-    kc: Any            # amount of cohesion from stress [-]
-    c_max: Any         # maximum cohesion [Pa]
-    initial_gap: Any   # [m]
+    Attributes:
+        E: particle Young's modulus [Pa] (E^ = E / 2).
+        nu: Poisson's ratio (kappa = 2 (1 - nu) / (2 - nu)).
+        friction: mu.
+        restitution: the COR.
+        c0: initial cohesion [Pa].
+        kc: amount of cohesion from stress [-].
+        c_max: maximum cohesion [Pa].
+        initial_gap: [m].
+    """
+
+    E: Any
+    nu: Any
+    friction: Any
+    restitution: Any
+    c0: Any
+    kc: Any
+    c_max: Any
+    initial_gap: Any
 
 
 class CohesiveForces(NamedTuple):
-    f_i: Any        # [3] force on particle i (on j: -f_i)
-    m_i: Any        # [3] moment on i
-    m_j: Any        # [3] moment on j
-    normal: Any     # F_N (repulsion > 0; negative when cohesion pulls)
-    spring: Any     # [3] stored elastic tangential force on j [N]
-    sliding: Any    # bool, Coulomb limit reached
-    active: Any     # bool, in contact
-    cohesion: Any   # the cohesion history after this step (see the module docstring)
-    stress: Any     # sigma_N [Pa] of this step (compressive part over A; 0 out of contact)
+    """Forces of a cohesive contact: :func:`cohesive_contact`'s output for one pair, ``[C, ...]`` for all.
+
+    Attributes:
+        f_i: ``[3]`` force on particle i [N] (on j: ``-f_i``).
+        m_i: ``[3]`` moment on i [N m].
+        m_j: ``[3]`` moment on j [N m].
+        normal: F_N [N] (repulsion > 0; negative when cohesion pulls).
+        spring: ``[3]`` stored elastic tangential force on j [N].
+        sliding: bool, the Coulomb limit is reached.
+        active: bool, the pair is in contact.
+        cohesion: the cohesion history after this step (see the module docstring).
+        stress: sigma_N [Pa] of this step (compressive part over A; 0 out of contact).
+    """
+
+    f_i: Any
+    m_i: Any
+    m_j: Any
+    normal: Any
+    spring: Any
+    sliding: Any
+    active: Any
+    cohesion: Any
+    stress: Any
 
 
 def restitution_damping(restitution):
-    """gamma = -ln(COR) / sqrt(pi^2 + ln^2(COR)) (Eq. 7): the fraction of critical damping giving that COR."""
+    """The fraction of critical damping that gives a coefficient of restitution (Eq. 7).
+
+    Args:
+        restitution: the COR, in (0, 1].
+
+    Returns:
+        gamma = -ln(COR) / sqrt(pi^2 + ln^2(COR)).
+    """
     log_e = jnp.log(restitution)
     return -log_e / jnp.sqrt(jnp.pi**2 + log_e**2)
 
 
 def contact_area(r_i, r_j, overlap):
-    """A = pi ((r_i + r_j) / 2)^2 (r_i + r_j) / (r_i + r_j - delta) (Eq. 11)."""
+    """The contact area (Eq. 11).
+
+    Args:
+        r_i, r_j: the radii [m].
+        overlap: the overlap delta [m].
+
+    Returns:
+        A = pi ((r_i + r_j) / 2)^2 (r_i + r_j) / (r_i + r_j - delta) [m^2].
+    """
     rsum = r_i + r_j
     return jnp.pi * (0.5 * rsum) ** 2 * rsum / (rsum - overlap)
 
 
 def normal_stiffness(r_i, r_j, overlap, E):
-    """k_N = E^ A / l with E^ = E / 2, l = r_i + r_j - delta (Eq. 4, 10, 11)."""
+    """The normal stiffness (Eq. 4, 10, 11).
+
+    Args:
+        r_i, r_j: the radii [m].
+        overlap: the overlap delta [m].
+        E: the particles' Young's modulus [Pa].
+
+    Returns:
+        k_N = E^ A / l [N/m], with E^ = E / 2 and l = r_i + r_j - delta.
+    """
     return 0.5 * E * contact_area(r_i, r_j, overlap) / (r_i + r_j - overlap)
 
 
 def update_cohesion(history, active, stress, p: CohesiveParams):
-    """The cohesion history after a step (Eq. 14 with the cap, Fig. 7): in contact ``min(c_max, max(c, k_c
-    sigma))`` (``c = |history|``: a pending initial contact starts at c_0); out of contact 0 (pending ones stay)."""
+    """The cohesion history after a step (Eq. 14 with the cap, Fig. 7).
+
+    Args:
+        history: ``[C]`` the cohesion history (``-c_0``: a pending initial contact).
+        active: ``[C]`` bool, in contact.
+        stress: ``[C]`` sigma_N of this step [Pa].
+        p: the law's scalars.
+
+    Returns:
+        ``[C]``: in contact ``min(c_max, max(c, k_c sigma))`` with ``c = |history|`` (a pending initial contact
+        starts at c_0); out of contact 0 (pending ones stay).
+    """
     grown = jnp.minimum(p.c_max, jnp.maximum(jnp.abs(history), p.kc * stress))
     return jnp.where(active, grown, jnp.where(history < 0, history, 0.0))
 
 
 def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, history, p: CohesiveParams, valid=True):
-    """The law on components (``(x, y, z)`` tuples of scalars or of ``[C]`` arrays), like
-    :func:`jaxbpm.physics.contact._law`; zero where the pair is not in contact."""
+    """The law on components, for one pair (scalars) or all pairs at once (``[C]`` arrays).
+
+    Written like :func:`jaxbpm.physics.contact.law_components`.
+
+    Args:
+        d: ``(x, y, z)``, x_j - x_i [m].
+        r_i, r_j: the radii [m].
+        m_i, m_j: the masses [kg].
+        spring: ``(x, y, z)``, the stored tangential force on j [N].
+        dxi: ``(x, y, z)``, the slip of j's contact point relative to i's in this step [m].
+        v_rel: ``(x, y, z)``, the relative velocity of the contact points [m/s].
+        history: the cohesion history (see the module docstring).
+        p: the law's scalars.
+        valid: bool, ``False`` on padding.
+
+    Returns:
+        A :class:`CohesiveForces` whose vectors are ``(x, y, z)`` component tuples, zero where the pair is not in
+        contact.
+    """
     one = p.E / p.E
     one = jnp.where(jnp.isfinite(one), one, 1.0)
     gamma = restitution_damping(p.restitution)
@@ -242,16 +343,37 @@ def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, history, p: Cohesi
                           stress=stress)
 
 
-
 def cohesive_contact(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, history, p: CohesiveParams) -> CohesiveForces:
-    """Forces of ONE contact (``d = x_j - x_i``, ``spring`` the stored tangential force, ``dxi`` the slip of this
-    step, ``v_rel`` the relative velocity of the contact points, ``history`` the cohesion history), ``[3]`` vectors."""
+    """Forces of one cohesive contact.
+
+    Args:
+        d: ``[3]`` x_j - x_i [m].
+        r_i, r_j: the radii [m].
+        m_i, m_j: the masses [kg].
+        spring: ``[3]`` the stored tangential force on j [N].
+        dxi: ``[3]`` the slip of j's contact point relative to i's in this step [m].
+        v_rel: ``[3]`` the relative velocity of the contact points [m/s].
+        history: the cohesion history.
+        p: the law's scalars.
+
+    Returns:
+        The contact's :class:`CohesiveForces`, vectors ``[3]``.
+    """
     return stack(law_components(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), history, p))
 
 
 def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, history, p: CohesiveParams):
-    """All candidate pairs at once (see :func:`jaxbpm.physics.contact.pair_forces`); ``history [C]``.
-    Returns per-particle force and moment sums and the per-pair :class:`CohesiveForces`."""
+    """Cohesive contacts of all candidate pairs and their sums per particle.
+
+    Args:
+        positions, pairs, valid, radii, mass, spring, dxi, v_rel: as for :func:`jaxbpm.physics.contact.pair_forces`.
+        history: ``[C]`` the cohesion histories.
+        p: the law's scalars.
+
+    Returns:
+        ``(forces, moments, per_pair)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] and the pairs' :class:`CohesiveForces`
+        (``[C, ...]``).
+    """
     import jax
 
     from jaxbpm.physics.contact import _components, pair_vectors

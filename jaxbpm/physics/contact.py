@@ -12,8 +12,27 @@ Optional damping (Tsuji et al.): ``c = 2 sqrt(5/6) beta sqrt(S m*)`` with ``beta
 ``S_n = 2 E* sqrt(R* delta)``, ``S_t = k_t``.
 
 The DEM passes each step's relative displacement of the contact points; a static solve (no-slip, Jarolin & Dosta 2020
-3.1.2)
-passes the whole displacement since the reference state with an empty spring.
+3.1.2) passes the whole displacement since the reference state with an empty spring.
+
+A walkthrough: two spheres of radius 1 mm pressed 1 um into each other push apart with Hertz's force; a small
+tangential displacement is held by Mindlin's spring, a large one slides at the Coulomb limit.
+
+Examples:
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import contact
+    >>> p = contact.contact_params(E=1e9, nu=0.25, friction=0.5, restitution=0.5)
+    >>> r, delta = 1e-3, 1e-6
+    >>> d = jnp.array([2 * r - delta, 0.0, 0.0])              # x_j - x_i
+    >>> zero = jnp.zeros(3)
+    >>> out = contact.hertz_mindlin(d, r, r, 1.0, 1.0, zero, zero, zero, p)
+    >>> hertz = 4 / 3 * float(p.E_star) * (r / 2) ** 0.5 * delta**1.5
+    >>> print(f"{float(out.normal) / hertz:.9f}, f_i along -x: {float(out.f_i[0]) < 0}")
+    1.000000000, f_i along -x: True
+    >>> slide = contact.hertz_mindlin(d, r, r, 1.0, 1.0, zero, jnp.array([0.0, 1e-4, 0.0]), zero, p)
+    >>> print(bool(slide.sliding), f"{float(jnp.linalg.norm(slide.f_i[1:]) / slide.normal):.9f}")
+    True 0.500000000
 """
 
 from __future__ import annotations
@@ -31,8 +50,14 @@ __all__ = ["law_components", "ContactParams", "ContactForces", "contact_params",
 
 
 class ContactParams(NamedTuple):
-    """Scalars of the particle material: E* and G* of a like pair [Pa], friction mu, damping factor beta (``None``:
-    no damping, and the law computes none of its terms)."""
+    """Scalars of the particle material.
+
+    Attributes:
+        E_star: E* of a like pair [Pa].
+        G_star: G* of a like pair [Pa].
+        friction: the friction coefficient mu.
+        beta: the damping factor, or ``None``: no damping, and the law computes none of its terms.
+    """
 
     E_star: jnp.ndarray
     G_star: jnp.ndarray
@@ -41,18 +66,41 @@ class ContactParams(NamedTuple):
 
 
 class ContactForces(NamedTuple):
-    f_i: jnp.ndarray       # [3] force on particle i (on j: -f_i)
-    m_i: jnp.ndarray       # [3] moment on i
-    m_j: jnp.ndarray       # [3] moment on j
-    normal: jnp.ndarray    # scalar normal force magnitude (repulsion > 0)
-    spring: jnp.ndarray    # [3] updated tangential spring
-    sliding: jnp.ndarray   # bool, Coulomb limit reached
-    active: jnp.ndarray    # bool, in contact
+    """Forces of a contact: :func:`hertz_mindlin`'s output for one pair, ``[C, ...]`` for all of them.
+
+    Attributes:
+        f_i: ``[3]`` force on particle i [N] (on j: ``-f_i``).
+        m_i: ``[3]`` moment on i [N m].
+        m_j: ``[3]`` moment on j [N m].
+        normal: normal force magnitude, repulsion > 0 [N].
+        spring: ``[3]`` the updated tangential spring [m].
+        sliding: bool, the Coulomb limit is reached.
+        active: bool, the pair is in contact.
+    """
+
+    f_i: jnp.ndarray
+    m_i: jnp.ndarray
+    m_j: jnp.ndarray
+    normal: jnp.ndarray
+    spring: jnp.ndarray
+    sliding: jnp.ndarray
+    active: jnp.ndarray
 
 
 def contact_params(E, nu, friction, restitution, damping: bool = False) -> ContactParams:
-    """Contact parameters of a particle material; ``damping=False`` gives no damping (beta ``None``; a traced
-    ``damping`` gives beta = 0 where it is false)."""
+    """Contact parameters of a particle material.
+
+    Args:
+        E: Young's modulus of the particles [Pa].
+        nu: Poisson's ratio of the particles.
+        friction: the friction coefficient mu.
+        restitution: the coefficient of restitution e (used with ``damping``).
+        damping: ``False``: no damping (beta ``None``); ``True`` or a traced bool: Tsuji damping (beta = 0 where a
+            traced ``damping`` is false).
+
+    Returns:
+        The :class:`ContactParams`.
+    """
     G = E / (2.0 * (1.0 + nu))
     if isinstance(damping, (bool, np.bool_)) and not damping:
         beta = None
@@ -64,21 +112,41 @@ def contact_params(E, nu, friction, restitution, damping: bool = False) -> Conta
 
 
 def hertz_normal_force(overlap, r_star, E_star):
-    """Hertz normal force ``4/3 E* sqrt(R*) delta^1.5`` (zero without overlap)."""
+    """Hertz normal force ``4/3 E* sqrt(R*) delta^1.5``.
+
+    Args:
+        overlap: the overlap delta [m] (no force where it is not positive).
+        r_star: the effective radius R* [m].
+        E_star: the effective modulus E* [Pa].
+
+    Returns:
+        The repulsive force [N], shaped as the arguments broadcast.
+    """
     delta = jnp.maximum(overlap, 0.0)
     return 4.0 / 3.0 * E_star * jnp.sqrt(r_star) * delta * safe_sqrt(delta)
 
 
-
 def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, valid=True):
-    """The contact law on components: ``d, spring, dxi, v_rel`` are ``(x, y, z)`` tuples of scalars (one pair) or of
-    ``[C]`` arrays (all pairs at once), the rest scalars or ``[C]`` arrays; ``valid`` masks padding. Returns the
-    fields of :class:`ContactForces`, vectors as component tuples, zero where the pair is not in contact.
+    """The contact law on components, for one pair (scalars) or all pairs at once (``[C]`` arrays).
 
-    Written like the bond law (:func:`jaxbpm.physics.bond._law`), elementwise on components. XLA's CPU fusion copies
-    cheap elementwise producers into every consumer (gathers included) but computes a division or a square root once
-    into memory; the law is arranged so that every value with several consumers ends in one (``_once`` adds an exact
-    division by one where none is natural).
+    Written like the bond law (:func:`jaxbpm.physics.bond.law_components`), elementwise on components. XLA's CPU fusion
+    copies cheap elementwise producers into every consumer (gathers included) but computes a division or a square root
+    once into memory; the law is arranged so that every value with several consumers ends in one (``_once`` adds an
+    exact division by one where none is natural).
+
+    Args:
+        d: ``(x, y, z)``, x_j - x_i [m].
+        r_i, r_j: the radii [m].
+        m_i, m_j: the masses [kg] (for damping).
+        spring: ``(x, y, z)``, the tangential spring carried from the last step [m].
+        dxi: ``(x, y, z)``, the relative displacement of the contact points since then [m].
+        v_rel: ``(x, y, z)``, the relative velocity of the contact points [m/s].
+        p: the contact parameters.
+        valid: bool, ``False`` on padding.
+
+    Returns:
+        A :class:`ContactForces` whose vectors are ``(x, y, z)`` component tuples, zero where the pair is not in
+        contact.
     """
     one = _one(p)
     dist = jnp.sqrt(dot(d, d))
@@ -133,18 +201,20 @@ def _one(p: ContactParams):
     return jnp.where(jnp.isfinite(ratio), ratio, 1.0)
 
 
-
-
-
-
 def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -> ContactForces:
-    """Forces of ONE contact.
+    """Forces of one contact.
 
     Args:
-      d: ``[3]`` x_j - x_i. r_i, r_j: radii. m_i, m_j: masses (for damping).
-      spring: ``[3]`` tangential spring carried from the last step. dxi: ``[3]`` relative displacement of the contact
-        point of j with respect to that of i since then. v_rel: ``[3]`` relative velocity of the contact points
-        (zeros for a static solve).
+        d: ``[3]`` x_j - x_i [m].
+        r_i, r_j: the radii [m].
+        m_i, m_j: the masses [kg] (for damping).
+        spring: ``[3]`` tangential spring carried from the last step [m].
+        dxi: ``[3]`` relative displacement of the contact point of j with respect to that of i since then [m].
+        v_rel: ``[3]`` relative velocity of the contact points [m/s] (zeros for a static solve).
+        p: the contact parameters.
+
+    Returns:
+        The contact's :class:`ContactForces`, vectors ``[3]``.
     """
     return stack(law_components(tuple(d), r_i, r_j, m_i, m_j, tuple(spring), tuple(dxi), tuple(v_rel), p))
 
@@ -155,8 +225,17 @@ def _components(a):
 
 
 def pair_vectors(positions, pairs, valid):
-    """Particle indices ``i, j [C]`` of the candidate pairs (padding and excluded pairs point at particles 0 and 1)
-    and the components ``(x, y, z)`` of ``d = x_j - x_i`` (``[C]`` each; ones for those, keeping them finite)."""
+    """Particle indices and pair vectors of the candidate pairs.
+
+    Args:
+        positions: ``[n, 3]`` particle positions [m].
+        pairs: ``[C, 2]`` candidate pairs.
+        valid: ``[C]`` bool, ``False`` on padding and excluded pairs.
+
+    Returns:
+        ``(i, j, d)``: ``[C]`` uint32 indices (padding and excluded pairs point at particles 0 and 1) and the
+        components ``(x, y, z)`` of ``d = x_j - x_i``, ``[C]`` each (ones on padding, keeping them finite).
+    """
     n = positions.shape[0]
     # unsigned indices: no wrapping of negative ones to compute in every gather
     i = jnp.where(valid, pairs[:, 0], 0).astype(jnp.uint32)
@@ -167,10 +246,20 @@ def pair_vectors(positions, pairs, valid):
 
 
 def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: ContactParams):
-    """Contacts of all candidate pairs ``[C, 2]`` (``valid [C]`` masks padding and excluded pairs).
+    """Contacts of all candidate pairs and their sums per particle.
 
-    ``spring``, ``dxi`` and ``v_rel`` are ``[C, 3]`` (or tuples of their three ``[C]`` columns).
-    Returns per-particle force and moment sums ``([n, 3], [n, 3])`` and the per-pair :class:`ContactForces`.
+    Args:
+        positions: ``[n, 3]`` particle positions [m].
+        pairs: ``[C, 2]`` candidate pairs.
+        valid: ``[C]`` bool, ``False`` on padding and excluded pairs.
+        radii: ``[n]`` radii [m].
+        mass: ``[n]`` masses [kg].
+        spring, dxi, v_rel: ``[C, 3]`` (or tuples of their three ``[C]`` columns), as for :func:`hertz_mindlin`.
+        p: the contact parameters.
+
+    Returns:
+        ``(forces, moments, per_pair)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] and the pairs' :class:`ContactForces`
+        (``[C, ...]``).
     """
     n = positions.shape[0]
     i, j, d = pair_vectors(positions, pairs, valid)

@@ -16,9 +16,13 @@ __all__ = ["Loading"]
 class Loading:
     """Boundary conditions of a DEM run (a pytree).
 
-    clamped: ``[n]`` bool, particles whose every DOF is prescribed (translation ``x0 + velocity t``, no rotation).
-    velocity: ``[n, 3]`` prescribed velocity of clamped particles (zero for fixed ones).
-    wall_points0, wall_normals, wall_velocity: ``[W, 3]`` plane walls (W may be 0).
+    Attributes:
+        clamped: ``[n]`` bool, particles whose every DOF is prescribed (translation ``x0 + velocity t``, no
+            rotation).
+        velocity: ``[n, 3]`` prescribed velocity of clamped particles [m/s] (zero for fixed ones).
+        wall_points0: ``[W, 3]`` a point of each plane wall at time 0 [m] (W may be 0).
+        wall_normals: ``[W, 3]`` the walls' unit normals, pointing to the particles' side.
+        wall_velocity: ``[W, 3]`` the walls' velocities [m/s].
     """
 
     clamped: Any

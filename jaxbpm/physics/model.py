@@ -4,15 +4,15 @@ A :class:`Model` holds the sample's arrays in JAX form and a few static switches
 
 * ``rotations``: particles carry orientations (6 DOF each) or not (3 DOF: bonds then act on relative translation
   only, as in the 3N direct stiffness method of Jarolin & Dosta 2020). Default: on whenever the sample has bonds (they
-  transmit
-  bending and twisting moments) or contacts with friction.
+  transmit bending and twisting moments) or contacts with friction.
 * ``contacts``: particle contacts (with a neighbour list in the DEM) or none; ``contact_law``: ``"hertz"``
   (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default) or ``"cohesive"`` (the stress-dependent cohesive law of
   Irazabal et al. 2023, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
 * ``walls``: the wall law (``"hertz"``/``"linear"``) or ``None``.
 
 Parameters that calibrators change live in a small pytree ``params = {"bond_E": [n_materials],
-"bond_nu": [n_materials]}``, mapped onto bonds by the material index, so ``grad``/``vmap``/optax all see one thing.
+"bond_nu": [n_materials]}``, mapped onto bonds by the material index, so ``grad``/``vmap``/optax all see one thing
+(:mod:`jaxbpm.physics.params`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import warnings
-import weakref
 from typing import Any
 
 import jax
@@ -31,9 +30,10 @@ from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import cohesive as cohesive_mod
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics import wall as wall_mod
+from jaxbpm.physics.params import _float_dtype, _put, check_params, default_params  # noqa: F401
 from jaxbpm.sample import Sample
 
-__all__ = ["Model", "build_model", "default_params", "check_params"]
+__all__ = ["Model", "build_model", "contact_params"]
 
 #: on the CPU the DEM's bond pass runs over blocks of BOND_BLOCK bonds on models of at least BLOCKED_FROM bonds
 #: (:func:`jaxbpm.physics.bond.bond_forces_breaking`: a block's intermediates of the law stay in the caches, where
@@ -42,181 +42,85 @@ __all__ = ["Model", "build_model", "default_params", "check_params"]
 BOND_BLOCK, BLOCKED_FROM = 4096, 65536
 
 
-def default_params(sample: Sample) -> dict:
-    """The calibratable parameters of ``sample`` at their current values: ``{"bond_E", "bond_nu"}`` (a new dict
-    of device arrays, moved once per sample and precision: a loop of solves with the defaults moves nothing)."""
-    dtype = _float_dtype()
-    key = (id(sample), dtype.name)
-    hit = _DEFAULTS.get(key)
-    if hit is None or hit[0]() is not sample:
-        hit = (weakref.ref(sample), {"bond_E": _put(sample.materials.E, dtype),
-                                     "bond_nu": _put(sample.materials.nu, dtype)})
-        _DEFAULTS[key] = hit
-        while len(_DEFAULTS) > 8:
-            _DEFAULTS.pop(next(iter(_DEFAULTS)))
-    return dict(hit[1])
-
-
-_DEFAULTS: dict = {}  # (id(sample), dtype) -> (weak reference to the sample, its default parameters)
-
-
-_PER_MATERIAL = {  # params keys with one entry per bond material: (check, what it must be)
-    "bond_E": (lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
-    "bond_nu": (lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)"),
-    "bond_tensile_strength": (lambda v: v >= 0, ">= 0 [Pa] (inf: never breaks)"),  # NaN fails it too
-    "bond_shear_strength": (lambda v: v >= 0, ">= 0 [Pa] (inf: never breaks)"),
-    "bond_friction_angle": (lambda v: np.isfinite(v) & (v >= 0) & (v < np.pi / 2), "finite and in [0, pi/2) [rad]"),
-    "bond_moment_factor": (lambda v: np.isfinite(v) & (v >= 0) & (v <= 1), "finite and in [0, 1]"),
-}
-_SCALAR = {  # params keys of the contact laws (Hertz-Mindlin, cohesive): scalars
-    "contact_E": (lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
-    "contact_nu": (lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)"),
-    "friction": (lambda v: np.isfinite(v) & (v >= 0), "finite and >= 0"),
-    "restitution": (lambda v: np.isfinite(v) & (v > 0) & (v <= 1), "finite and in (0, 1]"),
-    "cohesion_initial": (lambda v: np.isfinite(v) & (v >= 0), "finite and >= 0 [Pa]"),
-    "cohesion_from_stress": (lambda v: np.isfinite(v) & (v >= 0), "finite and >= 0"),
-    "cohesion_max": (lambda v: np.isfinite(v) & (v >= 0), "finite and >= 0 [Pa]"),
-}
-
-
-def check_params(params, sample: Sample) -> dict:
-    """``params`` checked against ``sample`` -- the one validation path every solver's ``params`` goes through --
-    and returned with the per-material entries as device arrays (lists, tuples and NumPy arrays are moved as they
-    are).
-
-    ``bond_E`` and ``bond_nu`` are required, one entry per bond material (``[sample.n_materials]``); ``bond_E``
-    finite and > 0 [Pa], ``bond_nu`` finite and in (-1, 0.5), the range :class:`~jaxbpm.sample.BondMaterials`
-    accepts (at -1 the shear stiffness is infinite; at 0.5 and above the bond is not an elastic solid). Optional,
-    per material: ``bond_tensile_strength`` and ``bond_shear_strength`` >= 0 [Pa] (``inf``: never breaks),
-    ``bond_friction_angle`` in [0, pi/2) [rad], ``bond_moment_factor`` in [0, 1]. Optional scalars of the contact laws: ``contact_E`` > 0 [Pa],
-    ``contact_nu`` in (-1, 0.5), ``friction`` >= 0, ``restitution`` in (0, 1], ``cohesion_initial`` and
-    ``cohesion_max`` >= 0 [Pa] (``cohesion_max`` >= ``cohesion_initial`` when both are given),
-    ``cohesion_from_stress`` >= 0. Any other key is an error (a misspelt key would otherwise be ignored). Values
-    must be real numbers (not booleans, complex numbers or strings); traced values (inside ``jit``/``grad``/``vmap``)
-    are not checked. Raises :class:`~jaxbpm.errors.SceneError` naming the key, the offending entries and what was
-    expected.
-    """
-    import difflib
-    from collections.abc import Mapping
-
-    from jaxbpm.errors import SceneError
-
-    if not isinstance(params, Mapping) or not {"bond_E", "bond_nu"} <= set(params):
-        got = sorted(map(str, params)) if isinstance(params, Mapping) else type(params).__name__
-        raise SceneError("params must be a dict with 'bond_E' and 'bond_nu', one entry per bond material (see "
-                         f"jaxbpm.physics.model.default_params), got {got}")
-    known = sorted(_PER_MATERIAL) + sorted(_SCALAR)
-    for key in params:
-        if key not in _PER_MATERIAL and key not in _SCALAR:
-            close = difflib.get_close_matches(key, known, n=3, cutoff=0.6) if isinstance(key, str) else []
-            hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
-            raise SceneError(f"params has an unknown key {key!r}{hint} (keys: {', '.join(known)})")
-    m = sample.n_materials
-    out = dict(params)
-    for name, (ok, what) in _PER_MATERIAL.items():
-        if name not in params:
-            continue
-        arr = _concrete(params, name, "real numbers, one per bond material", SceneError)
-        if arr is None:
-            continue
-        if arr.shape != (m,):
-            raise SceneError(f"params[{name!r}] must have shape [{m}] (one per bond material), got shape "
-                             f"{arr.shape}: {_short(arr)}")
-        bad = np.flatnonzero(~ok(arr))
-        if bad.size:
-            raise SceneError(f"params[{name!r}] must be {what}; bad entries (material: value) "
-                             + ", ".join(f"{int(k)}: {float(arr[k]):g}" for k in bad[:8]))
-        if not isinstance(params[name], jax.Array):
-            out[name] = _put(arr, _float_dtype())
-    scalars = {}
-    for name, (ok, what) in _SCALAR.items():
-        if name not in params:
-            continue
-        arr = _concrete(params, name, "a real number", SceneError)
-        if arr is not None and (arr.shape != () or not ok(arr)):
-            raise SceneError(f"params[{name!r}] must be a scalar, {what}; got {_short(arr)}")
-        scalars[name] = arr
-    c0, c_max = scalars.get("cohesion_initial"), scalars.get("cohesion_max")
-    if c0 is not None and c_max is not None and not c_max >= c0:
-        raise SceneError(f"params['cohesion_max'] ({float(c_max):g} Pa) must be at least params['cohesion_initial'] "
-                         f"({float(c0):g} Pa)")
-    return out
-
-
-def _short(arr: np.ndarray, limit: int = 8) -> str:
-    """The values of ``arr`` for a message: plain numbers, the first ``limit`` of a long array."""
-    flat = arr.reshape(-1).tolist()
-    if arr.ndim == 0:
-        return f"{flat[0]:g}"
-    return str(flat[:limit])[:-1] + (f", ... ({len(flat)} values)]" if len(flat) > limit else "]")
-
-
-def _concrete(params, name: str, expected: str, error):
-    """``params[name]`` as a float64 NumPy array; ``None`` for a traced value (inside ``jit``/``grad``/``vmap``)."""
-    value = params[name]
-    if isinstance(value, jax.core.Tracer):
-        return None
-    try:
-        arr = np.asarray(value)
-        real = arr.dtype != bool and (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer))
-        if not real:
-            raise TypeError
-        return np.asarray(arr, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        from jaxbpm.sample import _shown
-
-        raise error(f"params[{name!r}] must be {expected}, got {_shown(value)}") from None
-
-
-def _float_dtype():
-    """float64 with ``jax_enable_x64``, float32 without (no array is made: that would compile a program)."""
-    return np.dtype(jax.dtypes.canonicalize_dtype(np.float64))
-
-
-def _put(x, dtype):
-    """A NumPy array (converted on the host) on the device: a transfer, never a compiled program."""
-    return jax.device_put(np.asarray(x, dtype))
-
-
 @dataclasses.dataclass(frozen=True)
 class Model:
-    """Arrays of the sample in JAX form plus static switches. Build it with :func:`build_model`."""
+    """Arrays of the sample in JAX form plus static switches (a pytree). Build it with :func:`build_model`.
 
-    positions0: Any       # [n, 3] reference positions
-    radii: Any            # [n]
-    mass: Any             # [n]
-    inertia: Any          # [n]
-    bonds: Any            # [nb, 2]
-    r0: Any               # [nb, 3] reference bond vectors
-    bond_material: Any    # [nb]
+    Attributes:
+        positions0: ``[n, 3]`` reference positions [m].
+        radii: ``[n]`` [m].
+        mass: ``[n]`` [kg].
+        inertia: ``[n]`` moments of inertia [kg m^2].
+        bonds: ``[nb, 2]`` particle indices.
+        r0: ``[nb, 3]`` reference bond vectors [m].
+        bond_material: ``[nb]`` material index of each bond.
+        bond_area: ``[nb]`` cross-sections [m^2].
+        bond_I: ``[nb]`` second moments of area [m^4].
+        bond_J: ``[nb]`` polar moments of area [m^4].
+        bond_length: ``[nb]`` initial lengths [m].
+        bond_keys: ``[nb]`` sorted keys ``i * n + j`` of the bonded pairs (to exclude them from contacts).
+        bond_key_index: ``[nb]`` bond index of each sorted key.
+        bond_radius: ``[nb]`` r_b [m].
+        bond_tensile: ``[n_materials]`` tensile strength sigma_c [Pa] (inf: unbreakable).
+        bond_cohesion: ``[n_materials]`` shear strength (cohesion) c [Pa].
+        contact: the Hertz-Mindlin parameters.
+        wall_stiffness: E* of a particle on a rigid wall [Pa] (``"hertz"``) or k [N/m] (``"linear"``).
+        rotations: 6 DOF per particle (else 3).
+        contacts: particle contacts on.
+        walls: the wall law, ``"hertz"``, ``"linear"`` or ``None``.
+        bond_contact: how contacts of bonded pairs combine with the bond (``"superimpose"``).
+        breakage: bonds break.
+        cohesive: the cohesive law's :class:`~jaxbpm.physics.cohesive.CohesiveParams` with
+            ``contact_law="cohesive"``.
+        failure_rule: how a bond's stresses break it (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
+        contact_law: ``"hertz"`` or ``"cohesive"``.
+        bond_block: the DEM's bond pass in blocks of this many bonds (``None``: one pass).
+    """
+
+    positions0: Any
+    radii: Any
+    mass: Any
+    inertia: Any
+    bonds: Any
+    r0: Any
+    bond_material: Any
     bond_area: Any
     bond_I: Any
     bond_J: Any
     bond_length: Any
-    bond_keys: Any        # [nb] sorted keys i * n + j of bonded pairs (to exclude them from contacts)
-    bond_key_index: Any   # [nb] bond index of each sorted key
-    bond_radius: Any      # [nb] r_b [m]
-    bond_tensile: Any     # [n_materials] tensile strength sigma_c [Pa] (inf: unbreakable)
-    bond_cohesion: Any    # [n_materials] shear strength (cohesion) c [Pa]
+    bond_keys: Any
+    bond_key_index: Any
+    bond_radius: Any
+    bond_tensile: Any
+    bond_cohesion: Any
     contact: contact_mod.ContactParams
-    wall_stiffness: Any   # E* of particle on rigid wall [Pa] (hertz) or k [N/m] (linear)
+    wall_stiffness: Any
     rotations: bool = True
     contacts: bool = False
     walls: str | None = None
     bond_contact: str = "superimpose"
     breakage: bool = False
-    cohesive: Any = None  # cohesive_mod.CohesiveParams with contact_law="cohesive"
-    failure_rule: str = "separate"  # how a bond's stresses break it (jaxbpm.physics.bond.FAILURE_RULES)
+    cohesive: Any = None
+    failure_rule: str = "separate"
     contact_law: str = "hertz"
-    bond_block: int | None = None  # the DEM's bond pass in blocks of this many bonds (None: one pass)
+    bond_block: int | None = None
 
     @property
     def n(self) -> int:
+        """The number of particles."""
         return int(self.positions0.shape[0])
 
     def stiffness(self, params) -> bond_mod.BondStiffness:
-        """Per-bond stiffnesses from the parameter pytree (a :class:`BondStiffness` passes through unchanged, so
-        loops can compute it once)."""
+        """Per-bond stiffnesses from the parameters.
+
+        Args:
+            params: the parameter dict (or :meth:`precompute`'s), or a
+                :class:`~jaxbpm.physics.bond.BondStiffness`, which passes through unchanged (so that loops can
+                compute it once).
+
+        Returns:
+            The bonds' stiffnesses (``[nb]`` arrays).
+        """
         if isinstance(params, bond_mod.BondStiffness):
             return params
         if "_stiffness" in params:  # precomputed (see :meth:`precompute`)
@@ -226,11 +130,18 @@ class Model:
         return bond_mod.stiffness(E, nu, self.bond_area, self.bond_I, self.bond_J, self.bond_length)
 
     def strength(self, params) -> bond_mod.BondStrength | None:
-        """Per-bond strengths (``None`` when the model does not break bonds). ``params`` may override the material
-        table with ``"bond_tensile_strength"``, ``"bond_shear_strength"`` (cohesion c) [Pa] and
-        ``"bond_friction_angle"`` phi [rad] of the Mohr-Coulomb shear strength (default 0: constant) and
-        ``"bond_moment_factor"`` beta in [0, 1], the share of the bending and twisting moments in the rim stresses
-        (PFC's ``pb_mcf``; default 1: the full moments)."""
+        """Per-bond strengths.
+
+        Args:
+            params: the parameter dict; it may override the material table with ``"bond_tensile_strength"``,
+                ``"bond_shear_strength"`` (cohesion c) [Pa] and ``"bond_friction_angle"`` phi [rad] of the
+                Mohr-Coulomb shear strength (default 0: constant) and ``"bond_moment_factor"`` beta in [0, 1], the
+                share of the bending and twisting moments in the rim stresses (PFC's ``pb_mcf``; default 1: the full
+                moments).
+
+        Returns:
+            The bonds' :class:`~jaxbpm.physics.bond.BondStrength`, or ``None`` when the model does not break bonds.
+        """
         if not self.breakage:
             return None
         if isinstance(params, dict) and "_strength" in params:
@@ -257,9 +168,16 @@ class Model:
                      "cohesion_initial": "c0", "cohesion_from_stress": "kc", "cohesion_max": "c_max"}
 
     def cohesive_params(self, params) -> cohesive_mod.CohesiveParams | None:
-        """The cohesive law's scalars (``None`` with Hertz contacts). ``params`` may override them with
-        ``"contact_E"``, ``"contact_nu"``, ``"friction"``, ``"restitution"``, ``"cohesion_initial"`` (c_0),
-        ``"cohesion_from_stress"`` (k_c) and ``"cohesion_max"`` (c_max), scalars."""
+        """The cohesive law's scalars.
+
+        Args:
+            params: the parameter dict; it may override them with ``"contact_E"``, ``"contact_nu"``,
+                ``"friction"``, ``"restitution"``, ``"cohesion_initial"`` (c_0), ``"cohesion_from_stress"`` (k_c)
+                and ``"cohesion_max"`` (c_max), scalars.
+
+        Returns:
+            The :class:`~jaxbpm.physics.cohesive.CohesiveParams`, or ``None`` with Hertz contacts.
+        """
         if self.contact_law != "cohesive":
             return None
         if not isinstance(params, dict):
@@ -270,9 +188,15 @@ class Model:
         return self.cohesive._replace(**over) if over else self.cohesive
 
     def hertz_params(self, params) -> contact_mod.ContactParams:
-        """The Hertz-Mindlin parameters, with the particles' contact modulus and Poisson ratio taken from
-        ``params["contact_E"]`` / ``params["contact_nu"]`` (scalars) where given (differentiable), else the
-        sample's."""
+        """The Hertz-Mindlin parameters.
+
+        Args:
+            params: the parameter dict; ``"contact_E"`` and ``"contact_nu"`` (scalars, differentiable) replace the
+                particles' contact modulus and Poisson's ratio where given.
+
+        Returns:
+            The :class:`~jaxbpm.physics.contact.ContactParams`.
+        """
         c = self.contact
         if isinstance(params, dict) and "_contact" in params:
             return params["_contact"]
@@ -287,8 +211,14 @@ class Model:
         return c._replace(E_star=e / (2.0 * (1.0 - nu ** 2)), G_star=g / (2.0 * (2.0 - nu)))
 
     def precompute(self, params) -> dict:
-        """Per-bond stiffnesses and strengths (and the cohesive law's scalars) computed once (a loop of force
-        evaluations passes this instead of ``params``)."""
+        """Per-bond stiffnesses and strengths (and the contact laws' scalars) computed once.
+
+        Args:
+            params: the parameter dict.
+
+        Returns:
+            A dict that a loop of force evaluations passes instead of ``params``.
+        """
         out = {"_stiffness": self.stiffness(params), "_strength": self.strength(params),
                "_contact": self.hertz_params(params)}
         if self.contact_law == "cohesive":
@@ -296,7 +226,15 @@ class Model:
         return out
 
     def bonded(self, pairs, intact=None):
-        """Whether each candidate pair ``[C, 2]`` (i < j) is bonded (by an intact bond, when ``intact`` is given)."""
+        """Whether each candidate pair is bonded.
+
+        Args:
+            pairs: ``[C, 2]`` candidate pairs, i < j.
+            intact: ``[nb]`` bool, or ``None``: every bond counts.
+
+        Returns:
+            ``[C]`` bool: bonded (by an intact bond, when ``intact`` is given).
+        """
         if self.bond_keys.shape[0] == 0:
             return jnp.zeros(pairs.shape[0], bool)
         key_t = self.bond_keys.dtype
@@ -309,23 +247,32 @@ class Model:
 
     def forces(self, positions, orientations, params, intact=None, contacts=None, wall_points=None,
                wall_normals=None, bond_contacts=None, block=None):
-        """Forces ``[n, 3]`` and moments ``[n, 3]`` on every particle, and the parts they came from.
+        """Forces and moments on every particle, and the parts they came from.
 
-        contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``; the
-          cohesive law takes a sixth entry, the cohesion history ``[C]`` (zeros, i.e. new contacts, when absent).
-        wall_points, wall_normals: ``[W, 3]`` when the model has walls.
-        bond_contacts: ``None`` or ``(spring [nb, 3], motion, valid [nb])``: the Hertz-Mindlin law also on the
-          bonded pairs (``valid``: where it applies), evaluated with the bond law and summed with it before the
-          scatter to the particles (the DEM's contacts of bonded pairs); ``motion(i, j, d)`` gives the pairs'
-          ``(dxi, v_rel)`` from their particle indices and vectors ``d = x_j - x_i`` (component tuples);
-          ``contacts`` then hold the other pairs.
-        block: pass over the bonds in blocks of this many (see :func:`jaxbpm.physics.bond.bond_forces_breaking`;
-          ``parts["bonds"]`` is then ``None``).
-        Returns ``(force, moment, parts)`` with ``parts = {"bonds": BondForces, "contacts": ContactForces or None,
-        "walls": [W, 3] reactions or None, "intact": the new intact mask (bonds that broke in this evaluation
-        removed; the given one without breakage), "broken": break mode of each bond in this evaluation (0: none,
-        1: tensile, 2: shear; None without breakage), "bond_contacts": the bonded pairs' new springs ``[nb, 3]`` or
-        None}``.
+        Args:
+            positions: ``[n, 3]`` particle positions [m].
+            orientations: ``[n, 4]`` unit quaternions (ignored without rotations).
+            params: the parameter dict (or :meth:`precompute`'s).
+            intact: ``[nb]`` bool, or ``None``: all bonds intact.
+            contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``;
+                the cohesive law takes a sixth entry, the cohesion history ``[C]`` (zeros, i.e. new contacts, when
+                absent).
+            wall_points: ``[W, 3]`` when the model has walls.
+            wall_normals: ``[W, 3]`` when the model has walls.
+            bond_contacts: ``None`` or ``(spring [nb, 3], motion, valid [nb])``: the Hertz-Mindlin law also on the
+                bonded pairs (``valid``: where it applies), evaluated with the bond law and summed with it before the
+                scatter to the particles (the DEM's contacts of bonded pairs); ``motion(i, j, d)`` gives the pairs'
+                ``(dxi, v_rel)`` from their particle indices and vectors ``d = x_j - x_i`` (component tuples);
+                ``contacts`` then hold the other pairs.
+            block: pass over the bonds in blocks of this many (see :func:`jaxbpm.physics.bond.bond_forces_breaking`;
+                ``parts["bonds"]`` is then ``None``).
+
+        Returns:
+            ``(force, moment, parts)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] and ``parts = {"bonds": BondForces,
+            "contacts": ContactForces or None, "walls": [W, 3] reactions or None, "intact": the new intact mask
+            (bonds that broke in this evaluation removed; the given one without breakage), "broken": break mode of
+            each bond in this evaluation (0: none, 1: tensile, 2: shear; None without breakage), "bond_contacts": the
+            bonded pairs' new springs [nb, 3] or None}``.
         """
         k = self.stiffness(params)
         extra = None if bond_contacts is None else self._bond_contact_law(params, *bond_contacts)
@@ -353,7 +300,6 @@ class Model:
             force = force + fw
             parts["walls"] = reaction
         return force, moment, parts
-
 
     def _bond_contact_law(self, params, spring, motion, valid):
         """The ``extra`` of :func:`jaxbpm.physics.bond.bond_forces_breaking`: the Hertz-Mindlin law on the bonded
@@ -383,29 +329,44 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
                 contact_damping: bool = False, wall_stiffness: float | None = None,
                 breakage: bool = False, contact_law="hertz", cohesive=None, pad_to=None,
                 failure_rule: str = "separate") -> Model:
-    """A :class:`Model` of ``sample`` with just the interactions asked for.
+    """A :class:`Model` of a sample with just the interactions asked for.
 
-    rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
-    walls: ``"hertz"`` (default wall stiffness: the particle material on a rigid plane, E / (1 - nu^2)) or
-    ``"linear"`` (give ``wall_stiffness`` in N/m).
-    breakage: bonds break when their stresses exceed the strengths of the material table (or of the params); off
-    by default (the static solvers model the elastic range).
-    failure_rule: how the stresses combine when bonds break (:data:`jaxbpm.physics.bond.FAILURE_RULES`):
-    ``"separate"`` (default: tension and shear checked apart, the parallel bond), ``"summed"`` (LAMMPS
-    ``bpm/rotational``) or ``"max"`` (Yade's ``CohFrictPhys``).
-    contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw`;
-    cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
-    ``contact_law="cohesive"``. Particles with cohesive contacts and no bonds do not rotate by default (Irazabal et al.
-    2023).
-    pad_to: ``(particles, bonds)`` capacities (a :class:`~jaxbpm._compile.SizeClass`) to pad a bonds-only model to,
-    so that the samples of one size class share compiled programs. The sample's particles and bonds come first; the
-    extra particles lie in a row beyond the sample, with the largest radius, mass and moment of inertia of the
-    sample's particles (so its minima and maxima stay those of the sample); the extra bonds join pairs of distinct
-    extra particles, with a zero cross-section (no stiffness, no force: ``r0`` is their actual distance) and unit
-    length, and never break. A padded model's DEM loading clamps the extra particles at rest
-    (:func:`jaxbpm.dem.pad_loading`) and its state holds the sample's first (:func:`jaxbpm.dem.unpad_state`). Not
-    with contacts or walls (they would see the extra particles). The setup is NumPy on the host: building a model compiles no program (beyond one, once
-    per process, for the contact parameters).
+    The setup is NumPy on the host: building a model compiles no program (beyond one, once per process, for the
+    contact parameters).
+
+    Args:
+        sample: the sample.
+        contacts: particle contacts on.
+        walls: ``None``, ``"hertz"`` (default wall stiffness: the particle material on a rigid plane,
+            E / (1 - nu^2)) or ``"linear"`` (give ``wall_stiffness`` in N/m).
+        rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
+            Particles with cohesive contacts and no bonds do not rotate by default (Irazabal et al. 2023).
+        contact_damping: Tsuji damping of the Hertz-Mindlin contacts.
+        wall_stiffness: the walls' stiffness (see :attr:`Model.wall_stiffness`), or ``None``: the default.
+        breakage: bonds break when their stresses exceed the strengths of the material table (or of the params);
+            off by default (the static solvers model the elastic range).
+        contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw`.
+        cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
+            ``contact_law="cohesive"``.
+        pad_to: ``(particles, bonds)`` capacities (a :class:`~jaxbpm._compile.SizeClass`) to pad a bonds-only
+            model to, so that the samples of one size class share compiled programs. The sample's particles and
+            bonds come first; the extra particles lie in a row beyond the sample, with the largest radius, mass and
+            moment of inertia of the sample's particles (so its minima and maxima stay those of the sample); the
+            extra bonds join pairs of distinct extra particles, with a zero cross-section (no stiffness, no force:
+            ``r0`` is their actual distance) and unit length, and never break. A padded model's DEM loading clamps
+            the extra particles at rest (:func:`jaxbpm.dem.pad_loading`) and its state holds the sample's first
+            (:func:`jaxbpm.dem.unpad_state`). Not with contacts or walls (they would see the extra particles).
+        failure_rule: how the stresses combine when bonds break (:data:`jaxbpm.physics.bond.FAILURE_RULES`):
+            ``"separate"`` (default: tension and shear checked apart, the parallel bond), ``"summed"`` (LAMMPS
+            ``bpm/rotational``) or ``"max"`` (Yade's ``CohFrictPhys``).
+
+    Returns:
+        The :class:`Model`.
+
+    Raises:
+        SceneError: an unknown contact law, or cohesive parameters out of range.
+        ValueError: an unknown wall law or failure rule, ``walls="linear"`` without ``wall_stiffness``, padding with
+            contacts or walls, or to capacities too small.
     """
     pm = sample.particle_material
     law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
@@ -456,8 +417,8 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         bond_key_index=_put(key_index, np.int32),
         bond_tensile=_put(mats.tensile_strength, dtype),
         bond_cohesion=_put(mats.shear_strength, dtype),
-        contact=_contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
-                                bool(contact_damping)),
+        contact=contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
+                               bool(contact_damping)),
         wall_stiffness=_put(ws, dtype),
         rotations=bool(rotations),
         contacts=bool(contacts),
@@ -501,9 +462,21 @@ def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:
 
 
 @functools.lru_cache(maxsize=16)
-def _contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str, damping: bool):
-    """:func:`jaxbpm.physics.contact.contact_params` as one small program (not a dozen eager operations), once per
-    material."""
+def contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str,
+                   damping: bool) -> contact_mod.ContactParams:
+    """:func:`jaxbpm.physics.contact.contact_params` as one small compiled program, cached per material.
+
+    Args:
+        E: the particles' Young's modulus (Pa).
+        nu: the particles' Poisson's ratio.
+        friction: the contacts' friction coefficient (``inf``: no sliding).
+        restitution: the coefficient of restitution.
+        dtype: the name of the floating-point type of the parameters (``"float64"``).
+        damping: whether the normal force has its viscous part.
+
+    Returns:
+        The contact parameters, arrays of ``dtype``.
+    """
     a = lambda v: np.asarray(v, dtype)  # noqa: E731
     return _contact_params_jit(a(E), a(nu), a(friction), a(restitution), damping=damping)
 

@@ -3,8 +3,9 @@ that samples of similar size share compiled programs.
 
 Padding particles come after the real ones, copies of the first particle (its radius, mass, moment of inertia and
 position; the second one a mean bond length further along x). Padding bonds come after the real ones and join the
-first two padding particles with zero stiffness (zero area and moments of area, that length; material 0). A solver holds the padding
-particles (prescribed, zero displacement) or leaves them out of its averages, and slices its outputs back.
+first two padding particles with zero stiffness (zero area and moments of area, that length; material 0). A solver
+holds the padding particles (prescribed, zero displacement) or leaves them out of its averages, and slices its outputs
+back.
 """
 
 from __future__ import annotations
@@ -20,7 +21,19 @@ __all__ = ["pad_model", "pad_rows"]
 
 
 def pad_rows(a, size: int, fill=0):
-    """``a`` (NumPy or JAX, ``[m, ...]``) with rows of ``fill`` appended up to ``size`` rows (a NumPy array)."""
+    """Append rows of ``fill`` to an array.
+
+    Args:
+        a: ``[m, ...]``, NumPy or JAX.
+        size: the number of rows wanted.
+        fill: the value of the new rows.
+
+    Returns:
+        ``[size, ...]``, a NumPy array.
+
+    Raises:
+        ValueError: ``a`` has more than ``size`` rows.
+    """
     a = np.asarray(a)
     if size < a.shape[0]:
         raise ValueError(f"cannot pad {a.shape[0]} rows to {size}")
@@ -28,8 +41,19 @@ def pad_rows(a, size: int, fill=0):
 
 
 def pad_model(model: Model, n_cap: int, nb_cap: int) -> Model:
-    """``model`` with ``n_cap - n`` padding particles and ``nb_cap - nb`` padding bonds (see the module docstring);
-    ``n_cap`` must leave room for two padding particles."""
+    """Pad a model to a size class (see the module docstring).
+
+    Args:
+        model: the model of ``n`` particles and ``nb`` bonds.
+        n_cap: the particle count of the size class, at least ``n + 2``.
+        nb_cap: the bond count of the size class, at least ``nb``.
+
+    Returns:
+        The model with ``n_cap - n`` padding particles and ``nb_cap - nb`` padding bonds.
+
+    Raises:
+        ValueError: the size class is too small for the model.
+    """
     n, nb = model.n, int(model.bonds.shape[0])
     if n_cap < n + 2 or nb_cap < nb:
         raise ValueError(f"size class ({n_cap}, {nb_cap}) too small for {n} particles and {nb} bonds")

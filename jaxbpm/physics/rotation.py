@@ -16,12 +16,28 @@ __all__ = ["identity", "multiply", "conjugate", "rotate", "from_rotation_vector"
 
 
 def identity(n: int, dtype=None):
-    """``[n, 4]`` identity quaternions."""
+    """Identity quaternions.
+
+    Args:
+        n: how many.
+        dtype: their type (default JAX's).
+
+    Returns:
+        ``[n, 4]``, each ``(1, 0, 0, 0)``.
+    """
     return jnp.zeros((n, 4), dtype=dtype).at[:, 0].set(1.0)
 
 
 def multiply(p, q):
-    """Hamilton product ``p * q`` of ``[..., 4]`` quaternions (rotate by q, then by p)."""
+    """Hamilton product ``p * q``: rotate by q, then by p.
+
+    Args:
+        p: ``[..., 4]`` quaternions, or a ``(w, x, y, z)`` component tuple.
+        q: the same.
+
+    Returns:
+        ``[..., 4]``, or a component tuple for tuples.
+    """
     if isinstance(p, tuple):
         pw, pv, qw, qv = p[0], p[1:], q[0], q[1:]
         c = cross(pv, qv)
@@ -34,15 +50,29 @@ def multiply(p, q):
 
 
 def conjugate(q):
-    """The conjugate ``(w, -x, -y, -z)`` of a quaternion (the inverse rotation of a unit quaternion); an array
-    ``[..., 4]`` or a component tuple."""
+    """The conjugate ``(w, -x, -y, -z)`` of a quaternion: the inverse rotation of a unit quaternion.
+
+    Args:
+        q: ``[..., 4]`` quaternions, or a ``(w, x, y, z)`` component tuple.
+
+    Returns:
+        The conjugates, shaped as ``q``.
+    """
     if isinstance(q, tuple):
         return (q[0], -q[1], -q[2], -q[3])
     return q * jnp.array([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
 
 
 def rotate(q, v):
-    """Rotate ``[..., 3]`` vectors ``v`` by unit quaternions ``q``."""
+    """Rotate vectors by unit quaternions.
+
+    Args:
+        q: ``[..., 4]`` unit quaternions, or a ``(w, x, y, z)`` component tuple.
+        v: ``[..., 3]`` vectors, or an ``(x, y, z)`` component tuple.
+
+    Returns:
+        The rotated vectors, ``[..., 3]`` or a component tuple.
+    """
     if isinstance(q, tuple):
         w, u = q[0], q[1:]
         t = tuple(2.0 * c for c in cross(u, v))
@@ -53,10 +83,15 @@ def rotate(q, v):
     return v + w * t + jnp.cross(u, t)
 
 
-
-
 def from_rotation_vector(theta):
-    """Quaternion of the rotation by angle ``|theta|`` about ``theta`` (smooth at zero, so differentiable)."""
+    """Quaternion of the rotation by angle ``|theta|`` about ``theta`` (smooth at zero, so differentiable).
+
+    Args:
+        theta: ``[..., 3]`` rotation vectors [rad].
+
+    Returns:
+        ``[..., 4]`` unit quaternions.
+    """
     angle2 = jnp.sum(theta * theta, axis=-1, keepdims=True)
     small = angle2 < 1e-12
     safe = jnp.where(small, 1.0, angle2)
@@ -70,6 +105,12 @@ def small_angle_vector(q):
     """Rotation vector of ``q`` to third order in the angle: ``2 sign(w) (x, y, z)``.
 
     Exact for the identity (so rigid motions give exactly zero), error below 0.05 % for angles under 0.1 rad.
+
+    Args:
+        q: ``[..., 4]`` unit quaternions, or a ``(w, x, y, z)`` component tuple.
+
+    Returns:
+        ``[..., 3]`` rotation vectors [rad], or an ``(x, y, z)`` tuple.
     """
     if isinstance(q, tuple):
         sign = jnp.where(q[0] < 0, -1.0, 1.0)
@@ -83,6 +124,13 @@ def integrate(q, theta):
 
     Written on component arrays (structure of arrays): XLA on CPU runs this several times faster than the same
     algebra on ``[n, 4]`` rows.
+
+    Args:
+        q: ``[n, 4]`` unit quaternions.
+        theta: ``[n, 3]`` rotation increments [rad].
+
+    Returns:
+        ``[n, 4]`` unit quaternions.
     """
     w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
     tx, ty, tz = theta[:, 0], theta[:, 1], theta[:, 2]

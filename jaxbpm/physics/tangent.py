@@ -11,6 +11,24 @@ Forms (``nd`` DOF per particle, 3 or 6; DOF order of a pair ``(u_i, theta_i, u_j
 * unit ``[4, nb, 9]`` (:func:`bond_unit`): ``d f_i / d d`` row-major with one of (k_n, k_t, k_tw, k_b) set to one and
   the others to zero. The law is linear in its stiffnesses, so ``d f_i / d d = sum_s k_s unit[s]`` for any bond
   parameters: the STE's ``K^nm``.
+
+A walkthrough: the stiffness of one bond along x, without rotations, has k_n along the bond and k_t across it, is
+symmetric, and a rigid translation of the pair costs nothing.
+
+Examples:
+    >>> import jax
+    >>> jax.config.update("jax_enable_x64", True)
+    >>> import jax.numpy as jnp
+    >>> from jaxbpm.physics import bond, tangent
+    >>> r0 = jnp.array([[2e-3, 0.0, 0.0]])
+    >>> k = bond.BondStiffness(*(jnp.array([v]) for v in (4e5, 1.6e5, 1e-3, 2e-3)))
+    >>> K = tangent.bond_full(r0, k, rotations=False)[0]      # [6, 6], DOF order (u_i, u_j)
+    >>> K.shape
+    (6, 6)
+    >>> [round(float(v) / 1e5, 9) for v in jnp.diag(K)[:3]]
+    [4.0, 1.6, 1.6]
+    >>> bool(jnp.allclose(K, K.T)), bool(jnp.allclose(K @ jnp.tile(jnp.array([1.0, 2.0, 3.0]), 2), 0.0))
+    (True, True)
 """
 
 from __future__ import annotations
@@ -24,13 +42,21 @@ __all__ = ["bond_reduced", "full", "bond_full", "bond_unit", "contact_full"]
 
 
 def bond_reduced(r0, k: bond_mod.BondStiffness, rotations: bool, z0=None) -> jnp.ndarray:
-    """Reduced per-bond Jacobians ``[ni, no, nb]`` (components first, bonds last) of the bond law with rest vectors
-    ``r0 [nb, 3]`` and stiffnesses ``k`` (:class:`~jaxbpm.physics.bond.BondStiffness` of ``[nb]`` arrays).
+    """Reduced per-bond Jacobians of the bond law (components first, bonds last).
 
     One ``jax.jvp`` per input component, batched with ``vmap``, on ``[nb]`` component arrays. At rest (``z0``
     ``None``) a rotation enters as the quaternion ``(1, theta / 2)``: it agrees with the exact map to first order,
     which is all a Jacobian at rest sees. ``z0 [ni, nb]`` (``u_j - u_i``, then ``theta_i``, ``theta_j``) takes the
     Jacobians at that state instead (rotations through the exact map).
+
+    Args:
+        r0: ``[nb, 3]`` rest vectors of the bonds [m].
+        k: the bonds' stiffnesses (``[nb]`` arrays).
+        rotations: with the rotational DOF (``ni = no = 9``) or without (3).
+        z0: ``[ni, nb]`` the state to take the Jacobians at, or ``None``: at rest.
+
+    Returns:
+        ``[ni, no, nb]``: ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` (``d f_i / d d`` without rotations).
     """
     r0c = tuple(jnp.asarray(r0).T)
     nb = r0.shape[0]
@@ -58,8 +84,14 @@ def bond_reduced(r0, k: bond_mod.BondStiffness, rotations: bool, z0=None) -> jnp
 
 
 def full(jr) -> jnp.ndarray:
-    """``[nb, 2 nd, 2 nd]`` stiffness (minus the force Jacobian), DOF order ``(u_i, theta_i, u_j, theta_j)``, from
-    the reduced form of :func:`bond_reduced`."""
+    """The pair stiffness (minus the force Jacobian) from the reduced form.
+
+    Args:
+        jr: ``[ni, no, nb]``, :func:`bond_reduced`'s Jacobians.
+
+    Returns:
+        ``[nb, 2 nd, 2 nd]``, DOF order ``(u_i, theta_i, u_j, theta_j)`` (``(u_i, u_j)`` without rotations).
+    """
     J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
     jd = J[:, :, :3]
     if J.shape[1] == 3:  # f_i from d; f_j = -f_i
@@ -71,13 +103,28 @@ def full(jr) -> jnp.ndarray:
 
 
 def bond_full(r0, k: bond_mod.BondStiffness, rotations: bool) -> jnp.ndarray:
-    """Per-bond stiffness ``[nb, 2 nd, 2 nd]`` at rest: :func:`full` of :func:`bond_reduced`."""
+    """Per-bond stiffness at rest: :func:`full` of :func:`bond_reduced`.
+
+    Args:
+        r0: ``[nb, 3]`` rest vectors of the bonds [m].
+        k: the bonds' stiffnesses (``[nb]`` arrays).
+        rotations: with the rotational DOF (``nd = 6``) or without (3).
+
+    Returns:
+        ``[nb, 2 nd, 2 nd]``.
+    """
     return full(bond_reduced(r0, k, rotations))
 
 
 def bond_unit(r0) -> jnp.ndarray:
-    """``[4, nb, 9]``: ``d f_i / d d`` (row-major) of every bond at rest, without rotations, with (k_n, k_t, k_tw,
-    k_b) set to each unit vector in turn."""
+    """Unit Jacobians: ``d f_i / d d`` of every bond at rest, without rotations, per stiffness.
+
+    Args:
+        r0: ``[nb, 3]`` rest vectors of the bonds [m].
+
+    Returns:
+        ``[4, nb, 9]``: ``d f_i / d d`` (row-major) with (k_n, k_t, k_tw, k_b) set to each unit vector in turn.
+    """
     nb = r0.shape[0]
     out = []
     for s in range(4):
@@ -87,9 +134,19 @@ def bond_unit(r0) -> jnp.ndarray:
 
 
 def contact_full(d0, radii, params: contact_mod.ContactParams, dofs: int) -> jnp.ndarray:
-    """Per-contact stiffness ``[C, 2 nd, 2 nd]``: minus the Jacobian of the Hertz-Mindlin law (no slip, empty
-    tangential spring) at the pair vectors ``d0 [C, 3]`` (their overlap is the linearisation point), radii
-    ``[C, 2]``. With 6 DOF the contact point moves with the particles' rotations (levers ``-r_j n``, ``r_i n``)."""
+    """Per-contact stiffness: minus the Jacobian of the Hertz-Mindlin law (no slip, empty tangential spring).
+
+    With 6 DOF the contact point moves with the particles' rotations (levers ``-r_j n``, ``r_i n``).
+
+    Args:
+        d0: ``[C, 3]`` pair vectors x_j - x_i [m]; their overlap is the linearisation point.
+        radii: ``[C, 2]`` the pairs' radii [m].
+        params: the contact parameters.
+        dofs: DOF per particle, 3 or 6.
+
+    Returns:
+        ``[C, 2 nd, 2 nd]``, DOF order ``(u_i, theta_i, u_j, theta_j)``.
+    """
     nd = int(dofs)
     dtype = d0.dtype
 

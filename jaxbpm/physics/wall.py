@@ -17,10 +17,21 @@ __all__ = ["wall_forces"]
 
 
 def wall_forces(positions, radii, points, normals, law: str, stiffness):
-    """Forces on particles ``[n, 3]`` and reactions on the walls ``[W, 3]``.
+    """Forces of plane walls on the particles and the walls' reactions.
 
-    points, normals: ``[W, 3]``. law: ``"hertz"`` (stiffness = E* of particle on rigid wall [Pa]) or ``"linear"``
-    (stiffness = k [N/m]).
+    Args:
+        positions: ``[n, 3]`` particle positions [m].
+        radii: ``[n]`` radii [m].
+        points: ``[W, 3]`` a point of each wall [m].
+        normals: ``[W, 3]`` unit normals, pointing to the particles' side.
+        law: ``"hertz"`` or ``"linear"``.
+        stiffness: for ``"hertz"`` E* of a particle on a rigid wall [Pa], for ``"linear"`` k [N/m].
+
+    Returns:
+        ``(forces, reactions)``: ``[n, 3]`` on the particles and ``[W, 3]`` on the walls [N].
+
+    Raises:
+        ValueError: an unknown ``law``.
     """
     gap = jnp.einsum("nk,wk->nw", positions, normals) - jnp.sum(points * normals, axis=1)[None, :]
     delta = jnp.maximum(radii[:, None] - gap, 0.0)

@@ -15,7 +15,7 @@ import numpy as np
 from jaxbpm._compile import capacity, put, setup_jit, size_class
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import tangent
-from jaxbpm.physics.model import _contact_params, Model
+from jaxbpm.physics.model import Model, contact_params
 from jaxbpm.physics.padding import pad_model
 from jaxbpm.sample import Sample
 
@@ -254,7 +254,7 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         crad = rad[cpairs].reshape(-1, 2)
 
     pm = sample.particle_material
-    cparams = _contact_params(float(pm.E), float(pm.nu), float("inf"), float(pm.restitution), dtype.name, False)
+    cparams = contact_params(float(pm.E), float(pm.nu), float("inf"), float(pm.restitution), dtype.name, False)
     est = Estimator(model=model, pairs=put(pairs), d=put(d, dtype), contact_d=put(cd, dtype),
                     contact_radii=put(crad, dtype).reshape(-1, 2), contact_params=cparams, volume=put(vol, dtype),
                     valid=put(valid), include=put(include), free=put(free), layer=put(layer, np.int32),

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm.physics import tangent
-from jaxbpm.physics.chunks import fold_chunks
+from jaxbpm.physics.blocks import fold_blocks
 from jaxbpm.ste.estimator import _contact_jacobians, Estimator
 
 __all__ = ["pair_stiffness", "local_tensors", "body_tensor", "raw_body_tensor", "voigt", "tensor_from_voigt",
@@ -172,7 +172,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
 
     The algebra of :func:`_fluctuations3` (which the local tensors use) with the per-particle sums D, B and N
     gathered by one scatter per pair end into one ``[n, 63]`` array (30 % faster on CPU than a scatter per sum). The
-    two passes over the pairs fold over chunks of pairs on large samples (:func:`~jaxbpm.physics.chunks.fold_chunks`:
+    two passes over the pairs fold over chunks of pairs on large samples (:func:`~jaxbpm.physics.blocks.fold_blocks`:
     at a million particles the whole-sample per-pair rows were 3.6 GiB of scratch memory)."""
     K = coupling(est, params).reshape(-1, 9)
     n, d, dtype = est.n, est.d, est.d.dtype
@@ -201,7 +201,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
         return acc, gram + _gram(dd, kc)
 
     init = (jnp.zeros((n, 63 if neighbours else 36), dtype), jnp.zeros((9, 9), dtype))
-    acc, gram = fold_chunks(sums, init, K.shape[0])
+    acc, gram = fold_blocks(sums, init, K.shape[0])
     D = jnp.where(valid, acc[:, :9].reshape(n, 3, 3), jnp.eye(3, dtype=dtype))
     B = acc[:, 9:36].reshape(n, 3, 9)
     A = _inverse3(D)
@@ -213,7 +213,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
             k3 = kc.reshape(-1, 3, 3)
             return hat.at[i].add(_mul(k3, gamma[j])).at[j].add(_mul(k3, gamma[i]))
 
-        hat = fold_chunks(neighbour_sums, jnp.zeros((n, 3, 9), dtype), K.shape[0])
+        hat = fold_blocks(neighbour_sums, jnp.zeros((n, 3, 9), dtype), K.shape[0])
         phi = gamma + jnp.where(free, _mul(A, hat), 0.0)  # Eq. 24 + 29
     t = gram.reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
     # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: one matrix product each that
