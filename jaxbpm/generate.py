@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from jaxbpm._spatial import morton_order
 from jaxbpm.errors import SampleError
 from jaxbpm.packing import _jamming_fraction, _Walls, _pack, _pack_auto
 from jaxbpm.sample import BondMaterials, Domain, Sample
@@ -384,23 +385,6 @@ def from_shape(shape: str, n: int, *, seed: int = 0, progress=False, **kw) -> Sa
     if abs(count(c + 1) - n) < abs(count(c) - n):
         c += 1
     return lattice(key, (c, c, c), **kw)
-
-
-def morton_order(positions, bits: int = 10) -> np.ndarray:
-    """The permutation ``[n]`` that sorts points ``[n, 3]`` along a Morton (Z-order) curve of ``2**bits`` cells per
-    axis over their bounding box (ties keep their order): particles close in space get close indices, so the
-    solvers' per-bond gathers and per-particle sums touch memory in runs. On a 100k-particle random box it makes the
-    median index distance of a bond 11 instead of ~30 000 and the DEM ~10 % faster on CPU."""
-    x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    if len(x) == 0:
-        return np.zeros(0, np.int64)
-    lo, span = x.min(axis=0), np.ptp(x, axis=0)
-    q = np.floor((x - lo) / np.where(span > 0, span, 1.0) * (2**bits - 1)).astype(np.uint64)
-    code = np.zeros(len(x), np.uint64)
-    for bit in range(bits):
-        for axis in range(3):
-            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
-    return np.argsort(code, kind="stable")
 
 
 # ----------------------------------------------------------------------------------------------------------- bonds

@@ -16,6 +16,8 @@ from typing import Any, Mapping, NamedTuple
 import jax
 import numpy as np
 
+from jaxbpm._spatial import morton_order
+from jaxbpm._text import shown as _shown
 from jaxbpm.errors import SampleError
 
 __all__ = ["Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary"]
@@ -62,17 +64,6 @@ def _numbers(name: str, value) -> np.ndarray:
         return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
         raise SampleError(f"materials: {name} must be numbers, got {_shown(value)}") from None
-
-
-def _shown(value, limit: int = 80) -> str:
-    """``value`` for an error message: plain numbers (``1.5``, ``[1.0, 2.0]``, not NumPy reprs), shortened."""
-    try:
-        if isinstance(value, (np.ndarray, np.generic)):
-            value = value.tolist()
-        text = repr(value)
-    except Exception:  # noqa: BLE001 (a value whose repr fails still gets a message)
-        text = f"a {type(value).__name__}"
-    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 @dataclasses.dataclass(frozen=True)
@@ -490,8 +481,6 @@ class Sample:
         particles close in space are close in memory and the solvers' gathers and scatters stay in cache); bonds
         follow their particles and are sorted by their first particle. The generators already number their
         particles this way; samples read from other codes' files keep the files' order unless renumbered."""
-        from jaxbpm.generate import morton_order
-
         order = morton_order(self.positions) if order is None else np.asarray(order)
         n = self.n_particles
         if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):

@@ -30,6 +30,7 @@ import numpy as np
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import cohesive as cohesive_mod
 from jaxbpm.physics import contact as contact_mod
+from jaxbpm._text import shown
 from jaxbpm.physics import wall as wall_mod
 from jaxbpm.sample import Sample
 
@@ -163,9 +164,7 @@ def _concrete(params, name: str, expected: str, error):
             raise TypeError
         return np.asarray(arr, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
-        from jaxbpm.sample import _shown
-
-        raise error(f"params[{name!r}] must be {expected}, got {_shown(value)}") from None
+        raise error(f"params[{name!r}] must be {expected}, got {shown(value)}") from None
 
 
 def _float_dtype():
@@ -501,11 +500,26 @@ def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:
 
 
 @functools.lru_cache(maxsize=16)
-def _contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str, damping: bool):
+def contact_params(E: float, nu: float, friction: float, restitution: float, dtype: str, damping: bool):
     """:func:`jaxbpm.physics.contact.contact_params` as one small program (not a dozen eager operations), once per
-    material."""
+    material (cached).
+
+    Args:
+      E: particle Young's modulus [Pa].
+      nu: particle Poisson ratio [-].
+      friction: Coulomb friction coefficient [-].
+      restitution: coefficient of restitution [-].
+      dtype: the float dtype's name (``"float32"`` or ``"float64"``).
+      damping: whether the contact law is damped.
+
+    Returns:
+      What :func:`jaxbpm.physics.contact.contact_params` returns, in ``dtype``.
+    """
     a = lambda v: np.asarray(v, dtype)  # noqa: E731
     return _contact_params_jit(a(E), a(nu), a(friction), a(restitution), damping=damping)
+
+
+_contact_params = contact_params  # (the old private name, still imported by jaxbpm.ste.estimator)
 
 
 _contact_params_jit = jax.jit(contact_mod.contact_params, static_argnames=("damping",))
