@@ -675,18 +675,17 @@ def test_lammps_reads_our_files_and_we_read_its(tmp_path):
     np.testing.assert_array_equal(np.sort(np.sort(local.bonds(atoms.ids), axis=1), axis=0), sample.bonds)
 
 
-def test_old_module_names_still_import_with_a_warning():
+def test_old_module_names_are_gone():
+    # jaxbpm.formats and jaxbpm.conventions were the old names of jaxbpm.interop.formats and .conventions
     import importlib
-    import sys
 
-    for old, moved in (("jaxbpm.formats", formats), ("jaxbpm.conventions", conventions)):
-        saved = sys.modules.pop(old, None)
-        try:
-            with pytest.warns(DeprecationWarning, match=f"moved to jaxbpm.interop.{old.split('.')[1]}"):
-                assert importlib.import_module(old) is moved
-        finally:
-            if saved is not None:
-                sys.modules[old] = saved
+    import jaxbpm
+
+    for old in ("jaxbpm.formats", "jaxbpm.conventions"):
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(old)
+        with pytest.raises(AttributeError):
+            getattr(jaxbpm, old.split(".")[1])
 
 
 @pytest.mark.parametrize("comment", [False, True])
