@@ -10,8 +10,8 @@ import io
 import numpy as np
 
 from jaxbpm.interop._meta import _N_COEFFS
-from jaxbpm.interop.lammps import (_ATOM_COLUMNS, _SECTIONS, _coeff_row, _coeffs_head, _head_meta, _header,
-                                   _last_wins, _split, _table_arrays)
+from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, coeff_row, coeffs_head, head_meta, header,
+                                           last_wins, split, table_arrays)
 
 __all__ = ["parse_fast"]
 
@@ -57,23 +57,23 @@ def parse_fast(path, text: str, atom_style):
     def block(rows: tuple[int, int]) -> bytes:
         return data[starts[rows[0]]:nl[rows[1] - 1] + 1]
 
-    crc, meta = _head_meta(path, [line(k) for k in range(min(6, nlines))])
-    counts, i = _header(path, ((k + 1, line(k)) for k in range(1, nlines)))
+    crc, meta = head_meta(path, [line(k) for k in range(min(6, nlines))])
+    counts, i = header(path, ((k + 1, line(k)) for k in range(1, nlines)))
     sections: dict[str, tuple[int, str, tuple[int, int]]] = {}
     while i < nlines:
         if i not in special_set:
             return None
-        words, comment = _split(line(i))
+        words, comment = split(line(i))
         if not words:
             i += 1
             continue
         name = " ".join(words)
-        if name not in _SECTIONS:
+        if name not in SECTIONS:
             return None
-        want, j = counts.get(_SECTIONS[name], 0), i + 1
+        want, j = counts.get(SECTIONS[name], 0), i + 1
         if want:
             while j < nlines and j in special_set:  # blank lines before the rows
-                if _split(line(j))[0]:
+                if split(line(j))[0]:
                     return None
                 j += 1
             nxt = bisect.bisect_left(special, j)
@@ -89,11 +89,11 @@ def parse_fast(path, text: str, atom_style):
     _, comment, rows = sections["Atoms"]
     style = atom_style or (comment.strip() or None)
     n = rows[1] - rows[0]
-    if (style is not None and style not in _ATOM_COLUMNS) or n == 0:
+    if (style is not None and style not in ATOM_COLUMNS) or n == 0:
         return None
     text_rows = block(rows)
     ncols = len(line(rows[0]).split())
-    ncol = _ATOM_COLUMNS.get(style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(ncols))
+    ncol = ATOM_COLUMNS.get(style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(ncols))
     if b"#" in text_rows or ncol is None or ncols not in (ncol, ncol + 3):
         return None
     off = ncol - 7
@@ -141,10 +141,10 @@ def parse_fast(path, text: str, atom_style):
     else:
         rb_c, mat_c = np.full(nb, np.nan), np.full(nb, -1)
     # coefficients
-    table = _table_arrays({})
+    table = table_arrays({})
     if "Bond Coeffs" in sections:
         no, comment, rows = sections["Bond Coeffs"]
-        _coeffs_head(path, no, comment)
+        coeffs_head(path, no, comment)
         text_rows = block(rows) if rows[1] > rows[0] else b""
         width = len(line(rows[0]).split()) if text_rows else 13
         got = None if b"#" in text_rows or width not in (9, 13) else \
@@ -155,12 +155,12 @@ def parse_fast(path, text: str, atom_style):
             for k in range(width - 1):
                 vals[:, k] = got[f"c{k}"]
             if not (np.any(np.isnan(vals)) or not np.all(np.isfinite(vals[:, :4]))):
-                table = _last_wins(got["t"], vals)
+                table = last_wins(got["t"], vals)
                 got = True
         if got is not True:  # the rows line by line: the error names the line
             tab = {}
             for k in range(*rows):
-                key, row = _coeff_row(_split(line(k))[0], f"{path}:{k + 1}")
+                key, row = coeff_row(split(line(k))[0], f"{path}:{k + 1}")
                 tab[key] = row
-            table = _table_arrays(tab)
+            table = table_arrays(tab)
     return (crc, text[text.index("\n") + 1:], meta, pos, dia, dens, bonds, np.asarray(got_t, np.int64), rb_c, mat_c, table)

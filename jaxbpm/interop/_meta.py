@@ -8,6 +8,7 @@ import functools
 import json
 import math
 import numbers
+import pathlib
 import re
 import zlib
 
@@ -154,3 +155,25 @@ def _names_file(read):
                 raise
             raise type(exc)(f"{path}: {exc}") from exc
     return wrapper
+
+
+def read_text(path: pathlib.Path) -> str:
+    """The text of ``path``, or a :class:`SampleFileError` saying that it is missing, a folder or not text.
+
+    Args:
+      path: the file.
+
+    Returns:
+      Its text (the platform's default encoding).
+
+    Raises:
+      SampleFileError: the file is missing, a directory or not decodable.
+    """
+    if not path.exists():
+        raise SampleFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise SampleFileError(f"{path}: is a directory, not a file")
+    try:
+        return path.read_text()
+    except UnicodeDecodeError as exc:
+        raise SampleFileError(f"{path}: not a text file ({exc})") from None

@@ -21,7 +21,7 @@ from jaxbpm.sample import Sample
 from jaxbpm.interop._meta import (_checksums, _crc32, _domain, _meta, _meta_line, _names_file, _parse_meta, _r,
                                   _verify, _without_line)
 from jaxbpm.interop.lammps import _materials_from_bonds
-from jaxbpm.interop.lammps import _read_text
+from jaxbpm.interop._meta import read_text
 
 
 def _bonds_path(path: pathlib.Path) -> pathlib.Path:
@@ -68,7 +68,7 @@ class _Rows(NamedTuple):
 
 
 def _csv_rows(path: pathlib.Path) -> _Rows:
-    text = _read_text(path)
+    text = read_text(path)
     meta, rows, header, crc_line = None, [], None, None
     for no, line in enumerate(text.splitlines(), start=1):
         if line.lstrip().startswith("#"):

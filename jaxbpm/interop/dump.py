@@ -8,7 +8,7 @@ import pathlib
 import numpy as np
 
 from jaxbpm.errors import SampleFileError
-from jaxbpm.interop.lammps import _read_text
+from jaxbpm.interop._meta import read_text
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +65,7 @@ class DumpFrame:
 def read_lammps_dump(path) -> list[DumpFrame]:
     """All frames of a LAMMPS text dump (``dump atom/custom`` or ``dump local``); errors name the line."""
     path = pathlib.Path(path)
-    lines = _read_text(path).splitlines()
+    lines = read_text(path).splitlines()
     frames, i = [], 0
 
     def expect(k: int, prefix: str) -> str:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
-import re
 import warnings
 from typing import Any, Mapping
 
@@ -20,8 +19,11 @@ from jaxbpm.interop import conventions
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.io import atomic_write
 from jaxbpm.sample import ParticleMaterial, Sample
-from jaxbpm.interop._meta import (_BIG, _checksums, _crc32, _domain, _meta, _meta_line, _N_COEFFS, _names_file,
-                                  _parse_meta, _r, _verify, _without_line)
+from jaxbpm.interop._lammps_fast import parse_fast
+from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, Line, coeff_row, coeffs_head, head_meta, header,
+                                           last_wins, split, table_arrays)
+from jaxbpm.interop._meta import (_BIG, _crc32, _domain, _meta, _meta_line, _N_COEFFS, _names_file, _r, _verify,
+                                  _without_line, read_text)
 
 
 def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarray:
@@ -108,7 +110,7 @@ def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
     """``bond_coeff`` lines of a LAMMPS input file: ``({type: 12 coefficients}, normalize)`` (``normalize`` from a
     ``bond_style bpm/rotational ... normalize yes`` line). Errors name the line."""
     path = pathlib.Path(path)
-    text = _read_text(path)
+    text = read_text(path)
     coeffs, normalize = {}, False
     for no, raw in enumerate(text.splitlines(), start=1):
         words = raw.split("#", 1)[0].split()
@@ -121,28 +123,9 @@ def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
             normalize = "normalize" in kw and kw.index("normalize") + 1 < len(kw) and \
                 kw[kw.index("normalize") + 1] in ("yes", "1", "true")
         elif words[0] == "bond_coeff":
-            t, row = _coeff_row(words[1:], f"{path}:{no}")
+            t, row = coeff_row(words[1:], f"{path}:{no}")
             coeffs[t] = row
     return coeffs, normalize
-
-
-def _coeff_row(words: list[str], where: str) -> tuple[int, np.ndarray]:
-    if len(words) not in (9, 13):
-        raise SampleFileError(f"{where}: bpm/rotational coefficients need a type and 12 values (Kr Ks Kt Kb Fcr Fcs "
-                              f"Tct Tcb gamma_r gamma_s gamma_t gamma_b) or 8 without dampings; got "
-                              f"{len(words) - 1} values")
-    try:
-        t = int(words[0])
-        row = np.array([float(w) for w in words[1:]])
-    except ValueError:
-        raise SampleFileError(f"{where}: bond coefficients must be a type number and numbers, got "
-                              f"{' '.join(words)!r}") from None
-    if np.isnan(row).any() or not np.isfinite(row[:4]).all():
-        raise SampleFileError(f"{where}: bond coefficients must be numbers, the stiffnesses Kr Ks Kt Kb finite; got "
-                              f"{' '.join(words)!r}")
-    if len(row) == 8:
-        row = np.concatenate([row, np.zeros(4)])
-    return t, row
 
 
 def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_types=None, bond_types=None,
@@ -227,33 +210,6 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     return atomic_write(path, write)
 
 
-def _read_text(path: pathlib.Path) -> str:
-    if not path.exists():
-        raise SampleFileError(f"{path}: no such file")
-    if path.is_dir():
-        raise SampleFileError(f"{path}: is a directory, not a file")
-    try:
-        return path.read_text()
-    except UnicodeDecodeError as exc:
-        raise SampleFileError(f"{path}: not a text file ({exc})") from None
-
-
-_SECTIONS = {"Atoms": "atoms", "Velocities": "atoms", "Masses": "atom types", "Bonds": "bonds",
-             "Bond Coeffs": "bond types", "Pair Coeffs": "atom types", "Angles": "angles", "Dihedrals": "dihedrals",
-             "Impropers": "impropers", "Ellipsoids": "ellipsoids", "Lines": "lines", "Triangles": "triangles",
-             "Bodies": "bodies", "Angle Coeffs": "angle types", "Dihedral Coeffs": "dihedral types",
-             "Improper Coeffs": "improper types"}
-_HEADER = re.compile(r"^\s*([-+0-9.eE]+)(?:\s+([-+0-9.eE]+))?(?:\s+([-+0-9.eE]+))?\s+([a-z][a-z /]*[a-z])\s*$")
-_ATOM_COLUMNS = {"bpm/sphere": 8, "sphere": 7}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Line:
-    no: int
-    words: list[str]
-    comment: str
-
-
 @_names_file
 def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
                      breaking: bool = True, bond_radius_ratio: float | None = None,
@@ -282,9 +238,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
       ConventionError: the coefficients have no jaxbpm counterpart.
     """
     path = pathlib.Path(path)
-    text = _read_text(path)
-    from jaxbpm.interop._lammps_fast import parse_fast
-
+    text = read_text(path)
     got = parse_fast(path, text, atom_style)
     crc, body, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table = \
         got if got is not None else _parse_lines(path, text, atom_style)
@@ -299,9 +253,9 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         else:
             extra_table = {}
             for t, v in coeffs.items():
-                _, extra_table[int(t)] = _coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
-        extra_keys, extra_rows = _table_arrays(extra_table)
-        table = _last_wins(np.concatenate([table[0], extra_keys]), np.concatenate([table[1], extra_rows]))
+                _, extra_table[int(t)] = coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
+        extra_keys, extra_rows = table_arrays(extra_table)
+        table = last_wins(np.concatenate([table[0], extra_keys]), np.concatenate([table[1], extra_rows]))
     if normalize is None:
         normalize = bool(meta.get("normalize", False)) if meta else False
     kw = dict(sample_kw)
@@ -359,68 +313,16 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
                               particle_material=pm, **kw)
 
 
-def _table_arrays(table: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``{type: 12 coefficients}`` as sorted types and their rows (types outside int64 name no bond: dropped)."""
-    keys = sorted(t for t in table if -2 ** 63 <= t < 2 ** 63)
-    return (np.array(keys, np.int64).reshape(-1),
-            np.array([table[t] for t in keys], np.float64).reshape(-1, _N_COEFFS))
-
-
-def _last_wins(keys: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted distinct ``keys`` and, for each, the row of its last occurrence (as a dict filled in order keeps)."""
-    u, idx = np.unique(keys[::-1], return_index=True)
-    return u, rows[::-1][idx]
-
-
-def _header(path, numbered) -> tuple[dict[str, int], int]:
-    """The counts of the header lines ``numbered`` (``(line number, text)`` from line 2 on) and the index of the
-    line of the first section."""
-    counts: dict[str, int] = {}
-    body_start = None
-    for no, s in numbered:
-        words = _split(s)[0]
-        if not words:
-            continue
-        name = " ".join(words)
-        if name in _SECTIONS:
-            body_start = no - 1
-            break
-        m = _HEADER.match(name)
-        if not m:
-            raise SampleFileError(f"{path}:{no}: cannot read header line {s.strip()!r}")
-        key = m.group(4)
-        if m.group(2) is None:
-            try:
-                counts[key] = int(m.group(1))
-            except ValueError:
-                raise SampleFileError(f"{path}:{no}: the count of {key!r} must be a whole number") from None
-    if body_start is None:
-        raise SampleFileError(f"{path}: no Atoms section")
-    for key in ("atoms",):
-        if key not in counts:
-            raise SampleFileError(f"{path}: header lacks the '{key}' count")
-    return counts, body_start
-
-
-def _head_meta(path, first: list[str]):
-    """The checksum of the title line and the jaxbpm metadata of the first (up to 6) lines ``first``."""
-    crc = _checksums(first[0], f"{path}:1", ("crc32",))["crc32"] if first and "crc32=" in first[0] else None
-    meta = None
-    for no, line in enumerate(first[:6], start=1):
-        meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
-    return crc, meta
-
-
 def _parse_lines(path, text: str, atom_style):
     """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
     rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
     raw = text.splitlines()
     # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
-    crc, meta = _head_meta(path, raw[:6])
+    crc, meta = head_meta(path, raw[:6])
     # header
-    counts, body_start = _header(path, enumerate(raw[1:], start=2))
-    lines = [_Line(i + 1, *_split(s)) for i, s in enumerate(raw)]
-    sections: dict[str, tuple[_Line, list[_Line]]] = {}
+    counts, body_start = header(path, enumerate(raw[1:], start=2))
+    lines = [Line(i + 1, *split(s)) for i, s in enumerate(raw)]
+    sections: dict[str, tuple[Line, list[Line]]] = {}
     i = body_start
     while i < len(lines):
         ln = lines[i]
@@ -428,16 +330,16 @@ def _parse_lines(path, text: str, atom_style):
             i += 1
             continue
         name = " ".join(ln.words)
-        if name not in _SECTIONS:
+        if name not in SECTIONS:
             raise SampleFileError(f"{path}:{ln.no}: unknown section {raw[ln.no - 1].strip()!r} (or a "
                                   f"{'section line too many' if sections else 'misplaced line'})")
-        want = counts.get(_SECTIONS[name], 0)
+        want = counts.get(SECTIONS[name], 0)
         rows, i = [], i + 1
         while len(rows) < want:
             if i >= len(lines):
                 raise SampleFileError(f"{path}:{len(lines)}: section {name} ended after {len(rows)} of {want} lines")
             if lines[i].words:
-                if " ".join(lines[i].words) in _SECTIONS:
+                if " ".join(lines[i].words) in SECTIONS:
                     raise SampleFileError(f"{path}:{lines[i].no}: section {name} ended after {len(rows)} of {want} "
                                           f"lines")
                 rows.append(lines[i])
@@ -455,7 +357,7 @@ def _parse_lines(path, text: str, atom_style):
     # atoms
     head, rows = sections.get("Atoms", (None, []))
     style = atom_style or (head.comment.strip() if head is not None and head.comment.strip() else None)
-    if style is not None and style not in _ATOM_COLUMNS:
+    if style is not None and style not in ATOM_COLUMNS:
         raise SampleFileError(f"{path}:{head.no if head else 1}: atom style {style!r} is not supported (bpm/sphere "
                               f"or sphere)")
     n = len(rows)
@@ -464,7 +366,7 @@ def _parse_lines(path, text: str, atom_style):
     ids, dia, dens, pos = np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros((n, 3))
     for k, ln in enumerate(rows):
         st = style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(len(ln.words))
-        ncol = _ATOM_COLUMNS.get(st)
+        ncol = ATOM_COLUMNS.get(st)
         if ncol is None or len(ln.words) not in (ncol, ncol + 3):
             raise SampleFileError(
                 f"{path}:{ln.no}: Atoms line has {len(ln.words)} values, expected 8 (bpm/sphere: id mol type "
@@ -527,21 +429,11 @@ def _parse_lines(path, text: str, atom_style):
     table: dict[int, np.ndarray] = {}
     if "Bond Coeffs" in sections:
         head, crows = sections["Bond Coeffs"]
-        _coeffs_head(path, head.no, head.comment)
+        coeffs_head(path, head.no, head.comment)
         for ln in crows:
-            t, row = _coeff_row(ln.words, f"{path}:{ln.no}")
+            t, row = coeff_row(ln.words, f"{path}:{ln.no}")
             table[t] = row
-    return (crc, _without_line(text, 0), meta, pos, dia, dens, bonds, btype, rb_c, mat_c, _table_arrays(table))
-
-
-def _coeffs_head(path, no: int, comment: str) -> None:
-    if comment.strip() and comment.strip() != "bpm/rotational":
-        raise SampleFileError(f"{path}:{no}: Bond Coeffs are for {comment.strip()!r}; jaxbpm reads bpm/rotational")
-
-
-def _split(s: str) -> tuple[list[str], str]:
-    body, _, comment = s.partition("#")
-    return body.split(), comment
+    return (crc, _without_line(text, 0), meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table_arrays(table))
 
 
 def _materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:

@@ -27,7 +27,8 @@ import numpy as np
 from jaxbpm.errors import SampleFileError
 from jaxbpm.interop._meta import _names_file, _r
 from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
-from jaxbpm.interop.lammps import _read_text, read_lammps_data
+from jaxbpm.interop._meta import read_text
+from jaxbpm.interop.lammps import read_lammps_data
 from jaxbpm.io import atomic_write
 from jaxbpm.sample import Sample
 
@@ -82,7 +83,7 @@ def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: fl
 def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
     """Centres ``[n, 3]`` and radii ``[n]`` of a textExt file; errors name the line."""
     fmt, rows = "x_y_z_r", []
-    for no, line in enumerate(_read_text(path).splitlines(), start=1):
+    for no, line in enumerate(read_text(path).splitlines(), start=1):
         words = line.split()
         if not words:
             continue
