@@ -5,8 +5,9 @@
 bit for bit, and the loaded sample is rebuilt with :meth:`Sample.from_arrays`, so it is validated again.
 :func:`export_vtk` writes particles and bonds for ParaView (``.vtu`` XML or ``.vtk`` legacy) through meshio.
 
-Both writers are atomic: they write a temporary file in the target's directory and rename it onto the target
-only once it is complete, so an error or a crash never leaves a half-written file behind.
+Both writers are atomic (:func:`atomic_write`, from :mod:`jaxbpm._atomic`): they write a temporary file in the
+target's directory and rename it onto the target only once it is complete, so an error or a crash never leaves a
+half-written file behind.
 
 File layout (all quantities SI; every dataset carries a ``units`` attribute):
 
@@ -45,17 +46,14 @@ before it existed, or rewritten by other tools). An edit through h5py changes th
 
 from __future__ import annotations
 
-import contextlib
-import errno
-import os
 import pathlib
 import re
-import tempfile
 import zlib
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
+from jaxbpm._atomic import STALE_AFTER_S, atomic_write, check_writable, write_json
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
@@ -80,100 +78,6 @@ _DERIVED = [("mass", "kg"), ("inertia", "kg m^2"), ("bond_length", "m"), ("bond_
 _DERIVED_ALL = _DERIVED + [("coordination", "1")]  # what /derived holds
 
 _VTK_FORMATS = {".vtu": "vtu", ".vtk": "vtk"}
-
-
-# ---------------------------------------------------------------------------------------------- atomic writes
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def check_writable(path) -> pathlib.Path:
-    """``path`` as a :class:`pathlib.Path` when a file can be written there: its folder exists and it is not itself
-    a folder. Otherwise the ``OSError`` that says so, naming ``path`` (callers check before long work, e.g. a
-    packing, and :func:`atomic_write` checks again before it writes)."""
-    target = pathlib.Path(path)
-    if not target.parent.is_dir():
-        raise FileNotFoundError(errno.ENOENT, f"cannot write {target}: no such directory", str(target.parent))
-    if target.is_dir():
-        raise IsADirectoryError(errno.EISDIR, f"cannot write {target}: it is a directory (give a file name)",
-                                str(target))
-    return target
-
-
-def _naming_target(err: OSError, target: pathlib.Path) -> OSError:
-    """``err`` again, naming ``target`` (what the OS reports names the hidden temporary file)."""
-    return type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target))
-
-
-def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
-    """Call ``write(tmp_name)`` on a fresh temporary file next to ``path``, then rename it onto ``path``.
-
-    On any exception (including KeyboardInterrupt) the temporary file is deleted and the exception re-raised;
-    ``path`` is then exactly as it was before.
-    """
-    target = check_writable(path)
-    _remove_stale_temporaries(target)
-    try:
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    except OSError as err:
-        raise _naming_target(err, target) from err
-    os.close(fd)
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as fh:  # make the content durable before it replaces the target
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp creates 0600; give the usual permissions
-        os.replace(tmp, target)
-    except BaseException as err:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(err, OSError) and err.errno is not None and tmp in str(err):
-            raise _naming_target(err, target) from err
-        raise
-    return target
-
-
-STALE_AFTER_S = 3600.0  # a temporary file of a save this old was left by a killed process
-
-
-def _remove_stale_temporaries(target: pathlib.Path) -> None:
-    """Remove the temporary files an interrupted (killed) save of ``target`` left beside it, once they are older
-    than :data:`STALE_AFTER_S` (younger ones may belong to a save still running in another process)."""
-    import glob
-    import time
-
-    now = time.time()
-    for old in target.parent.glob(f".{glob.escape(target.name)}.*.tmp"):
-        with contextlib.suppress(OSError):
-            if now - old.stat().st_mtime > STALE_AFTER_S:
-                old.unlink()
-
-
-def write_json(path, data) -> pathlib.Path:
-    """Write ``data`` as indented JSON to ``path`` atomically, creating missing parent directories.
-
-    NumPy scalars and arrays are converted; anything else unknown is written as its ``float``.
-    """
-    import json
-
-    def convert(obj):
-        if isinstance(obj, np.ndarray):
-            return obj.tolist()
-        if isinstance(obj, (np.integer, np.bool_)):
-            return obj.item()
-        return float(obj)
-
-    target = pathlib.Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-
-    def write(tmp):
-        with open(tmp, "w") as fh:
-            json.dump(data, fh, indent=2, default=convert)
-            fh.write("\n")
-
-    return atomic_write(target, write)
 
 
 # ---------------------------------------------------------------------------------------------- HDF5 sample files
@@ -505,8 +409,23 @@ _EDITED = ("the inputs changed after the file was written, or the file is damage
 
 
 # ---------------------------------------------------------------------------------------------- VTK export
-def _user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
-               reserved: set[str]) -> dict[str, np.ndarray]:
+def user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
+              reserved: set[str]) -> dict[str, np.ndarray]:
+    """Check the extra fields a user adds to a VTK file (:func:`export_vtk`, the VTU series).
+
+    Args:
+      kind: the argument's name for messages (``"point_data"``, ``"bond_data"``).
+      data: ``{name: [count] or [count, k]}`` real (or boolean) arrays, or ``None``.
+      count: the rows each field must have.
+      what: what a row is, for messages (``"particle"``, ``"bond"``).
+      reserved: the names of the built-in fields, which a user field may not take.
+
+    Returns:
+      ``{name: array}`` (booleans as uint8).
+
+    Raises:
+      SampleError: a field has a bad name, type or shape (the field is named).
+    """
     out: dict[str, np.ndarray] = {}
     for name, value in (data or {}).items():
         if not isinstance(name, str) or not name:
@@ -569,14 +488,14 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
         "mass": np.asarray(sample.mass, dtype=np.float64),
         "coordination": np.asarray(sample.coordination(), dtype=np.int32),
     }
-    pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
+    pdata.update(user_data("point_data", point_data, n, "particle", set(pdata)))
     bdata = {
         "bond_radius": np.asarray(sample.bond_radius, dtype=np.float64),
         "material": np.asarray(sample.bond_material, dtype=np.int32),
         "length": np.asarray(sample.bond_length, dtype=np.float64),
     }
     bdata.update({k: v.astype(np.float64) for k, v in
-                  _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
+                  user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
 
     cells = [("vertex", np.arange(n, dtype=np.int64)[:, None])]
     if nb:

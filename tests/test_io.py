@@ -128,7 +128,7 @@ def test_save_atomic_when_rename_fails(tmp_path, monkeypatch):
     def fail(src, dst):
         raise OSError("disk gone")
 
-    monkeypatch.setattr(io.os, "replace", fail)
+    monkeypatch.setattr(os, "replace", fail)
     with pytest.raises(OSError, match="disk gone"):
         io.save_sample(target, _multi())
     assert _listing(tmp_path) == ["s.h5"] and target.read_bytes() == before
@@ -146,7 +146,7 @@ def test_a_failed_save_names_its_target_and_stale_temporaries_go(tmp_path, monke
     def busy(src, dst):  # what the OS says when the rename fails names the hidden temporary file
         raise OSError(errno.EBUSY, "Device or resource busy", src)
 
-    monkeypatch.setattr(io.os, "replace", busy)
+    monkeypatch.setattr(os, "replace", busy)
     with pytest.raises(OSError, match=r"cannot write .*s\.h5: Device or resource busy") as err:
         io.save_sample(target, _chain())
     assert ".tmp" not in str(err.value) and _listing(tmp_path) == []
@@ -342,23 +342,6 @@ def test_public_api_documented():
     assert set(io.__all__) == {"FORMAT", "FORMAT_VERSION"} | functions
     for name in functions:
         assert getattr(io, name).__doc__
-
-
-def test_write_json_round_trip_and_atomic(tmp_path, monkeypatch):
-    import json
-
-    target = tmp_path / "deep" / "r.json"
-    io.write_json(target, {"a": np.float64(1.5), "b": np.arange(3), "c": np.int32(4), "d": True})
-    assert json.loads(target.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": 4, "d": True}
-    before = target.read_bytes()
-
-    def boom(*a, **k):
-        raise RuntimeError("crash mid-write")
-
-    monkeypatch.setattr(json, "dump", boom)
-    with pytest.raises(RuntimeError, match="crash mid-write"):
-        io.write_json(target, {"a": 2})
-    assert target.read_bytes() == before and sorted(p.name for p in target.parent.iterdir()) == ["r.json"]
 
 
 @pytest.mark.parametrize("field", ["positions", "radii", "bonds", "materials/E"])

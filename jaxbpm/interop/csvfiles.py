@@ -16,7 +16,7 @@ import numpy as np
 
 from jaxbpm.interop import conventions
 from jaxbpm.errors import SampleFileError
-from jaxbpm.io import atomic_write
+from jaxbpm._atomic import atomic_write
 from jaxbpm.sample import Sample
 from jaxbpm.interop._meta import (_checksums, _crc32, _domain, _meta, _meta_line, _names_file, _parse_meta, _r,
                                   _verify, _without_line)

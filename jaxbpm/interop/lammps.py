@@ -17,7 +17,7 @@ import numpy as np
 
 from jaxbpm.interop import conventions
 from jaxbpm.errors import SampleError, SampleFileError
-from jaxbpm.io import atomic_write
+from jaxbpm._atomic import atomic_write
 from jaxbpm.sample import ParticleMaterial, Sample
 from jaxbpm.interop._lammps_fast import parse_fast
 from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, Line, coeff_row, coeffs_head, head_meta, header,

@@ -29,7 +29,7 @@ from jaxbpm.interop._meta import _names_file, _r
 from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
 from jaxbpm.interop._meta import read_text
 from jaxbpm.interop.lammps import read_lammps_data
-from jaxbpm.io import atomic_write
+from jaxbpm._atomic import atomic_write
 from jaxbpm.sample import Sample
 
 __all__ = ["read_liggghts_data", "read_liggghts_dump", "read_yade_text", "write_yade_text", "YADE_FORMATS"]

@@ -8,7 +8,8 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from jaxbpm.errors import SampleError, SampleFileError
-from jaxbpm.io import atomic_write, _user_data
+from jaxbpm._atomic import atomic_write
+from jaxbpm.io import user_data
 from jaxbpm.sample import Sample
 from jaxbpm.interop._meta import _r
 
@@ -95,10 +96,10 @@ def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data
     broken = np.bincount(b[~ok].ravel(), minlength=n).astype(np.int32)
     pdata = {"radius": np.asarray(s.radii, np.float64), "displacement": disp, "broken_bonds": broken,
              "coordination": np.bincount(b[ok].ravel(), minlength=n).astype(np.int32)}
-    pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
+    pdata.update(user_data("point_data", point_data, n, "particle", set(pdata)))
     bdata = {"intact": ok.astype(np.int32), "material": np.asarray(s.bond_material, np.int32)}
     bdata.update({k: v.astype(np.float64) for k, v in
-                  _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
+                  user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
     return pos, pdata, bdata
 
 
