@@ -313,14 +313,9 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
                               particle_material=pm, **kw)
 
 
-def _parse_lines(path, text: str, atom_style):
-    """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
-    rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
-    raw = text.splitlines()
-    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
-    crc, meta = head_meta(path, raw[:6])
-    # header
-    counts, body_start = header(path, enumerate(raw[1:], start=2))
+def _line_sections(path, raw: list[str], counts: dict[str, int], body_start: int) -> dict[str, tuple[Line, list[Line]]]:
+    """``{name: (its name's line, its rows)}`` of the sections from line ``body_start`` on, each with the row count
+    the header declares; errors name the line."""
     lines = [Line(i + 1, *split(s)) for i, s in enumerate(raw)]
     sections: dict[str, tuple[Line, list[Line]]] = {}
     i = body_start
@@ -345,8 +340,12 @@ def _parse_lines(path, text: str, atom_style):
                 rows.append(lines[i])
             i += 1
         sections[name] = (ln, rows)
-    # a count the header declares is a section the file must hold (a file cut before its Bonds section would
-    # otherwise read as a sample without bonds)
+    return sections
+
+
+def _check_complete(path, text: str, raw: list[str], counts: dict[str, int], sections) -> None:
+    """Raise a :class:`SampleFileError` for a file cut short: a section the header declares rows for is missing (a
+    file cut before its Bonds section would otherwise read as a sample without bonds), or the last line is cut."""
     for name, key in (("Atoms", "atoms"), ("Bonds", "bonds")):
         if counts.get(key, 0) > 0 and name not in sections:
             raise SampleFileError(f"{path}: the header declares {counts[key]} {key} but the file has no {name} section "
@@ -354,15 +353,21 @@ def _parse_lines(path, text: str, atom_style):
     if text and not text.endswith(("\n", "\r")) and raw[-1].split("#")[0].strip():
         raise SampleFileError(f"{path}:{len(raw)}: the file ends in the middle of a line (truncated?): "
                               f"{raw[-1].strip()!r}")
-    # atoms
-    head, rows = sections.get("Atoms", (None, []))
+
+
+def _atom_style(path, sections, atom_style) -> str | None:
+    """The atom style given, or named by the Atoms section's comment; ``None``: from each line's column count."""
+    head, _ = sections.get("Atoms", (None, []))
     style = atom_style or (head.comment.strip() if head is not None and head.comment.strip() else None)
     if style is not None and style not in ATOM_COLUMNS:
         raise SampleFileError(f"{path}:{head.no if head else 1}: atom style {style!r} is not supported (bpm/sphere "
                               f"or sphere)")
+    return style
+
+
+def _atom_rows(path, raw: list[str], rows: list[Line], style: str | None):
+    """``(ids, dia, dens, pos)`` of the Atoms rows in file order; errors name the line."""
     n = len(rows)
-    if n == 0:
-        raise SampleFileError(f"{path}: the Atoms section is empty")
     ids, dia, dens, pos = np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros((n, 3))
     for k, ln in enumerate(rows):
         st = style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(len(ln.words))
@@ -385,6 +390,17 @@ def _parse_lines(path, text: str, atom_style):
         if not np.all(np.isfinite(pos[k])):
             raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has a coordinate that is not finite: "
                                   f"{raw[ln.no - 1].strip()!r}")
+    return ids, dia, dens, pos
+
+
+def _atoms_by_line(path, raw: list[str], sections, atom_style):
+    """``(ids, dia, dens, pos)`` of the Atoms section sorted by ID: unique IDs, one density; errors name the
+    line."""
+    style = _atom_style(path, sections, atom_style)
+    _, rows = sections.get("Atoms", (None, []))
+    if not rows:
+        raise SampleFileError(f"{path}: the Atoms section is empty")
+    ids, dia, dens, pos = _atom_rows(path, raw, rows, style)
     order = np.argsort(ids, kind="stable")
     dup = np.flatnonzero(np.diff(ids[order]) == 0)
     if dup.size:
@@ -395,8 +411,13 @@ def _parse_lines(path, text: str, atom_style):
         k = int(np.flatnonzero(dens != dens[0])[0])
         raise SampleFileError(f"{path}:{atom_line[k]}: atom density {float(dens[k])!r} differs from "
                               f"{float(dens[0])!r}; a jaxbpm sample has one particle density")
+    return ids, dia, dens, pos
+
+
+def _bonds_by_line(path, raw: list[str], sections, ids: np.ndarray, counts: dict[str, int]):
+    """``(bonds [nb, 2] as particle indices, types, bond radii and materials from jaxbpm's comments)`` of the
+    Bonds section; errors name the line."""
     index = {int(a): k for k, a in enumerate(ids)}
-    # bonds
     _, brows = sections.get("Bonds", (None, []))
     nb = len(brows)
     bonds, btype = np.zeros((nb, 2), np.int64), np.zeros(nb, np.int64)
@@ -425,7 +446,11 @@ def _parse_lines(path, text: str, atom_style):
                 rb_c[k], mat_c[k] = float(extra[0]), int(extra[1])
             except (ValueError, OverflowError):  # not jaxbpm's comment: the coefficients are translated
                 rb_c[k], mat_c[k] = np.nan, -1
-    # coefficients
+    return bonds, btype, rb_c, mat_c
+
+
+def _coeffs_by_line(path, sections) -> tuple[np.ndarray, np.ndarray]:
+    """The Bond Coeffs section as ``(types, coefficients)`` (:func:`table_arrays`); errors name the line."""
     table: dict[int, np.ndarray] = {}
     if "Bond Coeffs" in sections:
         head, crows = sections["Bond Coeffs"]
@@ -433,7 +458,21 @@ def _parse_lines(path, text: str, atom_style):
         for ln in crows:
             t, row = coeff_row(ln.words, f"{path}:{ln.no}")
             table[t] = row
-    return (crc, _without_line(text, 0), meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table_arrays(table))
+    return table_arrays(table)
+
+
+def _parse_lines(path, text: str, atom_style):
+    """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
+    rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
+    raw = text.splitlines()
+    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
+    crc, meta = head_meta(path, raw[:6])
+    counts, body_start = header(path, enumerate(raw[1:], start=2))
+    sections = _line_sections(path, raw, counts, body_start)
+    _check_complete(path, text, raw, counts, sections)
+    ids, dia, dens, pos = _atoms_by_line(path, raw, sections, atom_style)
+    bonds = _bonds_by_line(path, raw, sections, ids, counts)
+    return (crc, _without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections))
 
 
 def _materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:
