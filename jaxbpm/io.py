@@ -53,7 +53,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from jaxbpm._atomic import STALE_AFTER_S, atomic_write, check_writable, write_json
+from jaxbpm._atomic import STALE_AFTER_S, atomic_write, check_writable, write_json  # noqa: F401 (re-exported)
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
