@@ -9,7 +9,7 @@ import io
 
 import numpy as np
 
-from jaxbpm.interop._meta import _N_COEFFS
+from jaxbpm.interop._meta import N_COEFFS
 from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, coeff_row, coeffs_head, head_meta, header,
                                            last_wins, split, table_arrays)
 
@@ -183,7 +183,7 @@ def _coeffs(path, lines: _Lines, sections):
         _table(text_rows, [("t", "i8")] + [(f"c{k}", "f8") for k in range(width - 1)]) if text_rows else \
         np.zeros(0, [("t", "i8")] + [(f"c{k}", "f8") for k in range(12)])
     if got is not None and len(got) == rows[1] - rows[0]:
-        vals = np.zeros((len(got), _N_COEFFS))
+        vals = np.zeros((len(got), N_COEFFS))
         for k in range(width - 1):
             vals[:, k] = got[f"c{k}"]
         if not (np.any(np.isnan(vals)) or not np.all(np.isfinite(vals[:, :4]))):

@@ -11,7 +11,7 @@ from typing import Mapping
 import numpy as np
 
 from jaxbpm.errors import SampleFileError
-from jaxbpm.interop._meta import _checksums, _N_COEFFS, _parse_meta
+from jaxbpm.interop._meta import N_COEFFS, checksums, parse_meta
 
 __all__ = ["SECTIONS", "HEADER", "ATOM_COLUMNS", "Line", "coeff_row", "table_arrays", "last_wins", "header",
            "head_meta", "coeffs_head", "split"]
@@ -56,7 +56,7 @@ def table_arrays(table: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarra
     """``{type: 12 coefficients}`` as sorted types and their rows (types outside int64 name no bond: dropped)."""
     keys = sorted(t for t in table if -2 ** 63 <= t < 2 ** 63)
     return (np.array(keys, np.int64).reshape(-1),
-            np.array([table[t] for t in keys], np.float64).reshape(-1, _N_COEFFS))
+            np.array([table[t] for t in keys], np.float64).reshape(-1, N_COEFFS))
 
 
 def last_wins(keys: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -97,10 +97,10 @@ def header(path, numbered) -> tuple[dict[str, int], int]:
 
 def head_meta(path, first: list[str]):
     """The checksum of the title line and the jaxbpm metadata of the first (up to 6) lines ``first``."""
-    crc = _checksums(first[0], f"{path}:1", ("crc32",))["crc32"] if first and "crc32=" in first[0] else None
+    crc = checksums(first[0], f"{path}:1", ("crc32",))["crc32"] if first and "crc32=" in first[0] else None
     meta = None
     for no, line in enumerate(first[:6], start=1):
-        meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
+        meta = meta or parse_meta(line.strip(), f"{path}:{no}")
     return crc, meta
 
 

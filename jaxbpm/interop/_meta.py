@@ -18,17 +18,17 @@ from jaxbpm.errors import ConventionError, SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
 
-_META = "# jaxbpm "
-_N_COEFFS = 12  # Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b
-_BIG = 1.0e300  # LAMMPS thresholds for unbreakable bonds (LAMMPS needs finite numbers)
+META = "# jaxbpm "
+N_COEFFS = 12  # Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b
+BIG = 1.0e300  # LAMMPS thresholds for unbreakable bonds (LAMMPS needs finite numbers)
 
 
-def _r(x) -> str:
+def exact_text(x) -> str:
     """Shortest exact decimal of a float."""
     return repr(float(x))
 
 
-def _meta(sample: Sample, **extra) -> dict:
+def meta_of(sample: Sample, **extra) -> dict:
     from jaxbpm._version import __version__
 
     pm = sample.particle_material
@@ -44,16 +44,16 @@ def _meta(sample: Sample, **extra) -> dict:
     return out
 
 
-def _meta_line(meta: dict) -> str:
-    return _META + json.dumps(meta, separators=(",", ":"))
+def meta_line(meta: dict) -> str:
+    return META + json.dumps(meta, separators=(",", ":"))
 
 
-def _parse_meta(text: str, where: str) -> dict | None:
+def parse_meta(text: str, where: str) -> dict | None:
     """The metadata of a ``# jaxbpm {...}`` line (``None`` for any other line), its fields checked."""
-    if not text.startswith(_META):
+    if not text.startswith(META):
         return None
     try:
-        meta = json.loads(text[len(_META):])
+        meta = json.loads(text[len(META):])
     except (ValueError, RecursionError) as exc:
         raise SampleFileError(f"{where}: unreadable jaxbpm header comment ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != "jaxbpm-exchange":
@@ -103,24 +103,24 @@ def _check_meta(meta: dict, where: str) -> None:
             bad(field, "a whole number >= 0")
 
 
-def _domain(meta: dict | None):
+def domain_of(meta: dict | None):
     d = None if meta is None else meta.get("domain")
     return None if d is None else Domain(d["kind"], tuple(d["lo"]), tuple(d["hi"]))
 
 
 # ---------------------------------------------------------------------------------------------- checksums
-def _crc32(text: str) -> str:
+def crc32(text: str) -> str:
     """CRC-32 (zlib) of ``text`` encoded as UTF-8, as 8 lowercase hex digits."""
     return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
 
 
-def _without_line(text: str, index: int) -> str:
+def without_line(text: str, index: int) -> str:
     """``text`` without its line ``index`` (0-based, as ``str.splitlines`` counts) and that line's break."""
     parts = text.splitlines(keepends=True)
     return "".join(parts[:index] + parts[index + 1:])
 
 
-def _checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
+def checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
     """The ``NAME=XXXXXXXX`` checksums (``names``, e.g. ``("crc32",)``) of a checksum line; malformed ones are an
     error (the line was damaged)."""
     out = {}
@@ -133,17 +133,17 @@ def _checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
-def _verify(text: str, name: str, expected: str, path, where: str, how: str) -> None:
+def verify(text: str, name: str, expected: str, path, where: str, how: str) -> None:
     """``text`` has CRC-32 ``expected`` (checksum ``name`` on ``where``), else a :class:`SampleFileError` for
     ``path`` saying how to accept an intended edit (``how``)."""
-    got = _crc32(text)
+    got = crc32(text)
     if got != expected:
         raise SampleFileError(f"{path}: the content does not match its CRC-32 checksum ({name}={expected} on {where}; "
                               f"the file gives {got}): the file is damaged, or was edited after jaxbpm wrote it. To "
                               f"accept an intended edit, {how} (the file is then read as it is)")
 
 
-def _names_file(read):
+def names_file(read):
     """``read(path, ...)`` whose :class:`SampleError` (content that makes no valid sample) and
     :class:`ConventionError` (coefficients with no jaxbpm counterpart) name the file."""
     @functools.wraps(read)

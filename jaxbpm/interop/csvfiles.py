@@ -14,14 +14,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxbpm.interop import conventions
-from jaxbpm.errors import SampleFileError
 from jaxbpm._atomic import atomic_write
+from jaxbpm.errors import SampleFileError
+from jaxbpm.interop import conventions
+from jaxbpm.interop._meta import (checksums, crc32, domain_of, exact_text, meta_line, meta_of, names_file, parse_meta,
+                                  read_text, verify, without_line)
+from jaxbpm.interop.lammps import materials_from_bonds
 from jaxbpm.sample import Sample
-from jaxbpm.interop._meta import (_checksums, _crc32, _domain, _meta, _meta_line, _names_file, _parse_meta, _r,
-                                  _verify, _without_line)
-from jaxbpm.interop.lammps import _materials_from_bonds
-from jaxbpm.interop._meta import read_text
 
 
 def _bonds_path(path: pathlib.Path) -> pathlib.Path:
@@ -37,18 +36,18 @@ def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
         raise TypeError(f"write_csv expects a jaxbpm Sample, got {type(sample).__name__}")
     path = pathlib.Path(path)
     bpath = _bonds_path(path)
-    meta = _meta(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
+    meta = meta_of(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-    plines = [_meta_line(meta), "id,x,y,z,radius"]
-    plines += [f"{i},{_r(pos[i, 0])},{_r(pos[i, 1])},{_r(pos[i, 2])},{_r(rad[i])}" for i in range(sample.n_particles)]
+    plines = [meta_line(meta), "id,x,y,z,radius"]
+    plines += [f"{i},{exact_text(pos[i, 0])},{exact_text(pos[i, 1])},{exact_text(pos[i, 2])},{exact_text(rad[i])}" for i in range(sample.n_particles)]
     b, rb, bm = np.asarray(sample.bonds), np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
     m = sample.materials
     blines = ["i,j,bond_radius,material,E,nu,tensile_strength,shear_strength"]
-    blines += [f"{b[k, 0]},{b[k, 1]},{_r(rb[k])},{bm[k]},{_r(m.E[bm[k]])},{_r(m.nu[bm[k]])},"
-               f"{_r(m.tensile_strength[bm[k]])},{_r(m.shear_strength[bm[k]])}" for k in range(sample.n_bonds)]
+    blines += [f"{b[k, 0]},{b[k, 1]},{exact_text(rb[k])},{bm[k]},{exact_text(m.E[bm[k]])},{exact_text(m.nu[bm[k]])},"
+               f"{exact_text(m.tensile_strength[bm[k]])},{exact_text(m.shear_strength[bm[k]])}" for k in range(sample.n_bonds)]
     btext = "\n".join(blines) + "\n"
     ptext = "\n".join(plines) + "\n"
-    ptext += f"# crc32={_crc32(ptext)} bonds_crc32={_crc32(btext)}\n"
+    ptext += f"# crc32={crc32(ptext)} bonds_crc32={crc32(btext)}\n"
     out_b = atomic_write(bpath, lambda tmp: pathlib.Path(tmp).write_text(btext, encoding="utf-8"))
     out_p = atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(ptext, encoding="utf-8"))
     return out_p, out_b
@@ -74,7 +73,7 @@ def _csv_rows(path: pathlib.Path) -> _Rows:
         if line.lstrip().startswith("#"):
             if crc_line is None and _CHECKSUM_LINE.match(line.strip()):
                 crc_line = (no, line)
-            meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
+            meta = meta or parse_meta(line.strip(), f"{path}:{no}")
             continue
         try:
             row = next(csv.reader([line]), [])
@@ -119,7 +118,7 @@ def _column(path, header, rows, names, cast=float, required=True):
     return None, None
 
 
-@_names_file
+@names_file
 def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, **sample_kw) -> Sample:
     """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
     file named in the particles file's metadata) CSV files.
@@ -155,11 +154,11 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])
-        kw.setdefault("domain", _domain(meta))
+        kw.setdefault("domain", domain_of(meta))
     sums = None
     if prows.crc_line is not None:
         no, line = prows.crc_line
-        sums = _checksums(line, f"{path}:{no}", ("crc32", "bonds_crc32"))
+        sums = checksums(line, f"{path}:{no}", ("crc32", "bonds_crc32"))
     if not bpath.exists():
         if meta is not None or sums is not None:
             raise SampleFileError(f"{bpath}: no such file (the bonds of {path})")
@@ -185,8 +184,8 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     if sums is not None:  # the files read well: are they the ones jaxbpm wrote?
         no, line = prows.crc_line
         how = f"delete line {no} ({line.strip()!r}) of {path.name}"
-        _verify(_without_line(prows.text, no - 1), "crc32", sums["crc32"], path, f"line {no}", how)
-        _verify(brows_all.text, "bonds_crc32", sums["bonds_crc32"], bpath, f"line {no} of {path.name}", how)
+        verify(without_line(prows.text, no - 1), "crc32", sums["crc32"], path, f"line {no}", how)
+        verify(brows_all.text, "bonds_crc32", sums["bonds_crc32"], bpath, f"line {no} of {path.name}", how)
     if not ends:
         raise SampleFileError(f"{bpath}: missing particle columns i,j (or id1,id2) (columns: {','.join(bheader)})")
     bonds = np.zeros((nb, 2), np.int64)
@@ -220,6 +219,6 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, **geom, **kw)
     defaults = {"E": 1.0e9, "nu": 0.25, "tensile_strength": np.inf, "shear_strength": np.inf}
     cols = {k: (v if v is not None else np.full(nb, defaults[k])) for k, v in props.items()}
-    mats, bm_auto = _materials_from_bonds(conventions.JaxbpmBond(cols["E"], cols["nu"], np.ones(nb),
+    mats, bm_auto = materials_from_bonds(conventions.JaxbpmBond(cols["E"], cols["nu"], np.ones(nb),
                                                                  cols["tensile_strength"], cols["shear_strength"]))
     return Sample.from_arrays(pos, rad, bonds, bond_material=bm_auto, materials=mats, **geom, **kw)

@@ -15,15 +15,15 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from jaxbpm.interop import conventions
-from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm._atomic import atomic_write
-from jaxbpm.sample import ParticleMaterial, Sample
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.interop import conventions
 from jaxbpm.interop._lammps_fast import parse_fast
 from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, Line, coeff_row, coeffs_head, head_meta, header,
                                            last_wins, split, table_arrays)
-from jaxbpm.interop._meta import (_BIG, _crc32, _domain, _meta, _meta_line, _N_COEFFS, _names_file, _r, _verify,
-                                  _without_line, read_text)
+from jaxbpm.interop._meta import (BIG, N_COEFFS, crc32, domain_of, exact_text, meta_line, meta_of, names_file,
+                                  read_text, verify, without_line)
+from jaxbpm.sample import ParticleMaterial, Sample
 
 
 def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarray:
@@ -34,7 +34,7 @@ def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarra
         warnings.simplefilter("ignore", conventions.InexactTranslationWarning)  # stated in the docs
         p = conventions.to_lammps(bond, length, normalize=normalize)
     c = p.coefficients().reshape(-1, 8)
-    c = np.where(np.isfinite(c), c, _BIG)
+    c = np.where(np.isfinite(c), c, BIG)
     return np.concatenate([c, np.zeros((c.shape[0], 4))], axis=1)
 
 
@@ -42,7 +42,7 @@ def _group_types(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """1-based type per bond (bonds with bit-identical coefficients share one, numbered by first appearance) and
     the ``[ntypes, 12]`` table."""
     if len(coeffs) == 0:
-        return np.zeros(0, np.int64), np.zeros((0, _N_COEFFS))
+        return np.zeros(0, np.int64), np.zeros((0, N_COEFFS))
     coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
     bits = coeffs.view(np.uint64)
     # a 64-bit hash of each row's bits groups the rows; the groups are exact when every row equals its group's first
@@ -65,7 +65,7 @@ def _group_types(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _rows(fmt: str, columns: list) -> str:
     """``fmt`` (``%``-format of one line, ``%s`` for each float column) applied to each row of ``columns`` (lists
-    of Python ints, or float arrays, written as :func:`_r` does), each line ended by a newline: one formatting call
+    of Python ints, or float arrays, written as :func:`exact_text` does), each line ended by a newline: one formatting call
     for all rows."""
     n = len(columns[0])
     if n == 0:
@@ -77,7 +77,7 @@ def _rows(fmt: str, columns: list) -> str:
 
 
 def _reprs(values: np.ndarray) -> list[str]:
-    """``[_r(v) for v in values]``, each distinct value (bit for bit) formatted once."""
+    """``[exact_text(v) for v in values]``, each distinct value (bit for bit) formatted once."""
     values = np.asarray(values).astype(np.float64)
     uniq, inv = np.unique(values.view(np.uint64), return_inverse=True)
     if 2 * len(uniq) > len(values):
@@ -86,14 +86,14 @@ def _reprs(values: np.ndarray) -> list[str]:
 
 
 def _coeff_line(t: int, row) -> str:
-    return f"{t} " + " ".join(_r(v) for v in row)
+    return f"{t} " + " ".join(exact_text(v) for v in row)
 
 
 def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational break yes smooth no") -> pathlib.Path:
     """Write an include file for a LAMMPS input: an optional ``bond_style`` line, then one ``bond_coeff`` line per
     row of ``table`` (``[ntypes, 8 or 12]``; missing dampings are 0). ``bond_style=None`` writes coefficients only."""
     table = np.asarray(table, dtype=np.float64)
-    if table.ndim != 2 or table.shape[1] not in (8, _N_COEFFS):
+    if table.ndim != 2 or table.shape[1] not in (8, N_COEFFS):
         raise SampleError(f"bond coefficient table must have shape [ntypes, 8] or [ntypes, 12], got {table.shape}")
     if table.shape[1] == 8:
         table = np.concatenate([table, np.zeros((len(table), 4))], axis=1)
@@ -154,7 +154,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     n, nb = sample.n_particles, sample.n_bonds
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     b = np.asarray(sample.bonds)
-    coeffs = lammps_coefficients(sample, normalize=normalize) if nb else np.zeros((0, _N_COEFFS))
+    coeffs = lammps_coefficients(sample, normalize=normalize) if nb else np.zeros((0, N_COEFFS))
     if bond_types is None:
         btype, table = _group_types(coeffs)
     else:
@@ -162,7 +162,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
         if btype.shape != (nb,) or (nb and btype.min() < 1):
             raise SampleError(f"bond_types must hold {nb} types >= 1, got shape {btype.shape}")
         ntype = int(btype.max()) if nb else 0
-        table = np.zeros((ntype, _N_COEFFS))
+        table = np.zeros((ntype, N_COEFFS))
         first = np.full(ntype, -1)
         for k in range(nb - 1, -1, -1):
             first[btype[k] - 1] = k
@@ -182,17 +182,17 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
     from jaxbpm._version import __version__
 
-    lines = [_meta_line(_meta(sample, normalize=bool(normalize))), "",
+    lines = [meta_line(meta_of(sample, normalize=bool(normalize))), "",
              f"{n} atoms", f"{int(atype.max())} atom types", f"{nb} bonds", f"{max(len(table), 1)} bond types", "",
-             *(f"{_r(lo[c])} {_r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
+             *(f"{exact_text(lo[c])} {exact_text(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
              "Atoms # bpm/sphere", ""]
-    # the text is what the line-by-line form "\n".join(lines) + "\n" gives (ids, types: %d; floats: repr, i.e. _r),
+    # the text is what the line-by-line form "\n".join(lines) + "\n" gives (ids, types: %d; floats: repr, i.e. exact_text),
     # formatted a whole section at a time
     parts = ["\n".join(lines) + "\n",
-             _rows(f"%d 1 %d %s {_r(density)} %s %s %s",
+             _rows(f"%d 1 %d %s {exact_text(density)} %s %s %s",
                    [list(range(1, n + 1)), atype.tolist(), 2.0 * rad, *(pos[:, c] for c in range(3))])]
     if coefficients and len(table):
-        parts.append("\nBond Coeffs # bpm/rotational\n\n" + _rows("%d" + " %s" * _N_COEFFS, [
+        parts.append("\nBond Coeffs # bpm/rotational\n\n" + _rows("%d" + " %s" * N_COEFFS, [
             list(range(1, len(table) + 1)), *np.asarray(table, np.float64).T]))
     if nb:
         rb, bm = np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
@@ -202,7 +202,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     body = "".join(parts)
     head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
                      f"jaxbpm {__version__}")
-    text = f"{head} crc32={_crc32(body)}\n{body}"
+    text = f"{head} crc32={crc32(body)}\n{body}"
 
     def write(tmp):
         pathlib.Path(tmp).write_text(text, encoding="utf-8")
@@ -210,7 +210,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     return atomic_write(path, write)
 
 
-@_names_file
+@names_file
 def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
                      breaking: bool = True, bond_radius_ratio: float | None = None,
                      materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
@@ -244,7 +244,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         got if got is not None else _parse_lines(path, text, atom_style)
     nb = len(bonds)
     if crc is not None:  # the file read well: is it the one jaxbpm wrote?
-        _verify(body, "crc32", crc, path, "line 1", f"delete 'crc32={crc}' from line 1 of {path.name}")
+        verify(body, "crc32", crc, path, "line 1", f"delete 'crc32={crc}' from line 1 of {path.name}")
     if coeffs is not None:
         if isinstance(coeffs, (str, pathlib.Path)):
             extra_table, extra_norm = read_lammps_coeffs(coeffs)
@@ -262,7 +262,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])
-        kw.setdefault("domain", _domain(meta))
+        kw.setdefault("domain", domain_of(meta))
     pm = kw.pop("particle_material", None) or {}
     if isinstance(pm, ParticleMaterial):
         pm = {f.name: getattr(pm, f.name) for f in dataclasses.fields(ParticleMaterial)}
@@ -304,11 +304,11 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         t = int(btype[np.flatnonzero(np.any(coef[:, 8:] != 0, axis=1))[0]])
         warnings.warn(f"{path}: bond type {t} has bond damping (gamma) coefficients; jaxbpm's bonds are undamped and "
                       f"ignores them", conventions.InexactTranslationWarning, stacklevel=2)
-    limits = np.where(coef[:, 4:8] >= 0.999 * _BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
+    limits = np.where(coef[:, 4:8] >= 0.999 * BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
     p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
                                         normalize=normalize)
     bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
-    mats, bm = _materials_from_bonds(bond)
+    mats, bm = materials_from_bonds(bond)
     return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
                               particle_material=pm, **kw)
 
@@ -472,11 +472,20 @@ def _parse_lines(path, text: str, atom_style):
     _check_complete(path, text, raw, counts, sections)
     ids, dia, dens, pos = _atoms_by_line(path, raw, sections, atom_style)
     bonds = _bonds_by_line(path, raw, sections, ids, counts)
-    return (crc, _without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections))
+    return (crc, without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections))
 
 
-def _materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:
-    """One material component per distinct (E, nu, tensile, shear) (to 1e-12 relative), numbered by first bond."""
+def materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:
+    """A material table for translated bonds: one component per distinct (E, nu, tensile, shear) (to 1e-12
+    relative), numbered in the order of their first bond.
+
+    Args:
+      bond: per-bond jaxbpm parameters (arrays ``[nb]`` or scalars).
+
+    Returns:
+      ``(materials, bond_material)``: ``{"E", "nu", "tensile_strength", "shear_strength": [k]}`` and ``[nb]`` int32
+      component indices.
+    """
     cols = [np.broadcast_to(np.asarray(getattr(bond, k), float), np.shape(bond.bond_radius))
             for k in ("E", "nu", "tensile_strength", "shear_strength")]
     table = np.stack(cols, axis=1)

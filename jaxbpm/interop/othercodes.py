@@ -24,12 +24,11 @@ import pathlib
 
 import numpy as np
 
-from jaxbpm.errors import SampleFileError
-from jaxbpm.interop._meta import _names_file, _r
-from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
-from jaxbpm.interop._meta import read_text
-from jaxbpm.interop.lammps import read_lammps_data
 from jaxbpm._atomic import atomic_write
+from jaxbpm.errors import SampleFileError
+from jaxbpm.interop._meta import exact_text, names_file, read_text
+from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
+from jaxbpm.interop.lammps import read_lammps_data
 from jaxbpm.sample import Sample
 
 __all__ = ["read_liggghts_data", "read_liggghts_dump", "read_yade_text", "write_yade_text", "YADE_FORMATS"]
@@ -56,7 +55,7 @@ def read_liggghts_dump(path) -> list[DumpFrame]:
     return read_lammps_dump(path)
 
 
-@_names_file
+@names_file
 def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: float = 0.5, **sample_kw) -> Sample:
     """Read spheres written by Yade's ``export.textExt`` (formats ``x_y_z_r``, ``x_y_z_r_matId``,
     ``x_y_z_r_attrs``; a file without a ``#format`` line is ``x_y_z_r``, as in Yade) into a :class:`Sample`.
@@ -123,5 +122,5 @@ def write_yade_text(path, sample: Sample, *, comment: str | None = None) -> path
         raise SampleFileError(f"{path}: comment must be one line of text, got {comment!r}")
     pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
     head = "#format x_y_z_r\n" + (f"# {comment}\n" if comment else "")
-    body = "".join(f"{_r(x)}\t{_r(y)}\t{_r(z)}\t{_r(r)}\n" for (x, y, z), r in zip(pos.tolist(), rad.tolist()))
+    body = "".join(f"{exact_text(x)}\t{exact_text(y)}\t{exact_text(z)}\t{exact_text(r)}\n" for (x, y, z), r in zip(pos.tolist(), rad.tolist()))
     return atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(head + body, encoding="utf-8"))

@@ -7,11 +7,11 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm._atomic import atomic_write
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.interop._meta import exact_text
 from jaxbpm.io import user_data
 from jaxbpm.sample import Sample
-from jaxbpm.interop._meta import _r
 
 
 class VTUSeries:
@@ -67,7 +67,7 @@ class VTUSeries:
         root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
         coll = ET.SubElement(root, "Collection")
         for t, name in self.steps:
-            ET.SubElement(coll, "DataSet", timestep=_r(t), group="", part="0", file=name)
+            ET.SubElement(coll, "DataSet", timestep=exact_text(t), group="", part="0", file=name)
         tree = ET.ElementTree(root)
         ET.indent(tree)
         atomic_write(self.path, lambda tmp: tree.write(tmp, encoding="utf-8", xml_declaration=True))

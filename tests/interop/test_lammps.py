@@ -57,7 +57,7 @@ def _reference_lammps_body(sample: Sample, atom_types=None) -> str:
     from jaxbpm.interop import _meta as meta
     from jaxbpm.interop.lammps import lammps_coefficients
 
-    r = meta._r
+    r = meta.exact_text
     pos, rad, b = np.asarray(sample.positions), np.asarray(sample.radii), np.asarray(sample.bonds)
     types, table = {}, []
     for row in lammps_coefficients(sample):
@@ -68,7 +68,7 @@ def _reference_lammps_body(sample: Sample, atom_types=None) -> str:
     btype = [types[tuple(np.asarray(row).view(np.uint64).tolist())] for row in lammps_coefficients(sample)]
     atype = [1] * len(pos) if atom_types is None else list(atom_types)
     lo, hi = pos.min(axis=0) - 10 * rad.max(), pos.max(axis=0) + 10 * rad.max()
-    lines = [meta._meta_line(meta._meta(sample, normalize=False)), "", f"{len(pos)} atoms",
+    lines = [meta.meta_line(meta.meta_of(sample, normalize=False)), "", f"{len(pos)} atoms",
              f"{max(atype)} atom types", f"{len(b)} bonds", f"{max(len(table), 1)} bond types", "",
              *(f"{r(lo[c])} {r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "", "Atoms # bpm/sphere", ""]
     density = r(sample.particle_material.density)
