@@ -154,8 +154,15 @@ def _reset_jax_cache() -> None:
         pass
 
 
-def _usage(path: str | os.PathLike) -> tuple[int, int]:
-    """(number of cached programs, total bytes of all files) under ``path``; (0, 0) if it does not exist."""
+def usage(path: str | os.PathLike) -> tuple[int, int]:
+    """What a compilation cache directory holds.
+
+    Args:
+      path: the directory.
+
+    Returns:
+      ``(number of cached programs, total bytes of all files)`` under ``path``; ``(0, 0)`` if it does not exist.
+    """
     entries = size = 0
     for root, _dirs, files in os.walk(path):
         for name in files:
@@ -165,3 +172,6 @@ def _usage(path: str | os.PathLike) -> tuple[int, int]:
                 continue
             entries += name.endswith(_ENTRY_SUFFIX)
     return entries, size
+
+
+_usage = usage  # (the old private name, still imported by jaxbpm/cli.py)

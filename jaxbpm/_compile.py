@@ -112,11 +112,11 @@ def _signature(args, static) -> tuple:
     return treedef, shapes, tuple(sorted(static.items())), jax.config.jax_enable_x64
 
 
-# priming stops after an execution that took longer than this [s]: priming is for millisecond-long programs (an STE
-# on 1M particles runs 4 s, and two primed executions would add 8 s to its compile time)
+# priming stops after an execution that took longer than this [s]: priming is for millisecond-long programs (each
+# primed execution of a long one adds its run time to the compile time)
 _PRIME_LIMIT = 0.05
 # ... and is skipped when the arguments hold more than this many bytes: such a program does not run in milliseconds,
-# and a primed execution would double the wall time of its first call (the STE on 1M particles: 3-4 s more)
+# and a primed execution would double the wall time of its first call
 _PRIME_BYTES = 1 << 26
 
 
@@ -134,12 +134,11 @@ class Program:
 
     ``prime=k`` (for programs that run in milliseconds) executes a new executable ``k`` times on the arguments it was
     compiled for, counted as compile time. The first executions of a program after its compilation fault its scratch
-    memory in page by page: the STE at 3k particles has 13 MB of it, ~3,200 page faults, 6-8 ms a call; glibc's
-    malloc hands that memory back to the system after each of the first two executions (the first from its own
-    mapping, the second when the compiler's freed memory is trimmed with it) and keeps it from the third on. Without
-    priming, the second and third calls of such a program took 2-3x its steady run time. Priming stops after an
-    execution longer than 50 ms and is skipped for arguments over 64 MiB (a large sample, whose run is not dominated by
-    its page faults).
+    memory in page by page: glibc's malloc hands that memory back to the system after each of the first two
+    executions (the first from its own mapping, the second when the compiler's freed memory is trimmed with it) and
+    keeps it from the third on, so that a millisecond-long program's second and third calls would be slower than its
+    steady run. Priming stops after an execution longer than 50 ms and is skipped for arguments over 64 MiB (a large
+    sample, whose run is not dominated by its page faults).
     """
 
     def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = (), maxsize: int = 32, prime: int = 0):
@@ -191,9 +190,9 @@ class Program:
         self._compiled.clear()
 
 
-# XLA's quick compiler settings: no LLVM optimisation, the older loop emitters for fusions. A setup program of a
-# 2000-particle sample (the bond law's Jacobians, the preconditioner's parts, the time-step estimate) compiles 4-6x
-# faster and runs 2-5x slower: 7 s less compilation for 0.25 s more run time, measured on one CPU core
+# XLA's quick compiler settings: no LLVM optimisation, the older loop emitters for fusions. A setup program (the bond
+# law's Jacobians, the preconditioner's parts, the time-step estimate) compiles several times faster and runs a few
+# times slower: for small samples, far less compilation for a little more run time
 QUICK_OPTIONS = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
 _quick_options: dict | None = None
 

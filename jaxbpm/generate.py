@@ -188,11 +188,10 @@ def random_packing(
       over the last 3000 steps (close to the jamming fraction, packing can take 10 000 steps);
     * the last one under the rule of an explicit ``packing_fraction`` (see Raises).
 
-    Every attempt starts at rest and runs the same FIRE steps whatever was tried before it. On the boxes measured
-    (5 % spread) the first fraction tried is the one kept (400 and 700 spheres 0.56, 1000 to 2500 0.58, 3000 and
-    more 0.60: no attempt wasted), and the samples are alike: the overlaps are removed from a random insertion at
-    the fraction kept, so most bonded neighbours touch. All attempts share one compiled program, which is why the
-    result, deterministic for a seed, is not bit for bit the sample of an explicit ``packing_fraction``.
+    Every attempt starts at rest and runs the same FIRE steps whatever was tried before it, and the samples are
+    alike: the overlaps are removed from a random insertion at the fraction kept, so most bonded neighbours touch.
+    All attempts share one compiled program, which is why the result, deterministic for a seed, is not bit for bit
+    the sample of an explicit ``packing_fraction``.
 
     Args:
       n: number of particles.

@@ -274,7 +274,7 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     t0 = time.perf_counter()
     size = np.asarray(walls.size)
     # the spheres relaxed in the order of a space-filling curve through their start: the pair gathers and force
-    # sums touch memory in runs (2x fewer seconds per step on 30k spheres); the result comes back in their order
+    # sums touch memory in runs; the result comes back in their order
     order = morton_order(x0)
     x = jnp.asarray(np.asarray(x0)[order] + _MARGIN, dtype=dtype)
     r = jnp.asarray(np.asarray(radii)[order], dtype=dtype)

@@ -7,10 +7,8 @@ import re
 import subprocess
 import sys
 import textwrap
-import warnings
 import zlib
 
-import jax
 import numpy as np
 import pytest
 
@@ -100,42 +98,6 @@ def test_lammps_data_text_as_written_line_by_line(tmp_path, make):
     assert body == _reference_lammps_body(sample, types)
     assert title.endswith(f" crc32={zlib.crc32(body.encode()):08x}")
     _assert_same(sample, formats.read_lammps_data(path))
-
-
-def test_lammps_data_fast_and_line_by_line_reading_agree(tmp_path):
-    """Files read in one go per section give what reading them line by line gives; files that are not plainly
-    regular (leading blanks, comments, blank lines inside a section) are read line by line."""
-    from jaxbpm.interop import _lammps_fast, lammps
-
-    written = formats.write_lammps_data(tmp_path / "s.data", _multi()).read_text()
-    lines = written.splitlines()
-    plain = "\n".join(ln.split("#")[0].rstrip() if not ln.startswith(("Atoms", "Bond Coeffs")) else ln
-                      for ln in lines[1:] if not ln.startswith("# jaxbpm")) + "\n"
-    sphere = "\n".join(" ".join(ln.split()[:1] + ln.split()[2:]) if ln[:1].isdigit() and len(ln.split()) == 8
-                       else ln.replace("Atoms # bpm/sphere", "Atoms # sphere") for ln in plain.splitlines()) + "\n"
-    base = "LAMMPS data file\n" + written.split("\n", 1)[1]  # (without the checksum, which edits break)
-    velocities = base + "\nVelocities\n\n" + "".join(f"{i + 1} 0 0 0 0 0 0\n" for i in range(6))
-    images = "\n".join(ln + " 0 -1 0" if ln[:1].isdigit() and len(ln.split()) == 8 else ln
-                       for ln in plain.splitlines()) + "\n"
-    fast = {"written": written, "plain": plain, "sphere": sphere, "velocities": velocities, "images": images,
-            "comment before rows": plain.replace("Atoms # bpm/sphere\n\n1 1 1", "Atoms\n\n# c\n1 1 1")}
-    slow = {"leading blanks": base.replace("\n1 ", "\n 1 "), "blank line in Bonds": base.replace(
-        "\n2 ", "\n\n2 ", 1), "comment in Atoms": plain.replace("\n3 1 1 ", "\n# c\n3 1 1 ", 1)}
-    for label, text in [*fast.items(), *slow.items()]:
-        path = tmp_path / f"{label}.data"
-        path.write_text(text)
-        got = _lammps_fast.parse_fast(path, text, None)
-        assert (got is None) == (label in slow), label
-        want = lammps._parse_lines(path, text, None)
-        if got is not None:
-            for x, y in zip(jax.tree_util.tree_leaves(got), jax.tree_util.tree_leaves(want)):
-                if isinstance(x, np.ndarray):
-                    assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), label
-                else:
-                    assert x == y, label
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", InexactTranslationWarning)
-            formats.read_lammps_data(path, particle_material=_multi().particle_material)
 
 
 @pytest.mark.parametrize("section, word, new, message", [
