@@ -273,17 +273,41 @@ def random_packing(
 
 
 def box(n: int, **kw) -> Sample:
-    """A random packing filling a box; see :func:`random_packing` (``aspect`` default ``(1, 1, 1)``)."""
+    """A random packing filling a box.
+
+    Args:
+      n: number of particles.
+      **kw: the keywords of :func:`random_packing` (``aspect`` default ``(1, 1, 1)``).
+
+    Returns:
+      The sample, see :func:`random_packing`.
+    """
     return random_packing(n, shape="box", **kw)
 
 
 def cylinder(n: int, **kw) -> Sample:
-    """A random packing filling a z-axis cylinder; see :func:`random_packing` (``aspect`` = H / D, default 2)."""
+    """A random packing filling a z-axis cylinder.
+
+    Args:
+      n: number of particles.
+      **kw: the keywords of :func:`random_packing` (``aspect`` = height / diameter, default 2).
+
+    Returns:
+      The sample, see :func:`random_packing`.
+    """
     return random_packing(n, shape="cylinder", **kw)
 
 
 def beam(n: int, **kw) -> Sample:
-    """A random packing filling a beam (a box, ``aspect`` default ``(4, 1, 1)``); see :func:`random_packing`."""
+    """A random packing filling a beam (a box).
+
+    Args:
+      n: number of particles.
+      **kw: the keywords of :func:`random_packing` (``aspect`` default ``(4, 1, 1)``).
+
+    Returns:
+      The sample, see :func:`random_packing`.
+    """
     return random_packing(n, shape="beam", **kw)
 
 
@@ -366,6 +390,12 @@ def from_shape(shape: str, n: int, *, seed: int = 0, progress=False, **kw) -> Sa
       progress: progress reporting, see :func:`random_packing` (random packings only).
       **kw: forwarded to :func:`random_packing` or :func:`lattice` (e.g. ``packing_fraction``, ``materials``,
         ``density``); for lattices ``mean_radius`` is accepted as the ``radius``.
+
+    Returns:
+      The sample.
+
+    Raises:
+      SampleError: an unknown shape or bad arguments.
     """
     key = str(shape).lower()
     if key not in SHAPES:

@@ -40,6 +40,7 @@ class Domain(NamedTuple):
 
     @property
     def volume(self) -> float:
+        """The region's volume [m^3] (a cylinder: the one inscribed in the box, pi a b h / 4)."""
         size = np.subtract(self.hi, self.lo)
         if self.kind == "cylinder":
             return float(np.pi * size[0] * size[1] / 4.0 * size[2])
@@ -78,11 +79,25 @@ class BondMaterials:
 
     @property
     def n(self) -> int:
+        """The number of material components."""
         return int(np.shape(self.E)[0])
 
     @classmethod
     def create(cls, E, nu=0.25, tensile_strength=np.inf, shear_strength=np.inf) -> "BondMaterials":
-        """Build and check a table; scalars broadcast to the number of components given by ``E``."""
+        """Build and check a table; scalars broadcast to the number of components given by ``E``.
+
+        Args:
+          E: ``[k]`` (or a scalar) bond Young's moduli [Pa], finite and > 0.
+          nu: Poisson ratios [-] in (-1, 0.5).
+          tensile_strength: [Pa], > 0 (``inf``: unbreakable).
+          shear_strength: [Pa], > 0 (``inf``: unbreakable).
+
+        Returns:
+          The table, each field ``[k]`` float64.
+
+        Raises:
+          SampleError: a field is not numbers, has the wrong shape, or is out of range (naming the components).
+        """
         E = np.atleast_1d(_numbers("E", E))
         if E.ndim != 1 or E.size == 0:
             raise SampleError(f"materials: E must be a non-empty 1-D list of Young's moduli, got shape {E.shape}")
@@ -130,6 +145,18 @@ class ParticleMaterial:
 
     @classmethod
     def create(cls, **kw) -> "ParticleMaterial":
+        """Build and check the particle material; fields not given take the class defaults.
+
+        Args:
+          **kw: ``density`` [kg/m^3] > 0, ``E`` [Pa] > 0, ``nu`` in (-1, 0.5), ``friction`` >= 0, ``restitution`` in
+            (0, 1]; each a finite real scalar.
+
+        Returns:
+          The material, fields as float64 scalars.
+
+        Raises:
+          SampleError: an unknown field, a value that is not a real number, or one out of range.
+        """
         unknown = set(kw) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise SampleError(f"particle_material: unknown fields {sorted(map(str, unknown))}")
@@ -312,9 +339,16 @@ class Sample:
     def replace(self, **changes) -> "Sample":
         """A new validated sample with some inputs of :meth:`from_arrays` changed.
 
-        Accepts the keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
-        ``bond_material``, ``materials``, ``particle_material``, ``bond_contact``, ``domain``); derived quantities
-        are recomputed.
+        Args:
+          **changes: keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
+            ``bond_radius_ratio``, ``bond_material``, ``materials``, ``density``, ``particle_material``,
+            ``bond_contact``, ``domain``). New ``bonds`` need a new ``bond_radius`` or ``bond_radius_ratio``.
+
+        Returns:
+          The sample, its derived quantities recomputed.
+
+        Raises:
+          SampleError: an unknown keyword, or inputs that make no valid sample.
         """
         kw = dict(positions=self.positions, radii=self.radii, bonds=self.bonds, bond_radius=self.bond_radius,
                   bond_material=self.bond_material, materials=self.materials,
@@ -332,7 +366,17 @@ class Sample:
         return Sample.from_arrays(**kw)
 
     def subset(self, keep) -> "Sample":
-        """The sample restricted to the particles where ``keep [n]`` is True (bonds between kept particles only)."""
+        """The sample restricted to some of its particles, with the bonds between them.
+
+        Args:
+          keep: ``[n]`` booleans, True for the particles kept (at least one).
+
+        Returns:
+          The smaller sample; particles and bonds keep their order.
+
+        Raises:
+          SampleError: ``keep`` has the wrong shape or keeps nothing.
+        """
         keep = np.asarray(keep, bool)
         if keep.shape != (self.n_particles,):
             raise SampleError(f"subset: keep must have shape [{self.n_particles}], got {keep.shape}")
@@ -348,11 +392,22 @@ class Sample:
                                   domain=self.domain)
 
     def renumbered(self, order=None) -> "Sample":
-        """The same sample with its particles renumbered: particle ``k`` of the result is particle ``order[k]`` of
-        this one (default: along a Morton space-filling curve, :func:`jaxbpm.generate.morton_order`, so that
-        particles close in space are close in memory and the solvers' gathers and scatters stay in cache); bonds
-        follow their particles and are sorted by their first particle. The generators already number their
-        particles this way; samples read from other codes' files keep the files' order unless renumbered."""
+        """The same sample with its particles renumbered.
+
+        The generators already number their particles along a Morton curve; samples read from other codes' files
+        keep the files' order unless renumbered.
+
+        Args:
+          order: ``[n]`` permutation: particle ``k`` of the result is particle ``order[k]`` of this one. Default:
+            along a Morton space-filling curve (:func:`jaxbpm.generate.morton_order`), so that particles close in
+            space are close in memory and the solvers' gathers and scatters stay in cache.
+
+        Returns:
+          The renumbered sample; bonds follow their particles and are sorted by their first particle.
+
+        Raises:
+          SampleError: ``order`` is not a permutation of the particle indices.
+        """
         order = morton_order(self.positions) if order is None else np.asarray(order)
         n = self.n_particles
         if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
@@ -367,30 +422,45 @@ class Sample:
                                   bond_contact=self.bond_contact, domain=self.domain)
 
     def largest_cluster(self) -> "Sample":
-        """The sample without the particles outside its largest bonded cluster (loose particles and fragments)."""
+        """The sample without the particles outside its largest bonded cluster (loose particles and fragments).
+
+        Returns:
+          The largest cluster as a sample (:meth:`subset`).
+        """
         labels = self.clusters()
         return self.subset(labels == np.argmax(np.bincount(labels)))
 
     # ------------------------------------------------------------------ derived info
     @property
     def n_particles(self) -> int:
+        """The number of particles ``n``."""
         return int(np.shape(self.positions)[0])
 
     @property
     def n_bonds(self) -> int:
+        """The number of bonds ``nb``."""
         return int(np.shape(self.bonds)[0])
 
     @property
     def n_materials(self) -> int:
+        """The number of bond material components."""
         return self.materials.n
 
     def coordination(self) -> np.ndarray:
-        """Number of bonds of each particle, ``[n]``."""
+        """The number of bonds of each particle.
+
+        Returns:
+          ``[n]`` integer counts.
+        """
         b = np.asarray(self.bonds)
         return np.bincount(b.ravel(), minlength=self.n_particles)
 
     def clusters(self) -> np.ndarray:
-        """Cluster label of each particle (particles joined by bonds share a label), ``[n]``."""
+        """The cluster label of each particle: particles joined by bonds share a label.
+
+        Returns:
+          ``[n]`` integer labels, 0 to the number of clusters - 1.
+        """
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
@@ -401,7 +471,9 @@ class Sample:
     def packing_fraction(self) -> tuple[float, str]:
         """Solid volume over the sample's volume, and what that volume is.
 
-        Uses the generated ``domain`` when known, else the bounding box of the spheres.
+        Returns:
+          ``(fraction, basis)``: the fraction, over the generated ``domain`` when known (basis ``"box domain"`` or
+          ``"cylinder domain"``), else over the bounding box of the spheres (``"bounding box of the spheres"``).
         """
         rad, pos = np.asarray(self.radii), np.asarray(self.positions)
         solid = float(np.sum(4.0 / 3.0 * np.pi * rad**3))
@@ -411,7 +483,11 @@ class Sample:
         return solid / float(np.prod(size)), "bounding box of the spheres"
 
     def summary(self) -> SampleSummary:
-        """Counts, coordination, clusters, packing fraction and extent of the sample."""
+        """Counts, coordination, clusters, packing fraction and extent of the sample.
+
+        Returns:
+          A :class:`SampleSummary` (``str()`` gives a readable table).
+        """
         coord = self.coordination()
         labels = self.clusters()
         sizes = np.bincount(labels)

@@ -8,9 +8,9 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from jaxbpm._atomic import atomic_write
+from jaxbpm._vtk import user_data
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.interop._meta import exact_text
-from jaxbpm.io import user_data
 from jaxbpm.sample import Sample
 
 
