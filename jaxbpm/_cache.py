@@ -101,6 +101,9 @@ def compilation_cache_dir() -> pathlib.Path | None:
 
     Reads JAX's configuration (``jax_compilation_cache_dir``, ``jax_enable_compilation_cache``), so it also reports
     a directory set through JAX itself, e.g. with ``JAX_COMPILATION_CACHE_DIR``.
+
+    Returns:
+      The absolute directory, or ``None``.
     """
     import jax
 

@@ -110,7 +110,14 @@ class HostList(NamedTuple):
         return jnp.zeros((), bool)
 
     def update(self, positions):
-        """The list itself (it is built again on the host, not inside jitted code)."""
+        """The list itself (it is built again on the host, not inside jitted code).
+
+        Args:
+          positions: ``[n, 3]`` (unused).
+
+        Returns:
+          ``self``.
+        """
         return self
 
 

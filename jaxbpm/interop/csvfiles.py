@@ -30,7 +30,12 @@ def _bonds_path(path: pathlib.Path) -> pathlib.Path:
 def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     """Write particles to ``path`` and bonds to ``<stem>_bonds.csv`` next to it (both atomic; exact decimals).
 
-    Returns the two paths.
+    Args:
+      path: the particles file.
+      sample: the sample.
+
+    Returns:
+      The particles and bonds files.
     """
     if not isinstance(sample, Sample):
         raise TypeError(f"write_csv expects a jaxbpm Sample, got {type(sample).__name__}")
@@ -123,8 +128,20 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
     file named in the particles file's metadata) CSV files.
 
-    See the module docstring for the columns. ``bond_radius_ratio`` is needed when the bonds file has no
-    ``bond_radius``/``bond_diameter`` column; ``sample_kw`` go to :meth:`Sample.from_arrays`.
+    See the module docstring for the columns.
+
+    Args:
+      path: the particles file.
+      bonds_path: the bonds file (default: see above).
+      bond_radius_ratio: needed when the bonds file has no ``bond_radius``/``bond_diameter`` column.
+      **sample_kw: more :meth:`Sample.from_arrays` keywords.
+
+    Returns:
+      The sample.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+      SampleError: the content does not make a valid sample.
     """
     path = pathlib.Path(path)
     prows = _csv_rows(path)

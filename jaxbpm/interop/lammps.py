@@ -27,8 +27,16 @@ from jaxbpm.sample import ParticleMaterial, Sample
 
 
 def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarray:
-    """Per-bond ``bpm/rotational`` coefficients ``[nb, 12]`` (Kr Ks Kt Kb Fcr Fcs Tct Tcb, dampings 0) of a sample,
-    exact translations of its bond law (:func:`jaxbpm.interop.conventions.to_lammps`); infinite strengths become 1e300."""
+    """Per-bond ``bpm/rotational`` coefficients of a sample: exact translations of its bond law
+    (:func:`jaxbpm.interop.conventions.to_lammps`).
+
+    Args:
+      sample: the sample.
+      normalize: coefficients for LAMMPS's ``normalize yes`` (stiffnesses per unit length).
+
+    Returns:
+      ``[nb, 12]``: Kr Ks Kt Kb Fcr Fcs Tct Tcb and the dampings (0); infinite strengths become 1e300.
+    """
     bond, length, _, _ = conventions.sample_bonds(sample)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", conventions.InexactTranslationWarning)  # stated in the docs
@@ -90,8 +98,16 @@ def _coeff_line(t: int, row) -> str:
 
 
 def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational break yes smooth no") -> pathlib.Path:
-    """Write an include file for a LAMMPS input: an optional ``bond_style`` line, then one ``bond_coeff`` line per
-    row of ``table`` (``[ntypes, 8 or 12]``; missing dampings are 0). ``bond_style=None`` writes coefficients only."""
+    """Write an include file for a LAMMPS input, atomically.
+
+    Args:
+      path: the file.
+      table: ``[ntypes, 8 or 12]`` coefficients, one ``bond_coeff`` line per row (missing dampings are 0).
+      bond_style: the ``bond_style`` line written first; ``None``: coefficients only.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
     table = np.asarray(table, dtype=np.float64)
     if table.ndim != 2 or table.shape[1] not in (8, N_COEFFS):
         raise SampleError(f"bond coefficient table must have shape [ntypes, 8] or [ntypes, 12], got {table.shape}")
@@ -107,8 +123,18 @@ def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational
 
 
 def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
-    """``bond_coeff`` lines of a LAMMPS input file: ``({type: 12 coefficients}, normalize)`` (``normalize`` from a
-    ``bond_style bpm/rotational ... normalize yes`` line). Errors name the line."""
+    """Read the ``bond_coeff`` lines of a LAMMPS input file.
+
+    Args:
+      path: the input file.
+
+    Returns:
+      ``({type: 12 coefficients}, normalize)``, ``normalize`` from a ``bond_style bpm/rotational ... normalize yes``
+      line.
+
+    Raises:
+      SampleFileError: a missing file, another bond style or a malformed line (named).
+    """
     path = pathlib.Path(path)
     text = read_text(path)
     coeffs, normalize = {}, False
@@ -231,6 +257,9 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
       bond_radius_ratio, materials: ignore the coefficients; bond radius ratio and material table as in
         :meth:`Sample.from_arrays`.
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ...).
+
+    Returns:
+      The sample, particles in the order of their atom IDs.
 
     Raises:
       SampleFileError: the file is missing or malformed (the message names the line).

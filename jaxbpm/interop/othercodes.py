@@ -37,10 +37,21 @@ YADE_FORMATS = {"x_y_z_r": 4, "x_y_z_r_matId": 5, "x_y_z_r_attrs": None}  # name
 
 
 def read_liggghts_data(path, *, bond_radius_ratio: float | None = None, materials=None, **sample_kw) -> Sample:
-    """Read a LIGGGHTS data file (``atom_style granular``) into a :class:`Sample`: particles ordered by atom ID;
-    bonds from a ``Bonds`` section (``id type atom1 atom2``) if there is one, with radius ``bond_radius_ratio``
-    times the smaller particle's radius and ``materials`` (default one component, see
-    :meth:`Sample.from_arrays`). ``sample_kw`` go to :meth:`Sample.from_arrays`; errors name the line."""
+    """Read a LIGGGHTS data file (``atom_style granular``) into a :class:`Sample`.
+
+    Args:
+      path: the data file.
+      bond_radius_ratio: bond radius over the smaller particle's radius, for the bonds of a ``Bonds`` section
+        (``id type atom1 atom2``), if there is one.
+      materials: the bond material table (default one component, see :meth:`Sample.from_arrays`).
+      **sample_kw: more :meth:`Sample.from_arrays` keywords.
+
+    Returns:
+      The sample, particles ordered by atom ID.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+    """
     kw = dict(sample_kw)
     if bond_radius_ratio is not None:
         kw.update(bond_radius_ratio=bond_radius_ratio, materials=materials)
@@ -50,8 +61,17 @@ def read_liggghts_data(path, *, bond_radius_ratio: float | None = None, material
 
 
 def read_liggghts_dump(path) -> list[DumpFrame]:
-    """All frames of a LIGGGHTS text dump (``dump custom``, e.g. ``id type x y z vx vy vz radius``): a LAMMPS
-    text dump, read by :func:`jaxbpm.interop.dump.read_lammps_dump`; errors name the line."""
+    """Read all frames of a LIGGGHTS text dump (``dump custom``, e.g. ``id type x y z vx vy vz radius``).
+
+    Args:
+      path: the dump, a LAMMPS text dump (:func:`jaxbpm.interop.dump.read_lammps_dump`).
+
+    Returns:
+      The frames, in file order.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+    """
     return read_lammps_dump(path)
 
 
@@ -66,6 +86,9 @@ def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: fl
         :func:`jaxbpm.generate.random_packing` does); ``None``: no bonds.
       bond_radius_ratio: bond radius over the smaller particle's radius.
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``materials``, ``particle_material``, ...).
+
+    Returns:
+      The sample, particles in file order.
     """
     from jaxbpm.generate import bond_pairs
 
@@ -113,9 +136,19 @@ def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def write_yade_text(path, sample: Sample, *, comment: str | None = None) -> pathlib.Path:
-    """Write the particles of ``sample`` as Yade's ``export.textExt`` ``x_y_z_r`` layout (tab-separated, exact
-    decimals), atomically; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')``. Bonds are not written
-    (Yade makes its cohesive bonds from contacts)."""
+    """Write the particles of ``sample`` in Yade's ``export.textExt`` ``x_y_z_r`` layout, atomically.
+
+    Tab-separated, exact decimals; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')``. Bonds are not
+    written (Yade makes its cohesive bonds from contacts).
+
+    Args:
+      path: the text file.
+      sample: the sample.
+      comment: a comment line written after the ``#format`` line.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
     if not isinstance(sample, Sample):
         raise TypeError(f"write_yade_text expects a jaxbpm Sample, got {type(sample).__name__}")
     if comment is not None and (comment.splitlines() != [comment]):
