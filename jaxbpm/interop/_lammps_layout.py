@@ -27,13 +27,26 @@ ATOM_COLUMNS = {"bpm/sphere": 8, "sphere": 7}
 
 @dataclasses.dataclass(frozen=True)
 class Line:
+    """One line of a data file: its number (from 1), its words before any ``#``, and the comment after it."""
+
     no: int
     words: list[str]
     comment: str
 
 
-
 def coeff_row(words: list[str], where: str) -> tuple[int, np.ndarray]:
+    """One ``bpm/rotational`` coefficient row: a bond type and 12 values (or 8, the dampings then 0).
+
+    Args:
+      words: the type and the values, as text.
+      where: ``file:line`` for messages.
+
+    Returns:
+      ``(type, [12] float64)``.
+
+    Raises:
+      SampleFileError: a wrong count, values that are not numbers, or stiffnesses that are not finite.
+    """
     if len(words) not in (9, 13):
         raise SampleFileError(f"{where}: bpm/rotational coefficients need a type and 12 values (Kr Ks Kt Kb Fcr Fcs "
                               f"Tct Tcb gamma_r gamma_s gamma_t gamma_b) or 8 without dampings; got "
@@ -53,21 +66,46 @@ def coeff_row(words: list[str], where: str) -> tuple[int, np.ndarray]:
 
 
 def table_arrays(table: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``{type: 12 coefficients}`` as sorted types and their rows (types outside int64 name no bond: dropped)."""
+    """A coefficient table as arrays.
+
+    Args:
+      table: ``{type: [12] coefficients}``.
+
+    Returns:
+      ``(types [k] int64 sorted, rows [k, 12])``; types outside int64 name no bond and are dropped.
+    """
     keys = sorted(t for t in table if -2 ** 63 <= t < 2 ** 63)
     return (np.array(keys, np.int64).reshape(-1),
             np.array([table[t] for t in keys], np.float64).reshape(-1, N_COEFFS))
 
 
 def last_wins(keys: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted distinct ``keys`` and, for each, the row of its last occurrence (as a dict filled in order keeps)."""
+    """The rows a dict filled in order would keep: for each distinct key, its last row.
+
+    Args:
+      keys: ``[m]`` integer keys.
+      rows: ``[m, ...]`` their rows.
+
+    Returns:
+      ``(distinct keys sorted, the row of each one's last occurrence)``.
+    """
     u, idx = np.unique(keys[::-1], return_index=True)
     return u, rows[::-1][idx]
 
 
 def header(path, numbered) -> tuple[dict[str, int], int]:
-    """The counts of the header lines ``numbered`` (``(line number, text)`` from line 2 on) and the index of the
-    line of the first section."""
+    """Read the header of a data file.
+
+    Args:
+      path: the file, for messages.
+      numbered: ``(line number, text)`` of its lines from line 2 on.
+
+    Returns:
+      ``({"atoms": n, "bonds": nb, "bond types": k, ...}, index of the first section's line, from 0)``.
+
+    Raises:
+      SampleFileError: an unreadable header line or count, no Atoms section, or no atom count.
+    """
     counts: dict[str, int] = {}
     body_start = None
     for no, s in numbered:
@@ -96,7 +134,18 @@ def header(path, numbered) -> tuple[dict[str, int], int]:
 
 
 def head_meta(path, first: list[str]):
-    """The checksum of the title line and the jaxbpm metadata of the first (up to 6) lines ``first``."""
+    """The checksum on the title line and jaxbpm's metadata line among the first lines.
+
+    Args:
+      path: the file, for messages.
+      first: its first lines (up to 6 are read).
+
+    Returns:
+      ``(crc32 hex or None, metadata dict or None)``.
+
+    Raises:
+      SampleFileError: a malformed checksum or metadata line.
+    """
     crc = checksums(first[0], f"{path}:1", ("crc32",))["crc32"] if first and "crc32=" in first[0] else None
     meta = None
     for no, line in enumerate(first[:6], start=1):
@@ -105,11 +154,29 @@ def head_meta(path, first: list[str]):
 
 
 def coeffs_head(path, no: int, comment: str) -> None:
+    """Check the style named on a ``Bond Coeffs`` line.
+
+    Args:
+      path: the file, for messages.
+      no: the line's number.
+      comment: the text after ``#`` (none, or ``bpm/rotational``).
+
+    Raises:
+      SampleFileError: another bond style.
+    """
     if comment.strip() and comment.strip() != "bpm/rotational":
         raise SampleFileError(f"{path}:{no}: Bond Coeffs are for {comment.strip()!r}; jaxbpm reads bpm/rotational")
 
 
 def split(s: str) -> tuple[list[str], str]:
+    """A line's words before ``#`` and the comment after it.
+
+    Args:
+      s: the line.
+
+    Returns:
+      ``(words, comment)``.
+    """
     body, _, comment = s.partition("#")
     return body.split(), comment
 

@@ -24,11 +24,27 @@ BIG = 1.0e300  # LAMMPS thresholds for unbreakable bonds (LAMMPS needs finite nu
 
 
 def exact_text(x) -> str:
-    """Shortest exact decimal of a float."""
+    """The shortest decimal that reads back as the same float.
+
+    Args:
+      x: a real number.
+
+    Returns:
+      ``repr(float(x))``.
+    """
     return repr(float(x))
 
 
 def meta_of(sample: Sample, **extra) -> dict:
+    """What a LAMMPS or CSV file's columns cannot hold of a sample: its materials, ``bond_contact`` and domain.
+
+    Args:
+      sample: the sample.
+      **extra: more fields (e.g. ``normalize``, ``particles``).
+
+    Returns:
+      The metadata (JSON-serialisable), ``format = "jaxbpm-exchange"``.
+    """
     from jaxbpm._version import __version__
 
     pm = sample.particle_material
@@ -45,11 +61,30 @@ def meta_of(sample: Sample, **extra) -> dict:
 
 
 def meta_line(meta: dict) -> str:
+    """The ``# jaxbpm {...}`` comment line of the metadata (one line of compact JSON).
+
+    Args:
+      meta: from :func:`meta_of`.
+
+    Returns:
+      The line, without its end.
+    """
     return META + json.dumps(meta, separators=(",", ":"))
 
 
 def parse_meta(text: str, where: str) -> dict | None:
-    """The metadata of a ``# jaxbpm {...}`` line (``None`` for any other line), its fields checked."""
+    """Read a ``# jaxbpm {...}`` line, its fields checked.
+
+    Args:
+      text: a line.
+      where: ``file:line`` for messages.
+
+    Returns:
+      The metadata, or ``None`` for any other line.
+
+    Raises:
+      SampleFileError: unreadable JSON, another format, or a field of the wrong type.
+    """
     if not text.startswith(META):
         return None
     try:
@@ -104,25 +139,59 @@ def _check_meta(meta: dict, where: str) -> None:
 
 
 def domain_of(meta: dict | None):
+    """The sample's domain recorded in the metadata.
+
+    Args:
+      meta: from :func:`parse_meta`, or ``None``.
+
+    Returns:
+      A :class:`~jaxbpm.sample.Domain`, or ``None`` when none is recorded.
+    """
     d = None if meta is None else meta.get("domain")
     return None if d is None else Domain(d["kind"], tuple(d["lo"]), tuple(d["hi"]))
 
 
 # ---------------------------------------------------------------------------------------------- checksums
 def crc32(text: str) -> str:
-    """CRC-32 (zlib) of ``text`` encoded as UTF-8, as 8 lowercase hex digits."""
+    """The CRC-32 (zlib) of ``text`` encoded as UTF-8.
+
+    Args:
+      text: the checksummed text.
+
+    Returns:
+      8 lowercase hex digits.
+    """
     return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
 
 
 def without_line(text: str, index: int) -> str:
-    """``text`` without its line ``index`` (0-based, as ``str.splitlines`` counts) and that line's break."""
+    """``text`` without one of its lines and that line's break.
+
+    Args:
+      text: the text.
+      index: the line, from 0, as ``str.splitlines`` counts.
+
+    Returns:
+      The rest of the text.
+    """
     parts = text.splitlines(keepends=True)
     return "".join(parts[:index] + parts[index + 1:])
 
 
 def checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
-    """The ``NAME=XXXXXXXX`` checksums (``names``, e.g. ``("crc32",)``) of a checksum line; malformed ones are an
-    error (the line was damaged)."""
+    """Read the ``NAME=XXXXXXXX`` checksums of a checksum line.
+
+    Args:
+      line: the line.
+      where: ``file:line`` for messages.
+      names: the checksums it must hold, e.g. ``("crc32",)``.
+
+    Returns:
+      ``{name: 8 hex digits}``.
+
+    Raises:
+      SampleFileError: a checksum is missing or malformed (the line was damaged).
+    """
     out = {}
     for name in names:
         m = re.search(rf"(?:^|\s){name}=(\S*)", line)
@@ -134,8 +203,19 @@ def checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
 
 
 def verify(text: str, name: str, expected: str, path, where: str, how: str) -> None:
-    """``text`` has CRC-32 ``expected`` (checksum ``name`` on ``where``), else a :class:`SampleFileError` for
-    ``path`` saying how to accept an intended edit (``how``)."""
+    """Check that ``text`` has the CRC-32 ``expected``.
+
+    Args:
+      text: the checksummed text.
+      name: the checksum's name (``crc32``), for the message.
+      expected: its recorded value.
+      path: the file, for the message.
+      where: where the checksum is written, for the message.
+      how: how to accept an intended edit, for the message.
+
+    Raises:
+      SampleFileError: the text does not match.
+    """
     got = crc32(text)
     if got != expected:
         raise SampleFileError(f"{path}: the content does not match its CRC-32 checksum ({name}={expected} on {where}; "
@@ -144,8 +224,15 @@ def verify(text: str, name: str, expected: str, path, where: str, how: str) -> N
 
 
 def names_file(read):
-    """``read(path, ...)`` whose :class:`SampleError` (content that makes no valid sample) and
-    :class:`ConventionError` (coefficients with no jaxbpm counterpart) name the file."""
+    """Decorate a reader so that its content errors name the file.
+
+    Args:
+      read: ``read(path, ...)``.
+
+    Returns:
+      The reader, whose :class:`SampleError` (content that makes no valid sample) and :class:`ConventionError`
+      (coefficients with no jaxbpm counterpart) start with the path unless they name it already.
+    """
     @functools.wraps(read)
     def wrapper(path, *args, **kw):
         try:
