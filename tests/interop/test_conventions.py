@@ -95,22 +95,6 @@ def test_translated_convention_has_jaxbpm_stiffness(name):
         np.testing.assert_allclose(getattr(back, f.name), getattr(BOND, f.name), rtol=1e-12)
 
 
-def test_known_factors():
-    # Yade: equal touching spheres with r_b = R: young = pi/2 E, poisson = k_s/k_n = 1/(2(1+nu)), no pi in adhesion
-    bond = JaxbpmBond(1e9, 0.25, 1e-3, tensile_strength=5e6)
-    with pytest.warns(InexactTranslationWarning, match="separately"):
-        y = conventions.to_yade(bond, 2e-3, 1e-3, 1e-3)
-    assert np.isclose(y.young, np.pi / 2 * 1e9, rtol=1e-14) and np.isclose(y.poisson, 0.4, rtol=1e-14)
-    assert np.isclose(y.normalCohesion, np.pi * 5e6, rtol=1e-14)
-    # PFC deformability method: emod = E for touching particles, kratio = 2 (1 + nu)
-    p = conventions.to_pfc(bond, 2e-3, 1e-3, 1e-3)
-    assert np.isclose(p.emod, 1e9, rtol=1e-14) and np.isclose(p.kratio, 2.5) and p.pb_rmul == 1.0
-    assert np.isclose(conventions.from_pfc(1e-3, 1e-3, 2e-3, emod=1e9, kratio=2.5).E, 1e9, rtol=1e-14)
-    # LAMMPS normalize yes: Kr = E A
-    lmp = conventions.to_lammps(JaxbpmBond(1e9, 0.25, 1e-3), 2e-3, normalize=True)
-    assert np.isclose(lmp.Kr, 1e9 * np.pi * 1e-6, rtol=1e-14)
-
-
 def test_failure_rules_stated_differences():
     b = BOND
     sig_force, tau_force = b.tensile_strength * b.area, b.shear_strength * b.area
