@@ -123,6 +123,49 @@ def _column(path, header, rows, names, cast=float, required=True):
     return None, None
 
 
+def _particles(path, header, rows) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+    """The particles file's centres ``[n, 3]``, radii ``[n]`` and ``{particle id: row index}``."""
+    pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
+    rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
+    if rname in ("diameter", "d"):
+        rad = rad / 2.0
+    ids, _ = _column(path, header, rows, ("id", "ID"), cast=int, required=False)
+    if ids is None:
+        ids = np.arange(len(rows))
+    index = {}
+    for k, (no, _) in enumerate(rows):
+        if int(ids[k]) in index:
+            raise SampleFileError(f"{path}:{no}: duplicate particle id {ids[k]}")
+        index[int(ids[k])] = k
+    return pos, rad, index
+
+
+def _bond_pairs(path, bpath, bheader, brows, ends, index: dict[int, int]) -> np.ndarray:
+    """The bonds ``[nb, 2]`` as particle row indices, from the bonds file's particle id columns ``ends``."""
+    if not ends:
+        raise SampleFileError(f"{bpath}: missing particle columns i,j (or id1,id2) (columns: {','.join(bheader)})")
+    bonds = np.zeros((len(brows), 2), np.int64)
+    for k, (no, _) in enumerate(brows):
+        for c in range(2):
+            pid = int(ends[c][k])
+            if pid not in index:
+                raise SampleFileError(f"{bpath}:{no}: bond refers to particle id {pid}, which is not in {path.name}")
+            bonds[k, c] = index[pid]
+    return bonds
+
+
+def _check_bond_columns(bpath, brows, props: dict, bm: np.ndarray, mats: dict) -> None:
+    """The bonds file's material property columns ``props`` agree with the metadata's table ``mats``."""
+    for k, v in props.items():
+        if v is not None and len(v):
+            want = np.asarray(mats[k], float)[np.clip(bm, 0, len(mats[k]) - 1)]
+            bad = np.flatnonzero(~((v == want) | (np.isnan(v) & np.isnan(want))))
+            if bad.size:
+                no = brows[bad[0]][0]
+                raise SampleFileError(f"{bpath}:{no}: {k} = {float(v[bad[0]])!r} disagrees with material "
+                                      f"{int(bm[bad[0]])}'s {float(want[bad[0]])!r} in the header")
+
+
 @names_file
 def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, **sample_kw) -> Sample:
     """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
@@ -155,18 +198,7 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     bpath = pathlib.Path(bonds_path) if bonds_path is not None else _bonds_path(path)
     if bonds_path is None and not bpath.exists() and meta and meta.get("bonds_file"):
         bpath = path.with_name(meta["bonds_file"])
-    pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
-    rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
-    if rname in ("diameter", "d"):
-        rad = rad / 2.0
-    ids, _ = _column(path, header, rows, ("id", "ID"), cast=int, required=False)
-    if ids is None:
-        ids = np.arange(len(rows))
-    index = {}
-    for k, (no, _) in enumerate(rows):
-        if int(ids[k]) in index:
-            raise SampleFileError(f"{path}:{no}: duplicate particle id {ids[k]}")
-        index[int(ids[k])] = k
+    pos, rad, index = _particles(path, header, rows)
     kw = dict(sample_kw)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
@@ -203,15 +235,7 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
         how = f"delete line {no} ({line.strip()!r}) of {path.name}"
         verify(without_line(prows.text, no - 1), "crc32", sums["crc32"], path, f"line {no}", how)
         verify(brows_all.text, "bonds_crc32", sums["bonds_crc32"], bpath, f"line {no} of {path.name}", how)
-    if not ends:
-        raise SampleFileError(f"{bpath}: missing particle columns i,j (or id1,id2) (columns: {','.join(bheader)})")
-    bonds = np.zeros((nb, 2), np.int64)
-    for k, (no, _) in enumerate(brows):
-        for c in range(2):
-            pid = int(ends[c][k])
-            if pid not in index:
-                raise SampleFileError(f"{bpath}:{no}: bond refers to particle id {pid}, which is not in {path.name}")
-            bonds[k, c] = index[pid]
+    bonds = _bond_pairs(path, bpath, bheader, brows, ends, index)
     rb, rbname = _column(bpath, bheader, brows, ("bond_radius", "bond_diameter"), required=False)
     if rbname == "bond_diameter":
         rb = rb / 2.0
@@ -223,14 +247,7 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
              for k in ("E", "nu", "tensile_strength", "shear_strength")}
     if meta is not None and bm is not None and "materials" not in kw:
         mats = meta["materials"]
-        for k, v in props.items():
-            if v is not None and len(v):
-                want = np.asarray(mats[k], float)[np.clip(bm, 0, len(mats[k]) - 1)]
-                bad = np.flatnonzero(~((v == want) | (np.isnan(v) & np.isnan(want))))
-                if bad.size:
-                    no = brows[bad[0]][0]
-                    raise SampleFileError(f"{bpath}:{no}: {k} = {float(v[bad[0]])!r} disagrees with material "
-                                          f"{int(bm[bad[0]])}'s {float(want[bad[0]])!r} in the header")
+        _check_bond_columns(bpath, brows, props, bm, mats)
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, materials=mats, **geom, **kw)
     if "materials" in kw:
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, **geom, **kw)
