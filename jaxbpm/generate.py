@@ -24,7 +24,7 @@ import numpy as np
 
 from jaxbpm._spatial import morton_order
 from jaxbpm.errors import SampleError
-from jaxbpm.packing import _jamming_fraction, _Walls, _pack, _pack_auto
+from jaxbpm.packing import jamming_fraction, Walls, pack, pack_auto
 from jaxbpm.sample import BondMaterials, Domain, Sample
 
 __all__ = [
@@ -254,14 +254,14 @@ def random_packing(
     cutoff = 2.0 * (1.0 + spread)
     if packing_fraction is not None:
         x0, k = _insert(rng, walls[0], radii), 0
-        x = _pack(x0, radii, walls[0], cutoff, tol, max_steps, progress, fractions[0])
+        x = pack(x0, radii, walls[0], cutoff, tol, max_steps, progress, fractions[0])
     else:
-        def start(domain: _Walls) -> np.ndarray:  # the insertion that an explicit packing_fraction starts from
+        def start(domain: Walls) -> np.ndarray:  # the insertion that an explicit packing_fraction starts from
             again = np.random.default_rng(seed)
             again.uniform(-1.0, 1.0, n)  # the radii
             return _insert(again, domain, radii)
 
-        x, k = _pack_auto(start, radii, walls, fractions, cutoff, tol, max_steps, progress)
+        x, k = pack_auto(start, radii, walls, fractions, cutoff, tol, max_steps, progress)
 
     # particles numbered along a space-filling curve: neighbours in space are neighbours in memory
     order = morton_order(x)
@@ -317,7 +317,7 @@ def _auto_fractions(shape: str, aspect, solid: float, r_max: float) -> tuple[flo
     (samples of fewer than about 300 spheres, whose walls loosen the packing more), fractions ``_AUTO_STEP`` apart
     downward, one past the first at or below its expected jamming fraction."""
     def expected(phi: float) -> float:
-        return _jamming_fraction(_walls(shape, aspect, solid / phi, r_max))
+        return jamming_fraction(_walls(shape, aspect, solid / phi, r_max))
 
     fractions = [float(phi) for phi in AUTO_PACKING_FRACTIONS if phi <= expected(phi)]
     phi = float(AUTO_PACKING_FRACTIONS[-1])
@@ -331,7 +331,7 @@ def _auto_fractions(shape: str, aspect, solid: float, r_max: float) -> tuple[flo
     return tuple(fractions)
 
 
-def _walls(shape: str, aspect, volume: float, r_max: float) -> _Walls:
+def _walls(shape: str, aspect, volume: float, r_max: float) -> Walls:
     """Domain of ``volume`` (in mean-radius units) with the ratios ``aspect``."""
     aspect = _DEFAULT_ASPECT[shape] if aspect is None else aspect
     if shape == "cylinder":
@@ -346,10 +346,10 @@ def _walls(shape: str, aspect, volume: float, r_max: float) -> _Walls:
     if min(size) <= 2.0 * r_max:
         raise SampleError(f"the {shape} domain ({min(size) / 2:.3g} mean radii across) is too thin for the "
                           f"largest sphere; use more particles or a less elongated aspect")
-    return _Walls(shape == "cylinder", tuple(float(s) for s in size))
+    return Walls(shape == "cylinder", tuple(float(s) for s in size))
 
 
-def _insert(rng: np.random.Generator, walls: _Walls, radii: np.ndarray) -> np.ndarray:
+def _insert(rng: np.random.Generator, walls: Walls, radii: np.ndarray) -> np.ndarray:
     """Random centres ``[n, 3]`` inside the domain shrunk by the largest radius, stratified: the shrunk domain is
     cut into at least ``n`` near-cubic grid cells, ``n`` of them are drawn at random and each receives one centre
     uniformly inside it. This keeps the start free of crowded spots (Poisson clumps), which makes the first FIRE

@@ -21,12 +21,15 @@ import numpy as np
 from jaxbpm._spatial import HostList, jax_md_neighbors, morton_order, pair_list, stale
 from jaxbpm.errors import SampleError
 
+__all__ = ["Walls", "pack", "pack_auto", "jamming_fraction"]
+
 # (the old private name, still imported by jaxbpm.neighbors)
 _jax_md_neighbors = jax_md_neighbors
 
 
-class _Walls(NamedTuple):
-    """The domain in units of the mean radius: lower corner at the origin, ``size`` its bounding box."""
+class Walls(NamedTuple):
+    """The domain in units of the mean radius: lower corner at the origin, ``size`` its bounding box, ``cylinder``
+    whether it is a z-axis cylinder inscribed in the box (else the box itself)."""
 
     cylinder: bool
     size: tuple[float, float, float]
@@ -215,9 +218,25 @@ class _Attempt(NamedTuple):
     packed: bool
 
 
-def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, progress, phi: float) -> np.ndarray:
-    """Remove the overlaps of the spheres ``radii`` at ``x0`` (mean-radius units) at the fixed fraction ``phi``;
-    returns ``[n, 3]`` float64, or raises :class:`SampleError` when the spheres jam or ``max_steps`` run out."""
+def pack(x0, radii, walls: Walls, cutoff: float, tol: float, max_steps: int, progress, phi: float) -> np.ndarray:
+    """Remove the overlaps of spheres at one packing fraction.
+
+    Args:
+      x0: ``[n, 3]`` start centres (mean-radius units, domain corner at the origin).
+      radii: ``[n]`` radii (mean-radius units).
+      walls: the domain.
+      cutoff: the neighbour-list cutoff (twice the largest radius).
+      tol: the largest overlap accepted (mean radii).
+      max_steps: the FIRE step budget.
+      progress: see :func:`jaxbpm.generate.random_packing`.
+      phi: the packing fraction, for messages.
+
+    Returns:
+      ``[n, 3]`` float64 centres.
+
+    Raises:
+      SampleError: the spheres jammed or ``max_steps`` ran out.
+    """
     cell_box = _cell_box(walls)
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         packer = _packer_for(len(x0))(cell_box, float(cutoff), walls.cylinder)
@@ -229,11 +248,27 @@ def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, p
     return run.x
 
 
-def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls], fractions: tuple[float, ...],
+def pack_auto(start: Callable[[Walls], np.ndarray], radii, walls: list[Walls], fractions: tuple[float, ...],
                cutoff: float, tol: float, max_steps: int, progress) -> tuple[np.ndarray, int]:
-    """The densest of ``fractions`` (descending; ``walls`` their domains) at which the spheres ``radii``, inserted
-    at ``start(domain)``, pack (see :func:`random_packing`); returns the centres ``[n, 3]`` and the fraction's
-    index."""
+    """The densest of several packing fractions at which the spheres pack (the automatic mode of
+    :func:`jaxbpm.generate.random_packing`).
+
+    Args:
+      start: the start centres ``[n, 3]`` in a domain.
+      radii: ``[n]`` radii (mean-radius units).
+      walls: the domain of each fraction.
+      fractions: the fractions to try, densest first.
+      cutoff: the neighbour-list cutoff (twice the largest radius).
+      tol: the largest overlap accepted (mean radii).
+      max_steps: the FIRE step budget per fraction.
+      progress: see :func:`jaxbpm.generate.random_packing`.
+
+    Returns:
+      ``(centres [n, 3] float64, index of the fraction kept)``.
+
+    Raises:
+      SampleError: the last fraction did not pack either.
+    """
     cell_box = _cell_box(walls[-1])  # the largest domain: one cell list, one compiled program for all fractions
     nbrs = None
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
@@ -241,7 +276,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
         target = _target(tol, cell_box)
         for k, (phi, wall) in enumerate(zip(fractions, walls)):
             last = k == len(fractions) - 1
-            trial = None if phi <= _jamming_fraction(wall) else _TRIAL_STEPS
+            trial = None if phi <= jamming_fraction(wall) else _TRIAL_STEPS
             give_up = _jammed if last else functools.partial(_give_up, target=target, trial=trial)
             t0 = time.perf_counter()
             report = _reporter(progress, phi)
@@ -261,7 +296,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
     raise AssertionError("unreachable")
 
 
-def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chunk: int,
+def _relax(packer, x0, radii, walls: Walls, target: float, max_steps: int, chunk: int,
            give_up: Callable[[list[int], list[float]], bool], report, nbrs=None, at_rest: bool = False) -> _Attempt:
     """FIRE from ``x0`` (mean-radius units, domain corner at the origin) in chunks of ``chunk`` steps until the
     largest overlap is below ``target``, ``give_up(steps, overlaps)`` says so, or ``max_steps`` run out. ``nbrs``:
@@ -317,7 +352,7 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     return _Attempt(x, nbrs, steps, overlaps, packed)
 
 
-def _cell_box(walls: _Walls) -> tuple[float, float, float]:
+def _cell_box(walls: Walls) -> tuple[float, float, float]:
     """The cell-list box around a domain (integers: the compiled program is reused across seeds)."""
     return tuple(float(v) for v in np.ceil(np.asarray(walls.size) + 2.0 * _MARGIN))
 
@@ -365,9 +400,18 @@ def _give_up(steps, overlaps, *, target: float, trial: int | None) -> bool:
     return bool(rate <= 0.0 or now + np.log(best[-1] / target) / rate > trial)
 
 
-def _jamming_fraction(walls: _Walls) -> float:
-    """The empirical packing fraction near which fresh insertions in ``walls`` jam: ``_PHI_BULK - _WALL_LOSS * S / V``
-    (wall area over volume, mean-radius units; fitted to boxes of 400 to 4000 spheres with 5 % radius spread)."""
+def jamming_fraction(walls: Walls) -> float:
+    """The empirical packing fraction near which fresh insertions in a domain jam.
+
+    ``_PHI_BULK - _WALL_LOSS * S / V`` (wall area over volume, mean-radius units; fitted to boxes of 400 to 4000
+    spheres with 5 % radius spread).
+
+    Args:
+      walls: the domain.
+
+    Returns:
+      The expected jamming fraction.
+    """
     a, b, c = walls.size
     if walls.cylinder:
         radius = 0.5 * a

@@ -95,7 +95,7 @@ def test_jamming_fraction_estimate_grows_with_the_domain():
     # boxes at 0.6 from fresh insertions: 2000 and 2500 spheres jam, 3000 pack (in 10 000 steps): the estimate
     # must put 0.6 between them, so that 3000 spheres keep 0.6 and 2000 do not wait for it
     def estimate(n, shape="box"):
-        return pk._jamming_fraction(g._walls(shape, None, n * 4.0 / 3.0 * np.pi / 0.6, 1.05))
+        return pk.jamming_fraction(g._walls(shape, None, n * 4.0 / 3.0 * np.pi / 0.6, 1.05))
 
     assert estimate(2000) < estimate(2500) < 0.6 < estimate(3000) < estimate(10_000) < pk._PHI_BULK
     assert estimate(2000, "cylinder") < 0.6 and estimate(2000, "beam") < estimate(2000)
