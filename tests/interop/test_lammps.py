@@ -255,8 +255,7 @@ def test_lammps_reads_our_files_and_we_read_its(tmp_path):
 @pytest.mark.parametrize("comment", [False, True])
 def test_lammps_bond_coeffs_in_any_order(tmp_path, comment):
     """Bond Coeffs rows need not come in type order (LAMMPS takes them by type): reversed, read in one go or line by
-    line (a comment on each row), each bond gets its own type's coefficients. (Line by line, a reversed section
-    used to raise IndexError: the types were looked up as if sorted.)"""
+    line (a comment on each row), each bond gets its own type's coefficients."""
     import jaxbpm
     from jaxbpm.interop.lammps import lammps_coefficients
 
