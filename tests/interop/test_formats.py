@@ -29,7 +29,7 @@ def test_convert_dump_to_vtkhdf(tmp_path):
 
 
 def test_old_module_names_are_gone():
-    # jaxbpm.formats and jaxbpm.conventions were the old names of jaxbpm.interop.formats and .conventions
+    # the format and convention modules live in jaxbpm.interop only (no jaxbpm.formats, jaxbpm.conventions)
     import pathlib
 
     import jaxbpm
