@@ -101,6 +101,9 @@ def compilation_cache_dir() -> pathlib.Path | None:
 
     Reads JAX's configuration (``jax_compilation_cache_dir``, ``jax_enable_compilation_cache``), so it also reports
     a directory set through JAX itself, e.g. with ``JAX_COMPILATION_CACHE_DIR``.
+
+    Returns:
+      The absolute directory, or ``None``.
     """
     import jax
 
@@ -154,8 +157,15 @@ def _reset_jax_cache() -> None:
         pass
 
 
-def _usage(path: str | os.PathLike) -> tuple[int, int]:
-    """(number of cached programs, total bytes of all files) under ``path``; (0, 0) if it does not exist."""
+def usage(path: str | os.PathLike) -> tuple[int, int]:
+    """What a compilation cache directory holds.
+
+    Args:
+      path: the directory.
+
+    Returns:
+      ``(number of cached programs, total bytes of all files)`` under ``path``; ``(0, 0)`` if it does not exist.
+    """
     entries = size = 0
     for root, _dirs, files in os.walk(path):
         for name in files:
@@ -165,3 +175,6 @@ def _usage(path: str | os.PathLike) -> tuple[int, int]:
                 continue
             entries += name.endswith(_ENTRY_SUFFIX)
     return entries, size
+
+
+_usage = usage  # (the old private name, still imported by jaxbpm/cli.py)

@@ -32,25 +32,60 @@ __all__ = ["Program", "SetupCache", "capacity", "size_class", "SizeClass", "comp
 
 
 def traced(tree) -> bool:
-    """Whether any leaf of ``tree`` is a tracer (inside ``jit``, ``grad``, ``vmap``): a pure function then traces its
-    body; called with concrete values it can run a compiled program instead."""
+    """Whether any leaf of ``tree`` is a tracer (inside ``jit``, ``grad``, ``vmap``).
+
+    A pure function then traces its body; called with concrete values it can run a compiled program instead.
+
+    Args:
+      tree: a pytree.
+
+    Returns:
+      True when some leaf is a tracer.
+    """
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 def strong(tree):
-    """Concrete array leaves of fixed dtype (not weakly typed): ``2e9``, ``jnp.asarray(2e9)`` and ``np.float64(2e9)``
-    then give one :class:`Program` signature, so parameters in any of these forms share a compiled program."""
+    """Concrete array leaves of fixed dtype (not weakly typed).
+
+    ``2e9``, ``jnp.asarray(2e9)`` and ``np.float64(2e9)`` then give one :class:`Program` signature, so parameters
+    in any of these forms share a compiled program.
+
+    Args:
+      tree: a pytree of numbers and arrays.
+
+    Returns:
+      The same tree with strongly typed array leaves.
+    """
     return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), tree)
 
 
 def put(a, dtype=None) -> jax.Array:
-    """A host array (or scalar) on the default device as ``dtype``. Unlike ``jnp.asarray``, which builds a small XLA
-    program per shape for most dtypes, this compiles nothing: setup code uses it for everything it builds in NumPy."""
+    """A host array (or scalar) on the default device, compiling nothing.
+
+    Unlike ``jnp.asarray``, which builds a small XLA program per shape for most dtypes, this compiles nothing: setup
+    code uses it for everything it builds in NumPy.
+
+    Args:
+      a: a NumPy array or scalar.
+      dtype: the dtype on the device; default ``a``'s.
+
+    Returns:
+      The device array.
+    """
     return jax.device_put(np.asarray(a, dtype))
 
 
 def capacity(count: int, minimum: int = 8) -> int:
-    """The smallest ``m * 2**e`` (``m`` in 4, 5, 6, 7) that is at least ``count`` (and at least ``minimum``)."""
+    """The next size on the capacity ladder.
+
+    Args:
+      count: the size needed.
+      minimum: the smallest size returned.
+
+    Returns:
+      The smallest ``m * 2**e`` (``m`` in 4, 5, 6, 7) that is at least ``count`` and ``minimum``.
+    """
     count = max(int(count), int(minimum), 1)
     e = max(math.ceil(math.log2(count)) - 3, 0)
     while True:
@@ -92,7 +127,16 @@ def size_class(n_particles: int, n_bonds: int, n_contacts: int = 0) -> SizeClass
     """The padded capacities of a sample: particles on the :func:`capacity` ladder (two spare particles at least,
     which padding bonds connect to); bonds and contacts at the particles' capacity times their count per particle
     with 0.05 to spare, rounded up to a quarter -- or the smallest class already handed out in this process for that
-    particle capacity which has room for them and is at most 25 % larger."""
+    particle capacity which has room for them and is at most 25 % larger.
+
+    Args:
+      n_particles: the sample's particles.
+      n_bonds: its bonds.
+      n_contacts: its contact candidates.
+
+    Returns:
+      ``SizeClass(particles, bonds, contacts)`` capacities.
+    """
     n_cap = capacity(n_particles + 2)
     own = SizeClass(n_cap, _per_particle(n_bonds, n_particles, n_cap),
                     _per_particle(n_contacts, n_particles, n_cap))
@@ -112,11 +156,11 @@ def _signature(args, static) -> tuple:
     return treedef, shapes, tuple(sorted(static.items())), jax.config.jax_enable_x64
 
 
-# priming stops after an execution that took longer than this [s]: priming is for millisecond-long programs (an STE
-# on 1M particles runs 4 s, and two primed executions would add 8 s to its compile time)
+# priming stops after an execution that took longer than this [s]: priming is for millisecond-long programs (each
+# primed execution of a long one adds its run time to the compile time)
 _PRIME_LIMIT = 0.05
 # ... and is skipped when the arguments hold more than this many bytes: such a program does not run in milliseconds,
-# and a primed execution would double the wall time of its first call (the STE on 1M particles: 3-4 s more)
+# and a primed execution would double the wall time of its first call
 _PRIME_BYTES = 1 << 26
 
 
@@ -134,12 +178,11 @@ class Program:
 
     ``prime=k`` (for programs that run in milliseconds) executes a new executable ``k`` times on the arguments it was
     compiled for, counted as compile time. The first executions of a program after its compilation fault its scratch
-    memory in page by page: the STE at 3k particles has 13 MB of it, ~3,200 page faults, 6-8 ms a call; glibc's
-    malloc hands that memory back to the system after each of the first two executions (the first from its own
-    mapping, the second when the compiler's freed memory is trimmed with it) and keeps it from the third on. Without
-    priming, the second and third calls of such a program took 2-3x its steady run time. Priming stops after an
-    execution longer than 50 ms and is skipped for arguments over 64 MiB (a large sample, whose run is not dominated by
-    its page faults).
+    memory in page by page: glibc's malloc hands that memory back to the system after each of the first two
+    executions (the first from its own mapping, the second when the compiler's freed memory is trimmed with it) and
+    keeps it from the third on, so that a millisecond-long program's second and third calls would be slower than its
+    steady run. Priming stops after an execution longer than 50 ms and is skipped for arguments over 64 MiB (a large
+    sample, whose run is not dominated by its page faults).
     """
 
     def __init__(self, fn: Callable, static_argnames: tuple[str, ...] = (), maxsize: int = 32, prime: int = 0):
@@ -154,7 +197,15 @@ class Program:
         self.__doc__ = fn.__doc__
 
     def compiled(self, *args, **static) -> tuple[Any, float]:
-        """The executable for these arguments and the time it took to compile (0 when it was there)."""
+        """The executable for these arguments, compiled when new.
+
+        Args:
+          *args: the arguments (their shapes and dtypes make the signature).
+          **static: the static arguments.
+
+        Returns:
+          ``(executable, compile_time)`` [s]; 0 when it was there.
+        """
         unknown = set(static) - set(self.static_argnames)
         if unknown:
             raise TypeError(f"{self.__name__}: unknown static options {sorted(unknown)}")
@@ -184,16 +235,25 @@ class Program:
         return out, compile_time, time.perf_counter() - tr
 
     def jit(self, *args, **static):
-        """The plain jitted function (for use inside other traced code: ``grad``, ``vmap``)."""
+        """The plain jitted function, for use inside other traced code (``grad``, ``vmap``).
+
+        Args:
+          *args: the arguments.
+          **static: the static arguments.
+
+        Returns:
+          The function's outputs.
+        """
         return self._jit(*args, **static)
 
     def clear(self) -> None:
+        """Drop the compiled executables."""
         self._compiled.clear()
 
 
-# XLA's quick compiler settings: no LLVM optimisation, the older loop emitters for fusions. A setup program of a
-# 2000-particle sample (the bond law's Jacobians, the preconditioner's parts, the time-step estimate) compiles 4-6x
-# faster and runs 2-5x slower: 7 s less compilation for 0.25 s more run time, measured on one CPU core
+# XLA's quick compiler settings: no LLVM optimisation, the older loop emitters for fusions. A setup program (the bond
+# law's Jacobians, the preconditioner's parts, the time-step estimate) compiles several times faster and runs a few
+# times slower: for small samples, far less compilation for a little more run time
 QUICK_OPTIONS = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
 _quick_options: dict | None = None
 
@@ -201,7 +261,11 @@ _quick_options: dict | None = None
 def quick_options() -> dict:
     """The :data:`QUICK_OPTIONS` that this jaxlib's CPU compiler knows (jaxlib 0.11 removed the older fusion
     emitters and, with them, ``xla_cpu_use_fusion_emitters``: an option it does not know fails the compilation).
-    Each option is tried once per process on a one-line program."""
+    Each option is tried once per process on a one-line program.
+
+    Returns:
+      ``{option: value}``, the known subset of :data:`QUICK_OPTIONS`.
+    """
     global _quick_options
     if _quick_options is None:
         known = {}
@@ -237,7 +301,14 @@ class SetupJit:
         self.__wrapped__ = fn
 
     def quick(self, *args) -> bool:
-        """Whether a call on ``args`` compiles with the quick settings."""
+        """Whether a call on ``args`` compiles with the quick settings.
+
+        Args:
+          *args: the arguments (their largest row count decides, see :data:`QUICK_ROWS`).
+
+        Returns:
+          True on the CPU for small arguments.
+        """
         if QUICK_ROWS <= 0 or traced(args) or jax.default_backend() != "cpu":
             return False
         return all(np.ndim(x) == 0 or np.shape(x)[0] <= QUICK_ROWS for x in jax.tree_util.tree_leaves(args))
@@ -253,7 +324,15 @@ class SetupJit:
 
 
 def setup_jit(fn: Callable | None = None, *, static_argnames: tuple[str, ...] = ()):
-    """:class:`SetupJit` of ``fn``; a decorator, with or without ``static_argnames``."""
+    """:class:`SetupJit` of ``fn``; a decorator, with or without ``static_argnames``.
+
+    Args:
+      fn: the setup function; ``None`` when used as ``@setup_jit(static_argnames=...)``.
+      static_argnames: its static arguments.
+
+    Returns:
+      The :class:`SetupJit`, or a decorator that makes one.
+    """
     if fn is None:
         return lambda f: SetupJit(f, tuple(static_argnames) if not isinstance(static_argnames, str)
                                   else (static_argnames,))
@@ -261,7 +340,14 @@ def setup_jit(fn: Callable | None = None, *, static_argnames: tuple[str, ...] = 
 
 
 def hashable(value) -> bool:
-    """Whether ``value`` can be part of a cache key."""
+    """Whether ``value`` can be part of a cache key.
+
+    Args:
+      value: anything.
+
+    Returns:
+      True when ``hash(value)`` works.
+    """
     try:
         hash(value)
     except TypeError:
@@ -283,7 +369,16 @@ class SetupCache:
     def get(self, owner, key, build: Callable[[], Any]):
         """The setup of ``owner`` under ``key`` (hashable options), built by ``build()`` when absent. An unhashable
         key is built every time. A setup built in float64 is not one for float32 (and the other way round): JAX's
-        precision is part of the key."""
+        precision is part of the key.
+
+        Args:
+          owner: the object the setup belongs to (held weakly).
+          key: hashable options.
+          build: makes the setup.
+
+        Returns:
+          The setup.
+        """
         if not hashable(key):
             self.builds += 1
             return build()
@@ -300,6 +395,7 @@ class SetupCache:
         return value
 
     def clear(self) -> None:
+        """Drop every cached setup."""
         self._items.clear()
 
 
@@ -322,7 +418,12 @@ class CompileClock:
         self.count, self._spans = 0, []
 
     def add(self, start: float, end: float) -> None:
-        """A step that ran from ``start`` to ``end`` (merged with the steps it overlaps)."""
+        """Add a step that ran from ``start`` to ``end`` (merged with the steps it overlaps).
+
+        Args:
+          start: its start [s, ``time.perf_counter``].
+          end: its end.
+        """
         keep = []
         for a, b in self._spans:
             if b < start or a > end:
@@ -334,6 +435,7 @@ class CompileClock:
 
     @property
     def seconds(self) -> float:
+        """The time covered by the steps [s], overlaps counted once."""
         return float(sum(b - a for a, b in self._spans))
 
     def __getitem__(self, index):  # ``n[0]``: the count, as count_compilations() gives it
@@ -358,6 +460,9 @@ def compile_clock():
         print(c.count, c.seconds)
 
     The solvers use it to report the compilation inside their setup as compile time.
+
+    Returns:
+      A context manager giving a :class:`CompileClock`.
     """
     global _listening
     if not _listening:

@@ -22,8 +22,9 @@ from typing import Any
 
 import numpy as np
 
+from jaxbpm._spatial import morton_order
 from jaxbpm.errors import SampleError
-from jaxbpm.packing import _jamming_fraction, _Walls, _pack, _pack_auto
+from jaxbpm.packing import jamming_fraction, Walls, pack, pack_auto
 from jaxbpm.sample import BondMaterials, Domain, Sample
 
 __all__ = [
@@ -187,11 +188,10 @@ def random_packing(
       over the last 3000 steps (close to the jamming fraction, packing can take 10 000 steps);
     * the last one under the rule of an explicit ``packing_fraction`` (see Raises).
 
-    Every attempt starts at rest and runs the same FIRE steps whatever was tried before it. On the boxes measured
-    (5 % spread) the first fraction tried is the one kept (400 and 700 spheres 0.56, 1000 to 2500 0.58, 3000 and
-    more 0.60: no attempt wasted), and the samples are alike: the overlaps are removed from a random insertion at
-    the fraction kept, so most bonded neighbours touch. All attempts share one compiled program, which is why the
-    result, deterministic for a seed, is not bit for bit the sample of an explicit ``packing_fraction``.
+    Every attempt starts at rest and runs the same FIRE steps whatever was tried before it, and the samples are
+    alike: the overlaps are removed from a random insertion at the fraction kept, so most bonded neighbours touch.
+    All attempts share one compiled program, which is why the result, deterministic for a seed, is not bit for bit
+    the sample of an explicit ``packing_fraction``.
 
     Args:
       n: number of particles.
@@ -254,14 +254,14 @@ def random_packing(
     cutoff = 2.0 * (1.0 + spread)
     if packing_fraction is not None:
         x0, k = _insert(rng, walls[0], radii), 0
-        x = _pack(x0, radii, walls[0], cutoff, tol, max_steps, progress, fractions[0])
+        x = pack(x0, radii, walls[0], cutoff, tol, max_steps, progress, fractions[0])
     else:
-        def start(domain: _Walls) -> np.ndarray:  # the insertion that an explicit packing_fraction starts from
+        def start(domain: Walls) -> np.ndarray:  # the insertion that an explicit packing_fraction starts from
             again = np.random.default_rng(seed)
             again.uniform(-1.0, 1.0, n)  # the radii
             return _insert(again, domain, radii)
 
-        x, k = _pack_auto(start, radii, walls, fractions, cutoff, tol, max_steps, progress)
+        x, k = pack_auto(start, radii, walls, fractions, cutoff, tol, max_steps, progress)
 
     # particles numbered along a space-filling curve: neighbours in space are neighbours in memory
     order = morton_order(x)
@@ -273,17 +273,41 @@ def random_packing(
 
 
 def box(n: int, **kw) -> Sample:
-    """A random packing filling a box; see :func:`random_packing` (``aspect`` default ``(1, 1, 1)``)."""
+    """A random packing filling a box.
+
+    Args:
+      n: number of particles.
+      **kw: the keywords of :func:`random_packing` (``aspect`` default ``(1, 1, 1)``).
+
+    Returns:
+      The sample, see :func:`random_packing`.
+    """
     return random_packing(n, shape="box", **kw)
 
 
 def cylinder(n: int, **kw) -> Sample:
-    """A random packing filling a z-axis cylinder; see :func:`random_packing` (``aspect`` = H / D, default 2)."""
+    """A random packing filling a z-axis cylinder.
+
+    Args:
+      n: number of particles.
+      **kw: the keywords of :func:`random_packing` (``aspect`` = height / diameter, default 2).
+
+    Returns:
+      The sample, see :func:`random_packing`.
+    """
     return random_packing(n, shape="cylinder", **kw)
 
 
 def beam(n: int, **kw) -> Sample:
-    """A random packing filling a beam (a box, ``aspect`` default ``(4, 1, 1)``); see :func:`random_packing`."""
+    """A random packing filling a beam (a box).
+
+    Args:
+      n: number of particles.
+      **kw: the keywords of :func:`random_packing` (``aspect`` default ``(4, 1, 1)``).
+
+    Returns:
+      The sample, see :func:`random_packing`.
+    """
     return random_packing(n, shape="beam", **kw)
 
 
@@ -293,7 +317,7 @@ def _auto_fractions(shape: str, aspect, solid: float, r_max: float) -> tuple[flo
     (samples of fewer than about 300 spheres, whose walls loosen the packing more), fractions ``_AUTO_STEP`` apart
     downward, one past the first at or below its expected jamming fraction."""
     def expected(phi: float) -> float:
-        return _jamming_fraction(_walls(shape, aspect, solid / phi, r_max))
+        return jamming_fraction(_walls(shape, aspect, solid / phi, r_max))
 
     fractions = [float(phi) for phi in AUTO_PACKING_FRACTIONS if phi <= expected(phi)]
     phi = float(AUTO_PACKING_FRACTIONS[-1])
@@ -307,7 +331,7 @@ def _auto_fractions(shape: str, aspect, solid: float, r_max: float) -> tuple[flo
     return tuple(fractions)
 
 
-def _walls(shape: str, aspect, volume: float, r_max: float) -> _Walls:
+def _walls(shape: str, aspect, volume: float, r_max: float) -> Walls:
     """Domain of ``volume`` (in mean-radius units) with the ratios ``aspect``."""
     aspect = _DEFAULT_ASPECT[shape] if aspect is None else aspect
     if shape == "cylinder":
@@ -322,10 +346,10 @@ def _walls(shape: str, aspect, volume: float, r_max: float) -> _Walls:
     if min(size) <= 2.0 * r_max:
         raise SampleError(f"the {shape} domain ({min(size) / 2:.3g} mean radii across) is too thin for the "
                           f"largest sphere; use more particles or a less elongated aspect")
-    return _Walls(shape == "cylinder", tuple(float(s) for s in size))
+    return Walls(shape == "cylinder", tuple(float(s) for s in size))
 
 
-def _insert(rng: np.random.Generator, walls: _Walls, radii: np.ndarray) -> np.ndarray:
+def _insert(rng: np.random.Generator, walls: Walls, radii: np.ndarray) -> np.ndarray:
     """Random centres ``[n, 3]`` inside the domain shrunk by the largest radius, stratified: the shrunk domain is
     cut into at least ``n`` near-cubic grid cells, ``n`` of them are drawn at random and each receives one centre
     uniformly inside it. This keeps the start free of crowded spots (Poisson clumps), which makes the first FIRE
@@ -366,6 +390,12 @@ def from_shape(shape: str, n: int, *, seed: int = 0, progress=False, **kw) -> Sa
       progress: progress reporting, see :func:`random_packing` (random packings only).
       **kw: forwarded to :func:`random_packing` or :func:`lattice` (e.g. ``packing_fraction``, ``materials``,
         ``density``); for lattices ``mean_radius`` is accepted as the ``radius``.
+
+    Returns:
+      The sample.
+
+    Raises:
+      SampleError: an unknown shape or bad arguments.
     """
     key = str(shape).lower()
     if key not in SHAPES:
@@ -384,23 +414,6 @@ def from_shape(shape: str, n: int, *, seed: int = 0, progress=False, **kw) -> Sa
     if abs(count(c + 1) - n) < abs(count(c) - n):
         c += 1
     return lattice(key, (c, c, c), **kw)
-
-
-def morton_order(positions, bits: int = 10) -> np.ndarray:
-    """The permutation ``[n]`` that sorts points ``[n, 3]`` along a Morton (Z-order) curve of ``2**bits`` cells per
-    axis over their bounding box (ties keep their order): particles close in space get close indices, so the
-    solvers' per-bond gathers and per-particle sums touch memory in runs. On a 100k-particle random box it makes the
-    median index distance of a bond 11 instead of ~30 000 and the DEM ~10 % faster on CPU."""
-    x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-    if len(x) == 0:
-        return np.zeros(0, np.int64)
-    lo, span = x.min(axis=0), np.ptp(x, axis=0)
-    q = np.floor((x - lo) / np.where(span > 0, span, 1.0) * (2**bits - 1)).astype(np.uint64)
-    code = np.zeros(len(x), np.uint64)
-    for bit in range(bits):
-        for axis in range(3):
-            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
-    return np.argsort(code, kind="stable")
 
 
 # ----------------------------------------------------------------------------------------------------------- bonds

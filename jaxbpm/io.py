@@ -3,10 +3,12 @@
 :func:`save_sample` / :func:`load_sample` store a :class:`~jaxbpm.sample.Sample` in an HDF5 file (format
 ``"jaxbpm-sample"``, version :data:`FORMAT_VERSION`) and read it back exactly: every array leaf round-trips
 bit for bit, and the loaded sample is rebuilt with :meth:`Sample.from_arrays`, so it is validated again.
-:func:`export_vtk` writes particles and bonds for ParaView (``.vtu`` XML or ``.vtk`` legacy) through meshio.
+:func:`export_vtk` (from :mod:`jaxbpm._vtk`) writes particles and bonds for ParaView (``.vtu`` XML or ``.vtk``
+legacy) through meshio.
 
-Both writers are atomic: they write a temporary file in the target's directory and rename it onto the target
-only once it is complete, so an error or a crash never leaves a half-written file behind.
+Both writers are atomic (:func:`atomic_write`, from :mod:`jaxbpm._atomic`): they write a temporary file in the
+target's directory and rename it onto the target only once it is complete, so an error or a crash never leaves a
+half-written file behind.
 
 File layout (all quantities SI; every dataset carries a ``units`` attribute):
 
@@ -45,17 +47,14 @@ before it existed, or rewritten by other tools). An edit through h5py changes th
 
 from __future__ import annotations
 
-import contextlib
-import errno
-import os
 import pathlib
 import re
-import tempfile
 import zlib
-from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from jaxbpm._atomic import STALE_AFTER_S, atomic_write, check_writable, write_json  # noqa: F401 (re-exported)
+from jaxbpm._vtk import export_vtk
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
@@ -79,101 +78,6 @@ _DERIVED = [("mass", "kg"), ("inertia", "kg m^2"), ("bond_length", "m"), ("bond_
             ("bond_J", "m^4")]
 _DERIVED_ALL = _DERIVED + [("coordination", "1")]  # what /derived holds
 
-_VTK_FORMATS = {".vtu": "vtu", ".vtk": "vtk"}
-
-
-# ---------------------------------------------------------------------------------------------- atomic writes
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def check_writable(path) -> pathlib.Path:
-    """``path`` as a :class:`pathlib.Path` when a file can be written there: its folder exists and it is not itself
-    a folder. Otherwise the ``OSError`` that says so, naming ``path`` (callers check before long work, e.g. a
-    packing, and :func:`atomic_write` checks again before it writes)."""
-    target = pathlib.Path(path)
-    if not target.parent.is_dir():
-        raise FileNotFoundError(errno.ENOENT, f"cannot write {target}: no such directory", str(target.parent))
-    if target.is_dir():
-        raise IsADirectoryError(errno.EISDIR, f"cannot write {target}: it is a directory (give a file name)",
-                                str(target))
-    return target
-
-
-def _naming_target(err: OSError, target: pathlib.Path) -> OSError:
-    """``err`` again, naming ``target`` (what the OS reports names the hidden temporary file)."""
-    return type(err)(err.errno, f"cannot write {target}: {err.strerror}", str(target))
-
-
-def atomic_write(path, write: Callable[[str], None]) -> pathlib.Path:
-    """Call ``write(tmp_name)`` on a fresh temporary file next to ``path``, then rename it onto ``path``.
-
-    On any exception (including KeyboardInterrupt) the temporary file is deleted and the exception re-raised;
-    ``path`` is then exactly as it was before.
-    """
-    target = check_writable(path)
-    _remove_stale_temporaries(target)
-    try:
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    except OSError as err:
-        raise _naming_target(err, target) from err
-    os.close(fd)
-    try:
-        write(tmp)
-        with open(tmp, "rb+") as fh:  # make the content durable before it replaces the target
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_current_umask())  # mkstemp creates 0600; give the usual permissions
-        os.replace(tmp, target)
-    except BaseException as err:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(err, OSError) and err.errno is not None and tmp in str(err):
-            raise _naming_target(err, target) from err
-        raise
-    return target
-
-
-STALE_AFTER_S = 3600.0  # a temporary file of a save this old was left by a killed process
-
-
-def _remove_stale_temporaries(target: pathlib.Path) -> None:
-    """Remove the temporary files an interrupted (killed) save of ``target`` left beside it, once they are older
-    than :data:`STALE_AFTER_S` (younger ones may belong to a save still running in another process)."""
-    import glob
-    import time
-
-    now = time.time()
-    for old in target.parent.glob(f".{glob.escape(target.name)}.*.tmp"):
-        with contextlib.suppress(OSError):
-            if now - old.stat().st_mtime > STALE_AFTER_S:
-                old.unlink()
-
-
-def write_json(path, data) -> pathlib.Path:
-    """Write ``data`` as indented JSON to ``path`` atomically, creating missing parent directories.
-
-    NumPy scalars and arrays are converted; anything else unknown is written as its ``float``.
-    """
-    import json
-
-    def convert(obj):
-        if isinstance(obj, np.ndarray):
-            return obj.tolist()
-        if isinstance(obj, (np.integer, np.bool_)):
-            return obj.item()
-        return float(obj)
-
-    target = pathlib.Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-
-    def write(tmp):
-        with open(tmp, "w") as fh:
-            json.dump(data, fh, indent=2, default=convert)
-            fh.write("\n")
-
-    return atomic_write(target, write)
 
 
 # ---------------------------------------------------------------------------------------------- HDF5 sample files
@@ -435,6 +339,13 @@ def load_sample(path, *, verify: bool = True) -> Sample:
     ``verify=False`` reads a file changed on purpose (an edit through h5py) as it is: only the Fletcher-32 sums and
     the validation of the sample apply.
 
+    Args:
+      path: the HDF5 sample file.
+      verify: compare the file with its checksums and its derived quantities (see above).
+
+    Returns:
+      The sample, validated.
+
     Raises:
       SampleFileError: the file is missing, is not an HDF5 file (or is corrupt), is not a jaxbpm sample, has an
         unsupported ``format_version``, or lacks a field (the message names the file and the problem).
@@ -504,96 +415,20 @@ _EDITED = ("the inputs changed after the file was written, or the file is damage
            "and save the sample again")
 
 
-# ---------------------------------------------------------------------------------------------- VTK export
-def _user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
-               reserved: set[str]) -> dict[str, np.ndarray]:
-    out: dict[str, np.ndarray] = {}
-    for name, value in (data or {}).items():
-        if not isinstance(name, str) or not name:
-            raise SampleError(f"{kind}: field names must be non-empty strings, got {name!r}")
-        if name in reserved:
-            raise SampleError(f"{kind}[{name!r}]: the name is taken by a built-in field ({sorted(reserved)})")
-        arr = np.asarray(value)
-        if arr.dtype == bool:
-            arr = arr.astype(np.uint8)
-        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
-            raise SampleError(f"{kind}[{name!r}]: must be a real numeric array, got dtype {arr.dtype}")
-        if arr.ndim not in (1, 2) or arr.shape[0] != count or (arr.ndim == 2 and arr.shape[1] < 1):
-            raise SampleError(
-                f"{kind}[{name!r}]: expected shape [{count}] or [{count}, k] (one row per {what}), got {arr.shape}")
-        out[name] = arr
-    return out
+# ---------------------------------------------------------------------------------------------------- STE map
+def save_local_map(path, lmap) -> pathlib.Path:
+    """Write a :class:`~jaxbpm.ste.LocalMap` to HDF5, atomically.
 
-
-def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = None,
-               bond_data: Mapping[str, Any] | None = None) -> pathlib.Path:
-    """Write particles and bonds to a VTK file for ParaView, atomically.
-
-    The points are the particle centres [m]. Two cell blocks: ``vertex`` (one cell per particle, in particle
-    order) and ``line`` (one cell per bond, in bond order; left out when the sample has no bonds, since legacy
-    VTK cannot hold an empty block).
-
-    Point data: ``radius`` [m], ``mass`` [kg], ``coordination`` (bonds per particle), then ``point_data``.
-    Cell data, per bond: ``bond_radius`` [m], ``material`` (component index), ``length`` [m] (initial bond
-    length), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
-    the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for ``material``.
-    In ParaView, glyph the points with spheres scaled by ``radius`` and show the lines as tubes.
+    Datasets ``positions`` [m], ``E`` [Pa], ``deviation`` [1], ``valid``; attributes ``format = "jaxbpm-ste-map"``,
+    ``radius`` [m].
 
     Args:
-      path: ``*.vtu`` (VTK XML unstructured grid, preferred) or ``*.vtk`` (legacy); the suffix picks the format.
-      sample: the sample.
-      point_data: ``{name: [n] or [n, k]}`` extra per-particle fields (e.g. displacement ``[n, 3]``).
-      bond_data: ``{name: [nb] or [nb, k]}`` extra per-bond fields (e.g. bond force ``[nb]``).
+      path: the target file.
+      lmap: the local map.
 
     Returns:
       ``path`` as a :class:`pathlib.Path`.
-
-    Raises:
-      SampleError: a user field has the wrong shape or type, or reuses a built-in name (the field is named).
-      SampleFileError: the suffix is neither ``.vtu`` nor ``.vtk``.
-      TypeError: ``sample`` is not a :class:`Sample`.
     """
-    import meshio
-
-    if not isinstance(sample, Sample):
-        raise TypeError(f"export_vtk expects a jaxbpm Sample, got {type(sample).__name__}")
-    target = pathlib.Path(path)
-    file_format = _VTK_FORMATS.get(target.suffix.lower())
-    if file_format is None:
-        raise SampleFileError(
-            f"{target}: cannot tell the VTK format from the suffix {target.suffix!r}; use .vtu (XML) or .vtk (legacy)")
-
-    n, nb = sample.n_particles, sample.n_bonds
-    pdata = {
-        "radius": np.asarray(sample.radii, dtype=np.float64),
-        "mass": np.asarray(sample.mass, dtype=np.float64),
-        "coordination": np.asarray(sample.coordination(), dtype=np.int32),
-    }
-    pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
-    bdata = {
-        "bond_radius": np.asarray(sample.bond_radius, dtype=np.float64),
-        "material": np.asarray(sample.bond_material, dtype=np.int32),
-        "length": np.asarray(sample.bond_length, dtype=np.float64),
-    }
-    bdata.update({k: v.astype(np.float64) for k, v in
-                  _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
-
-    cells = [("vertex", np.arange(n, dtype=np.int64)[:, None])]
-    if nb:
-        cells.append(("line", np.asarray(sample.bonds, dtype=np.int64)))
-    cell_data = {}
-    for name, arr in bdata.items():
-        filler = np.full((n,) + arr.shape[1:], -1 if name == "material" else np.nan, dtype=arr.dtype)
-        cell_data[name] = [filler, arr] if nb else [filler]
-    mesh = meshio.Mesh(np.asarray(sample.positions, dtype=np.float64), cells, point_data=pdata,
-                       cell_data=cell_data)
-    return atomic_write(target, lambda tmp: meshio.write(tmp, mesh, file_format=file_format))
-
-
-# ---------------------------------------------------------------------------------------------------- STE map
-def save_local_map(path, lmap) -> pathlib.Path:
-    """Write a :class:`~jaxbpm.ste.LocalMap` to HDF5 (atomically): datasets ``positions`` [m], ``E`` [Pa],
-    ``deviation`` [1], ``valid``; attributes ``format = "jaxbpm-ste-map"``, ``radius`` [m]."""
     import h5py
 
     def write(tmp):
@@ -609,16 +444,35 @@ def save_local_map(path, lmap) -> pathlib.Path:
 
 
 def export_local_map_vtk(path, sample, lmap) -> pathlib.Path:
-    """Write the sample with the map as point data (``E_local`` [n, 3], ``deviation`` [n, 3], ``ste_valid``) to
-    ``.vtu``/``.vtk`` through :func:`export_vtk`."""
+    """Write the sample with a local stiffness map as point data, through :func:`export_vtk`.
+
+    Args:
+      path: ``*.vtu`` or ``*.vtk``.
+      sample: the sample the map belongs to.
+      lmap: the :class:`~jaxbpm.ste.LocalMap`; written as ``E_local [n, 3]``, ``deviation [n, 3]``, ``ste_valid``.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
     return export_vtk(path, sample, point_data={"E_local": lmap.E, "deviation": lmap.deviation,
                                                 "ste_valid": lmap.valid})
 
 
 def plot_local_map(path, lmap, *, direction: int = 2, slice_axis: int = 1, thickness: float | None = None):
-    """Save a picture (format from the suffix: PNG, SVG, PDF, ...) of the deviation (Eq. 36, percent) along
-    ``direction`` in a slice through the middle of the sample normal to ``slice_axis`` (``thickness`` default two
-    neighbourhood radii). Written atomically, without pyplot or any global matplotlib state; returns the path."""
+    """Save a picture of a local stiffness map's deviation (Eq. 36, percent) in a slice through the sample.
+
+    Written atomically, without pyplot or any global matplotlib state.
+
+    Args:
+      path: the picture; its suffix gives the format (PNG, SVG, PDF, ...).
+      lmap: the :class:`~jaxbpm.ste.LocalMap`.
+      direction: the stiffness direction shown (0, 1, 2 for x, y, z).
+      slice_axis: the slice's normal, through the middle of the sample.
+      thickness: the slice's thickness [m]; default two neighbourhood radii.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
     from matplotlib.figure import Figure
 
     pos = lmap.positions

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import importlib.util
-import sys
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -20,11 +18,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._spatial import HostList, jax_md_neighbors, morton_order, pair_list, stale
 from jaxbpm.errors import SampleError
 
+__all__ = ["Walls", "pack", "pack_auto", "jamming_fraction"]
 
-class _Walls(NamedTuple):
-    """The domain in units of the mean radius: lower corner at the origin, ``size`` its bounding box."""
+# (the old private name, still imported by jaxbpm.neighbors)
+_jax_md_neighbors = jax_md_neighbors
+
+
+class Walls(NamedTuple):
+    """The domain in units of the mean radius: lower corner at the origin, ``size`` its bounding box, ``cylinder``
+    whether it is a z-axis cylinder inscribed in the box (else the box itself)."""
 
     cylinder: bool
     size: tuple[float, float, float]
@@ -123,30 +128,10 @@ def _fire_start(x, nbrs, radii, walls, cylinder: bool) -> _Fire:
                  jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32))
 
 
-def _jax_md_neighbors():
-    """jax-md's ``partition`` and ``space`` modules, imported lazily (and, not being strict-promotion safe, within
-    the caller's promotion context). Unless jax-md is imported already, only these two modules and their own
-    imports are loaded: the package's ``__init__`` imports all of jax-md (neural networks, rigid bodies, with
-    computations at import), which takes seconds. A later ``import jax_md`` loads the rest as usual."""
-    if "jax_md" not in sys.modules:
-        spec = importlib.util.find_spec("jax_md")
-        if spec is not None and spec.submodule_search_locations:
-            sys.modules["jax_md"] = importlib.util.module_from_spec(spec)  # the package, __init__ not run
-            try:
-                from jax_md import partition, space
-                return partition, space
-            except ImportError:
-                pass
-            finally:
-                del sys.modules["jax_md"]
-    from jax_md import partition, space
-    return partition, space
-
-
 @functools.lru_cache(maxsize=8)
 def _packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool):
     """Neighbour-list functions and the jitted FIRE pieces for one cell-list box (cached: no recompilation)."""
-    partition, space = _jax_md_neighbors()
+    partition, space = jax_md_neighbors()
     box_arr = np.asarray(cell_box, dtype=np.float64)
     displacement, _ = space.free()
     neighbor_fn = partition.neighbor_list(displacement, box_arr, cutoff, dr_threshold=_SKIN,
@@ -172,57 +157,31 @@ def _packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool)
         def body(carry):
             return _fire_step(*carry, radii, walls, cell, cylinder)
 
-        return jax.lax.while_loop(cond, body, (state, nbrs))
+        state, nbrs = jax.lax.while_loop(cond, body, (state, nbrs))
+        return state, nbrs, nbrs.did_buffer_overflow
 
     return allocate, init, run
 
 
 # from this many spheres on the CPU the neighbour list is built on the host (a k-d tree) instead of by jax-md's cell
-# list inside the step: the cell list's rebuild fills a dense [n, 27 x cell capacity, 3] candidate array, gigabytes
-# fresh from the system at every rebuild (at 200k spheres 9-20 s a rebuild against 0.17 s a step)
+# list inside the step: the cell list's rebuild fills a dense [n, 27 x cell capacity, 3] candidate array, fresh from
+# the system at every rebuild, which costs more than many steps at this size
 _HOST_LIST_MIN = 20_000
-
-
-class _HostList(NamedTuple):
-    """A neighbour list built on the host: jax-md's sparse layout (``idx [2, capacity]``, both directions, grouped
-    by ``idx[1]``, padded with ``n``), the positions it was built at, and whether a sphere has moved more than half
-    the skin since (named as jax-md's overflow flag: the caller rebuilds the list on either)."""
-
-    idx: jax.Array
-    reference: jax.Array
-    did_buffer_overflow: jax.Array
-
-
-def _host_pairs(x: np.ndarray, radius: float, capacity: int) -> tuple[np.ndarray, int]:
-    """Pairs of centres closer than ``radius`` in jax-md's sparse layout with ``capacity`` slots (more when they do
-    not fit), and that slot count; sorted by ``idx[1]`` then ``idx[0]``."""
-    from scipy.spatial import cKDTree
-
-    n = x.shape[0]
-    half = cKDTree(x).query_pairs(radius, output_type="ndarray").astype(np.int32)
-    rows = np.concatenate([half[:, 0], half[:, 1]])
-    cols = np.concatenate([half[:, 1], half[:, 0]])
-    order = np.argsort(rows.astype(np.int64) * n + cols)  # by row, then column: jax-md's order of the sums
-    count = rows.shape[0]
-    if count > capacity:
-        capacity = int(count * _CAPACITY) + 1
-    idx = np.full((2, capacity), n, np.int32)
-    idx[1, :count], idx[0, :count] = rows[order], cols[order]
-    return idx, capacity
 
 
 @functools.lru_cache(maxsize=8)
 def _host_packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: bool):
-    """:func:`_packer`'s three functions with the neighbour list built on the host (:func:`_host_pairs`): the
-    jitted chunk stops at the step after which a sphere has moved more than half the skin, and the caller rebuilds
-    the list there and recomputes the forces, as on a jax-md overflow. The slot count only grows (one compiled
-    chunk)."""
+    """:func:`_packer`'s three functions with the neighbour list built on the host (:func:`jaxbpm._spatial.pair_list`,
+    both ways): the jitted chunk stops at the step after which a sphere has moved more than half the skin
+    (:func:`jaxbpm._spatial.stale`), and the caller rebuilds the list there and recomputes the forces, as on a jax-md
+    overflow. The slot count only grows (one compiled chunk)."""
     box = np.asarray(cell_box, dtype=np.float64)
     slots = [0]
 
     def allocate(x):
-        idx, slots[0] = _host_pairs(np.asarray(x, dtype=np.float64), cutoff + _SKIN, slots[0])
-        return _HostList(jnp.asarray(idx), x, jnp.zeros((), bool))
+        idx, slots[0] = pair_list(np.asarray(x, dtype=np.float64), cutoff + _SKIN, slots[0], _CAPACITY,
+                                  both_ways=True)
+        return HostList(jnp.asarray(idx), x, jnp.asarray((0.5 * _SKIN) ** 2, x.dtype))
 
     init = jax.jit(functools.partial(_fire_start, cylinder=cylinder))
 
@@ -231,27 +190,17 @@ def _host_packer(cell_box: tuple[float, float, float], cutoff: float, cylinder: 
         cell = jnp.asarray(box, dtype=state.x.dtype)
 
         def cond(carry):
-            s, nb = carry
-            return (s.step < stop) & (s.max_overlap >= tol) & ~nb.did_buffer_overflow
+            s, _, moved = carry
+            return (s.step < stop) & (s.max_overlap >= tol) & ~moved
 
         def body(carry):
-            s, nb = carry
-            s, _ = _fire_step(s, _Static(nb.idx), radii, walls, cell, cylinder)
-            moved = jnp.max(jnp.sum((s.x - nb.reference) ** 2, axis=1)) > (0.5 * _SKIN) ** 2
-            return s, nb._replace(did_buffer_overflow=moved)
+            s, nb, _ = carry
+            s, nb = _fire_step(s, nb, radii, walls, cell, cylinder)
+            return s, nb, stale(nb, s.x)
 
-        return jax.lax.while_loop(cond, body, (state, nbrs))
+        return jax.lax.while_loop(cond, body, (state, nbrs, jnp.zeros((), bool)))
 
     return allocate, init, run
-
-
-class _Static(NamedTuple):
-    """A neighbour list that :func:`_fire_step` updates to itself (the host list is checked by its caller)."""
-
-    idx: jax.Array
-
-    def update(self, x):
-        return self
 
 
 def _packer_for(n: int):
@@ -269,9 +218,25 @@ class _Attempt(NamedTuple):
     packed: bool
 
 
-def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, progress, phi: float) -> np.ndarray:
-    """Remove the overlaps of the spheres ``radii`` at ``x0`` (mean-radius units) at the fixed fraction ``phi``;
-    returns ``[n, 3]`` float64, or raises :class:`SampleError` when the spheres jam or ``max_steps`` run out."""
+def pack(x0, radii, walls: Walls, cutoff: float, tol: float, max_steps: int, progress, phi: float) -> np.ndarray:
+    """Remove the overlaps of spheres at one packing fraction.
+
+    Args:
+      x0: ``[n, 3]`` start centres (mean-radius units, domain corner at the origin).
+      radii: ``[n]`` radii (mean-radius units).
+      walls: the domain.
+      cutoff: the neighbour-list cutoff (twice the largest radius).
+      tol: the largest overlap accepted (mean radii).
+      max_steps: the FIRE step budget.
+      progress: see :func:`jaxbpm.generate.random_packing`.
+      phi: the packing fraction, for messages.
+
+    Returns:
+      ``[n, 3]`` float64 centres.
+
+    Raises:
+      SampleError: the spheres jammed or ``max_steps`` ran out.
+    """
     cell_box = _cell_box(walls)
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
         packer = _packer_for(len(x0))(cell_box, float(cutoff), walls.cylinder)
@@ -283,11 +248,27 @@ def _pack(x0, radii, walls: _Walls, cutoff: float, tol: float, max_steps: int, p
     return run.x
 
 
-def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls], fractions: tuple[float, ...],
+def pack_auto(start: Callable[[Walls], np.ndarray], radii, walls: list[Walls], fractions: tuple[float, ...],
                cutoff: float, tol: float, max_steps: int, progress) -> tuple[np.ndarray, int]:
-    """The densest of ``fractions`` (descending; ``walls`` their domains) at which the spheres ``radii``, inserted
-    at ``start(domain)``, pack (see :func:`random_packing`); returns the centres ``[n, 3]`` and the fraction's
-    index."""
+    """The densest of several packing fractions at which the spheres pack (the automatic mode of
+    :func:`jaxbpm.generate.random_packing`).
+
+    Args:
+      start: the start centres ``[n, 3]`` in a domain.
+      radii: ``[n]`` radii (mean-radius units).
+      walls: the domain of each fraction.
+      fractions: the fractions to try, densest first.
+      cutoff: the neighbour-list cutoff (twice the largest radius).
+      tol: the largest overlap accepted (mean radii).
+      max_steps: the FIRE step budget per fraction.
+      progress: see :func:`jaxbpm.generate.random_packing`.
+
+    Returns:
+      ``(centres [n, 3] float64, index of the fraction kept)``.
+
+    Raises:
+      SampleError: the last fraction did not pack either.
+    """
     cell_box = _cell_box(walls[-1])  # the largest domain: one cell list, one compiled program for all fractions
     nbrs = None
     with jax.numpy_dtype_promotion("standard"), jax.numpy_rank_promotion("allow"):
@@ -295,7 +276,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
         target = _target(tol, cell_box)
         for k, (phi, wall) in enumerate(zip(fractions, walls)):
             last = k == len(fractions) - 1
-            trial = None if phi <= _jamming_fraction(wall) else _TRIAL_STEPS
+            trial = None if phi <= jamming_fraction(wall) else _TRIAL_STEPS
             give_up = _jammed if last else functools.partial(_give_up, target=target, trial=trial)
             t0 = time.perf_counter()
             report = _reporter(progress, phi)
@@ -315,7 +296,7 @@ def _pack_auto(start: Callable[[_Walls], np.ndarray], radii, walls: list[_Walls]
     raise AssertionError("unreachable")
 
 
-def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chunk: int,
+def _relax(packer, x0, radii, walls: Walls, target: float, max_steps: int, chunk: int,
            give_up: Callable[[list[int], list[float]], bool], report, nbrs=None, at_rest: bool = False) -> _Attempt:
     """FIRE from ``x0`` (mean-radius units, domain corner at the origin) in chunks of ``chunk`` steps until the
     largest overlap is below ``target``, ``give_up(steps, overlaps)`` says so, or ``max_steps`` run out. ``nbrs``:
@@ -323,14 +304,12 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     chunk is reused; the attempt's first step then only updates the list and computes the forces. ``at_rest``: start
     so without ``nbrs`` too (the automatic mode's attempts: each runs the same steps whether or not others came
     before it; near jamming, one step's offset decides whether a fraction packs)."""
-    from jaxbpm.generate import morton_order
-
     allocate, init, run = packer
     dtype = jnp.result_type(float)
     t0 = time.perf_counter()
     size = np.asarray(walls.size)
     # the spheres relaxed in the order of a space-filling curve through their start: the pair gathers and force
-    # sums touch memory in runs (2x fewer seconds per step on 30k spheres); the result comes back in their order
+    # sums touch memory in runs; the result comes back in their order
     order = morton_order(x0)
     x = jnp.asarray(np.asarray(x0)[order] + _MARGIN, dtype=dtype)
     r = jnp.asarray(np.asarray(radii)[order], dtype=dtype)
@@ -350,8 +329,8 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     while True:
         stop = min(int(state.step) + chunk, max_steps)
         while True:
-            state, nbrs = run(state, nbrs, r, w, tol_j, jnp.asarray(stop, dtype=jnp.int32))
-            if not bool(nbrs.did_buffer_overflow):
+            state, nbrs, rebuild = run(state, nbrs, r, w, tol_j, jnp.asarray(stop, dtype=jnp.int32))
+            if not bool(rebuild):
                 break
             # the last step used a truncated (jax-md) or stale (host) list: rebuild, recompute the forces, and go
             # on with the chunk
@@ -373,7 +352,7 @@ def _relax(packer, x0, radii, walls: _Walls, target: float, max_steps: int, chun
     return _Attempt(x, nbrs, steps, overlaps, packed)
 
 
-def _cell_box(walls: _Walls) -> tuple[float, float, float]:
+def _cell_box(walls: Walls) -> tuple[float, float, float]:
     """The cell-list box around a domain (integers: the compiled program is reused across seeds)."""
     return tuple(float(v) for v in np.ceil(np.asarray(walls.size) + 2.0 * _MARGIN))
 
@@ -421,9 +400,18 @@ def _give_up(steps, overlaps, *, target: float, trial: int | None) -> bool:
     return bool(rate <= 0.0 or now + np.log(best[-1] / target) / rate > trial)
 
 
-def _jamming_fraction(walls: _Walls) -> float:
-    """The empirical packing fraction near which fresh insertions in ``walls`` jam: ``_PHI_BULK - _WALL_LOSS * S / V``
-    (wall area over volume, mean-radius units; fitted to boxes of 400 to 4000 spheres with 5 % radius spread)."""
+def jamming_fraction(walls: Walls) -> float:
+    """The empirical packing fraction near which fresh insertions in a domain jam.
+
+    ``_PHI_BULK - _WALL_LOSS * S / V`` (wall area over volume, mean-radius units; fitted to boxes of 400 to 4000
+    spheres with 5 % radius spread).
+
+    Args:
+      walls: the domain.
+
+    Returns:
+      The expected jamming fraction.
+    """
     a, b, c = walls.size
     if walls.cylinder:
         radius = 0.5 * a

@@ -16,17 +16,15 @@ from typing import Any, Mapping, NamedTuple
 import jax
 import numpy as np
 
+from jaxbpm._spatial import morton_order
+from jaxbpm._text import shown
+from jaxbpm._validate import (bond_lengths, checked_bond_material, checked_bond_radius, checked_bonds,
+                              checked_positions, checked_radii, listed)
 from jaxbpm.errors import SampleError
 
 __all__ = ["Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary"]
 
-_MAX_LISTED = 10  # how many offending indices an error message lists
-
-
-def _listed(idx) -> str:
-    idx = np.asarray(idx).tolist()
-    more = f" ... ({len(idx)} in all)" if len(idx) > _MAX_LISTED else ""
-    return f"{idx[:_MAX_LISTED]}{more}"
+_shown = shown  # (the old private name of jaxbpm._text.shown, still imported by options.py and records.py)
 
 
 class Domain(NamedTuple):
@@ -42,6 +40,7 @@ class Domain(NamedTuple):
 
     @property
     def volume(self) -> float:
+        """The region's volume [m^3] (a cylinder: the one inscribed in the box, pi a b h / 4)."""
         size = np.subtract(self.hi, self.lo)
         if self.kind == "cylinder":
             return float(np.pi * size[0] * size[1] / 4.0 * size[2])
@@ -61,18 +60,7 @@ def _numbers(name: str, value) -> np.ndarray:
             raise TypeError
         return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
-        raise SampleError(f"materials: {name} must be numbers, got {_shown(value)}") from None
-
-
-def _shown(value, limit: int = 80) -> str:
-    """``value`` for an error message: plain numbers (``1.5``, ``[1.0, 2.0]``, not NumPy reprs), shortened."""
-    try:
-        if isinstance(value, (np.ndarray, np.generic)):
-            value = value.tolist()
-        text = repr(value)
-    except Exception:  # noqa: BLE001 (a value whose repr fails still gets a message)
-        text = f"a {type(value).__name__}"
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+        raise SampleError(f"materials: {name} must be numbers, got {shown(value)}") from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,11 +79,25 @@ class BondMaterials:
 
     @property
     def n(self) -> int:
+        """The number of material components."""
         return int(np.shape(self.E)[0])
 
     @classmethod
     def create(cls, E, nu=0.25, tensile_strength=np.inf, shear_strength=np.inf) -> "BondMaterials":
-        """Build and check a table; scalars broadcast to the number of components given by ``E``."""
+        """Build and check a table; scalars broadcast to the number of components given by ``E``.
+
+        Args:
+          E: ``[k]`` (or a scalar) bond Young's moduli [Pa], finite and > 0.
+          nu: Poisson ratios [-] in (-1, 0.5).
+          tensile_strength: [Pa], > 0 (``inf``: unbreakable).
+          shear_strength: [Pa], > 0 (``inf``: unbreakable).
+
+        Returns:
+          The table, each field ``[k]`` float64.
+
+        Raises:
+          SampleError: a field is not numbers, has the wrong shape, or is out of range (naming the components).
+        """
         E = np.atleast_1d(_numbers("E", E))
         if E.ndim != 1 or E.size == 0:
             raise SampleError(f"materials: E must be a non-empty 1-D list of Young's moduli, got shape {E.shape}")
@@ -109,18 +111,18 @@ class BondMaterials:
                 raise SampleError(
                     f"materials: {name} has shape {arr.shape}, expected a scalar or {E.shape[0]} values") from None
             if np.isnan(arr).any():
-                raise SampleError(f"materials: {name} is NaN for components {_listed(np.flatnonzero(np.isnan(arr)))}")
+                raise SampleError(f"materials: {name} is NaN for components {listed(np.flatnonzero(np.isnan(arr)))}")
             out[name] = arr
         bad = np.flatnonzero(~np.isfinite(out["E"]) | (out["E"] <= 0))
         if bad.size:
-            raise SampleError(f"materials: E must be finite and > 0; bad components {_listed(bad)}")
+            raise SampleError(f"materials: E must be finite and > 0; bad components {listed(bad)}")
         bad = np.flatnonzero(~((out["nu"] > -1.0) & (out["nu"] < 0.5)))
         if bad.size:
-            raise SampleError(f"materials: nu must lie in (-1, 0.5); bad components {_listed(bad)}")
+            raise SampleError(f"materials: nu must lie in (-1, 0.5); bad components {listed(bad)}")
         for name in ("tensile_strength", "shear_strength"):
             bad = np.flatnonzero(out[name] <= 0)
             if bad.size:
-                raise SampleError(f"materials: {name} must be > 0; bad components {_listed(bad)}")
+                raise SampleError(f"materials: {name} must be > 0; bad components {listed(bad)}")
         return cls(**out)
 
 
@@ -143,6 +145,18 @@ class ParticleMaterial:
 
     @classmethod
     def create(cls, **kw) -> "ParticleMaterial":
+        """Build and check the particle material; fields not given take the class defaults.
+
+        Args:
+          **kw: ``density`` [kg/m^3] > 0, ``E`` [Pa] > 0, ``nu`` in (-1, 0.5), ``friction`` >= 0, ``restitution`` in
+            (0, 1]; each a finite real scalar.
+
+        Returns:
+          The material, fields as float64 scalars.
+
+        Raises:
+          SampleError: an unknown field, a value that is not a real number, or one out of range.
+        """
         unknown = set(kw) - {f.name for f in dataclasses.fields(cls)}
         if unknown:
             raise SampleError(f"particle_material: unknown fields {sorted(map(str, unknown))}")
@@ -151,11 +165,11 @@ class ParticleMaterial:
             arr = np.asarray(v) if not isinstance(v, (str, bytes)) else None
             if arr is None or arr.shape != () or arr.dtype == bool or not (
                     np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
-                raise SampleError(f"particle_material: {k} must be a real number, got {_shown(v)}")
+                raise SampleError(f"particle_material: {k} must be a real number, got {shown(v)}")
             try:
                 values[k] = np.float64(arr)
             except OverflowError:
-                raise SampleError(f"particle_material: {k} must be a real number, got {_shown(v)}") from None
+                raise SampleError(f"particle_material: {k} must be a real number, got {shown(v)}") from None
         pm = cls(**values)
         checks = {
             "density": pm.density > 0, "E": pm.E > 0, "nu": -1 < pm.nu < 0.5,
@@ -284,147 +298,23 @@ class Sample:
           bond_contact: ``"superimpose"`` or ``"replace"`` (do bonded pairs also feel contact forces?).
           domain: the region the sample fills (used for its packing fraction), optional.
 
+        Returns:
+          The sample, with its derived per-particle and per-bond quantities.
+
         Raises:
           SampleError: naming the problem and the offending indices.
         """
-        pos = _float_array("positions", positions)
-        if pos.ndim != 2 or pos.shape[1] != 3:
-            raise SampleError(f"positions must have shape [n, 3], got {pos.shape}")
+        pos = checked_positions(positions)
         n = pos.shape[0]
-        if n == 0:
-            raise SampleError("positions: the sample has no particles")
-        _finite("positions", pos)
-
-        rad = _float_array("radii", radii)
-        if rad.ndim == 0:
-            rad = np.full(n, float(rad))
-        if rad.shape != (n,):
-            raise SampleError(f"radii must have shape [{n}] (one per particle), got {rad.shape}")
-        _finite("radii", rad)
-        bad = np.flatnonzero(rad <= 0)
-        if bad.size:
-            raise SampleError(f"radii must be > 0; non-positive radius at particles {_listed(bad)}")
-        # float64-safe: mass (r^3) and moment of inertia (r^5) must come out finite and > 0
-        with np.errstate(over="ignore", under="ignore"):
-            bad = np.flatnonzero(~(np.isfinite(rad ** 5) & (rad ** 5 > 0)))
-        if bad.size:
-            raise SampleError(f"radii must lie where mass and inertia are finite and > 0 in float64 (about 1e-60 to "
-                              f"1e60 m); bad radius {rad[bad[0]]:g} m at particles {_listed(bad)}")
-
-        b = _array("bonds", bonds)
-        if b.size == 0:
-            b = np.zeros((0, 2), dtype=np.int32)
-        if b.ndim != 2 or b.shape[1] != 2:
-            raise SampleError(f"bonds must have shape [nb, 2], got {b.shape}")
-        if not np.issubdtype(b.dtype, np.integer):
-            if np.issubdtype(b.dtype, np.floating) and np.all(np.isfinite(b)) and np.all(b == np.round(b)):
-                b = b.astype(np.int64)
-            else:
-                raise SampleError(f"bonds must hold integer particle indices, got dtype {b.dtype}")
-        nb = b.shape[0]
-        bad = np.flatnonzero(((b < 0) | (b >= n)).any(axis=1))
-        if bad.size:
-            raise SampleError(
-                f"bonds reference missing particles (valid indices are 0..{n - 1}); bad bonds {_listed(bad)}, "
-                f"e.g. bond {bad[0]} = {b[bad[0]].tolist()}")
-        bad = np.flatnonzero(b[:, 0] == b[:, 1])
-        if bad.size:
-            raise SampleError(f"self-bonds (a particle bonded to itself) at bonds {_listed(bad)}")
-        b = np.sort(b, axis=1).astype(np.int32)
-        if nb:
-            key = b[:, 0].astype(np.int64) * n + b[:, 1]
-            order = np.argsort(key, kind="stable")
-            dup = order[1:][key[order][1:] == key[order][:-1]]
-            if dup.size:
-                first = order[np.searchsorted(key[order], key[dup[0]])]
-                raise SampleError(
-                    f"duplicate bonds ((i, j) and (j, i) count as the same) at bonds {_listed(np.sort(dup))}; "
-                    f"e.g. bond {dup[0]} repeats bond {first} = {b[dup[0]].tolist()}")
-
-        with np.errstate(over="ignore"):  # (a length that overflows is caught below as far too long)
-            length = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1)
-        bad = np.flatnonzero(length <= 1e-9 * np.max(rad))
-        if bad.size:
-            raise SampleError(f"zero-length bonds (coincident particles) at bonds {_listed(bad)}")
-        gap = length / (rad[b[:, 0]] + rad[b[:, 1]])
-        bad = np.flatnonzero(gap > 1e3)
-        if bad.size:
-            raise SampleError(f"bonds must join neighbours: bonds {_listed(bad)} are more than 1000 times the sum of "
-                              f"their particles' radii long (e.g. bond {bad[0]}: {length[bad[0]]:.4g} m)")
-        # the bond vectors are differences of positions: their float64 round-off (eps |x|) must stay far below
-        # the bond lengths, or a sample far from the origin gets bonds of the wrong length
-        if nb:
-            scale = np.maximum(np.abs(pos[b[:, 0]]).max(axis=1), np.abs(pos[b[:, 1]]).max(axis=1))
-            rel = np.finfo(np.float64).eps * scale / length
-            bad = np.flatnonzero(rel > 1e-9)
-            if bad.size:
-                raise SampleError(f"positions lie too far from the origin for their bond lengths in float64 "
-                                  f"(round-off {rel.max():.2g} of a bond length, at bonds {_listed(bad)}): recentre "
-                                  "the sample (subtract its centre from the positions)")
-
-        if (bond_radius is None) == (bond_radius_ratio is None):
-            raise SampleError("give exactly one of bond_radius and bond_radius_ratio")
-        if bond_radius_ratio is not None:
-            try:
-                if isinstance(bond_radius_ratio, (str, bytes, bool)):
-                    raise TypeError
-                ratio = float(bond_radius_ratio)
-            except (TypeError, ValueError, OverflowError):
-                ratio = float("nan")
-            if not np.isfinite(ratio) or ratio <= 0:
-                raise SampleError(f"bond_radius_ratio must be finite and > 0, got {_shown(bond_radius_ratio)}")
-            rb = ratio * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
-        else:
-            rb = _float_array("bond_radius", bond_radius)
-            if rb.ndim == 0:
-                rb = np.full(nb, float(rb))
-            if rb.shape != (nb,):
-                raise SampleError(f"bond_radius must be a scalar or have shape [{nb}], got {rb.shape}")
-            _finite("bond_radius", rb)
-            bad = np.flatnonzero(rb <= 0)
-            if bad.size:
-                raise SampleError(f"bond_radius must be > 0; non-positive at bonds {_listed(bad)}")
-
-        if materials is None:
-            mats = BondMaterials.create(E=1.0e9)
-        elif isinstance(materials, BondMaterials):
-            mats = BondMaterials.create(materials.E, materials.nu, materials.tensile_strength,
-                                        materials.shear_strength)
-        else:
-            unknown = set(materials) - {"E", "nu", "tensile_strength", "shear_strength"}
-            if unknown:
-                raise SampleError(f"materials: unknown fields {sorted(unknown)}")
-            if "E" not in materials:
-                raise SampleError("materials: missing field 'E' (bond Young's modulus per component)")
-            mats = BondMaterials.create(**materials)
-
-        if bond_material is None:
-            bm = np.zeros(nb, dtype=np.int32)
-        else:
-            bm = _array("bond_material", bond_material)
-            if bm.ndim == 0:
-                bm = np.full(nb, bm)
-            if bm.shape != (nb,):
-                raise SampleError(f"bond_material must have shape [{nb}], got {bm.shape}")
-            if not np.issubdtype(bm.dtype, np.integer):
-                raise SampleError(f"bond_material must hold integer component indices, got dtype {bm.dtype}")
-            bm = bm.astype(np.int32)
-        bad = np.flatnonzero((bm < 0) | (bm >= mats.n))
-        if bad.size:
-            raise SampleError(
-                f"unknown material index (the table has {mats.n} components, 0..{mats.n - 1}) at bonds "
-                f"{_listed(bad)}, e.g. index {bm[bad[0]]}")
-
-        if isinstance(particle_material, ParticleMaterial):
-            pm_kw = {f.name: getattr(particle_material, f.name) for f in dataclasses.fields(ParticleMaterial)}
-        else:
-            pm_kw = dict(particle_material or {})
-        if density is not None:
-            pm_kw["density"] = density
-        pm = ParticleMaterial.create(**pm_kw)
-
+        rad = checked_radii(radii, n)
+        b = checked_bonds(bonds, n)
+        length = bond_lengths(pos, rad, b)
+        rb = checked_bond_radius(bond_radius, bond_radius_ratio, rad, b)
+        mats = _material_table(materials)
+        bm = checked_bond_material(bond_material, b.shape[0], mats.n)
+        pm = _particle_material(particle_material, density)
         if not isinstance(bond_contact, str) or bond_contact not in _BOND_CONTACT:
-            raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {_shown(bond_contact)}")
+            raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {shown(bond_contact)}")
         domain = _checked_domain(domain)
 
         mass = pm.density * 4.0 / 3.0 * np.pi * rad**3
@@ -449,9 +339,16 @@ class Sample:
     def replace(self, **changes) -> "Sample":
         """A new validated sample with some inputs of :meth:`from_arrays` changed.
 
-        Accepts the keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
-        ``bond_material``, ``materials``, ``particle_material``, ``bond_contact``, ``domain``); derived quantities
-        are recomputed.
+        Args:
+          **changes: keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
+            ``bond_radius_ratio``, ``bond_material``, ``materials``, ``density``, ``particle_material``,
+            ``bond_contact``, ``domain``). New ``bonds`` need a new ``bond_radius`` or ``bond_radius_ratio``.
+
+        Returns:
+          The sample, its derived quantities recomputed.
+
+        Raises:
+          SampleError: an unknown keyword, or inputs that make no valid sample.
         """
         kw = dict(positions=self.positions, radii=self.radii, bonds=self.bonds, bond_radius=self.bond_radius,
                   bond_material=self.bond_material, materials=self.materials,
@@ -469,7 +366,17 @@ class Sample:
         return Sample.from_arrays(**kw)
 
     def subset(self, keep) -> "Sample":
-        """The sample restricted to the particles where ``keep [n]`` is True (bonds between kept particles only)."""
+        """The sample restricted to some of its particles, with the bonds between them.
+
+        Args:
+          keep: ``[n]`` booleans, True for the particles kept (at least one).
+
+        Returns:
+          The smaller sample; particles and bonds keep their order.
+
+        Raises:
+          SampleError: ``keep`` has the wrong shape or keeps nothing.
+        """
         keep = np.asarray(keep, bool)
         if keep.shape != (self.n_particles,):
             raise SampleError(f"subset: keep must have shape [{self.n_particles}], got {keep.shape}")
@@ -485,13 +392,22 @@ class Sample:
                                   domain=self.domain)
 
     def renumbered(self, order=None) -> "Sample":
-        """The same sample with its particles renumbered: particle ``k`` of the result is particle ``order[k]`` of
-        this one (default: along a Morton space-filling curve, :func:`jaxbpm.generate.morton_order`, so that
-        particles close in space are close in memory and the solvers' gathers and scatters stay in cache); bonds
-        follow their particles and are sorted by their first particle. The generators already number their
-        particles this way; samples read from other codes' files keep the files' order unless renumbered."""
-        from jaxbpm.generate import morton_order
+        """The same sample with its particles renumbered.
 
+        The generators already number their particles along a Morton curve; samples read from other codes' files
+        keep the files' order unless renumbered.
+
+        Args:
+          order: ``[n]`` permutation: particle ``k`` of the result is particle ``order[k]`` of this one. Default:
+            along a Morton space-filling curve (:func:`jaxbpm.generate.morton_order`), so that particles close in
+            space are close in memory and the solvers' gathers and scatters stay in cache.
+
+        Returns:
+          The renumbered sample; bonds follow their particles and are sorted by their first particle.
+
+        Raises:
+          SampleError: ``order`` is not a permutation of the particle indices.
+        """
         order = morton_order(self.positions) if order is None else np.asarray(order)
         n = self.n_particles
         if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
@@ -506,30 +422,45 @@ class Sample:
                                   bond_contact=self.bond_contact, domain=self.domain)
 
     def largest_cluster(self) -> "Sample":
-        """The sample without the particles outside its largest bonded cluster (loose particles and fragments)."""
+        """The sample without the particles outside its largest bonded cluster (loose particles and fragments).
+
+        Returns:
+          The largest cluster as a sample (:meth:`subset`).
+        """
         labels = self.clusters()
         return self.subset(labels == np.argmax(np.bincount(labels)))
 
     # ------------------------------------------------------------------ derived info
     @property
     def n_particles(self) -> int:
+        """The number of particles ``n``."""
         return int(np.shape(self.positions)[0])
 
     @property
     def n_bonds(self) -> int:
+        """The number of bonds ``nb``."""
         return int(np.shape(self.bonds)[0])
 
     @property
     def n_materials(self) -> int:
+        """The number of bond material components."""
         return self.materials.n
 
     def coordination(self) -> np.ndarray:
-        """Number of bonds of each particle, ``[n]``."""
+        """The number of bonds of each particle.
+
+        Returns:
+          ``[n]`` integer counts.
+        """
         b = np.asarray(self.bonds)
         return np.bincount(b.ravel(), minlength=self.n_particles)
 
     def clusters(self) -> np.ndarray:
-        """Cluster label of each particle (particles joined by bonds share a label), ``[n]``."""
+        """The cluster label of each particle: particles joined by bonds share a label.
+
+        Returns:
+          ``[n]`` integer labels, 0 to the number of clusters - 1.
+        """
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
@@ -540,7 +471,9 @@ class Sample:
     def packing_fraction(self) -> tuple[float, str]:
         """Solid volume over the sample's volume, and what that volume is.
 
-        Uses the generated ``domain`` when known, else the bounding box of the spheres.
+        Returns:
+          ``(fraction, basis)``: the fraction, over the generated ``domain`` when known (basis ``"box domain"`` or
+          ``"cylinder domain"``), else over the bounding box of the spheres (``"bounding box of the spheres"``).
         """
         rad, pos = np.asarray(self.radii), np.asarray(self.positions)
         solid = float(np.sum(4.0 / 3.0 * np.pi * rad**3))
@@ -550,7 +483,11 @@ class Sample:
         return solid / float(np.prod(size)), "bounding box of the spheres"
 
     def summary(self) -> SampleSummary:
-        """Counts, coordination, clusters, packing fraction and extent of the sample."""
+        """Counts, coordination, clusters, packing fraction and extent of the sample.
+
+        Returns:
+          A :class:`SampleSummary` (``str()`` gives a readable table).
+        """
         coord = self.coordination()
         labels = self.clusters()
         sizes = np.bincount(labels)
@@ -592,6 +529,33 @@ _register(
 )
 
 
+def _material_table(materials) -> BondMaterials:
+    """The bond material table of :meth:`Sample.from_arrays`: a mapping, a :class:`BondMaterials` (checked again)
+    or ``None`` (one component, E = 1 GPa, nu = 0.25, unbreakable)."""
+    if materials is None:
+        return BondMaterials.create(E=1.0e9)
+    if isinstance(materials, BondMaterials):
+        return BondMaterials.create(materials.E, materials.nu, materials.tensile_strength, materials.shear_strength)
+    unknown = set(materials) - {"E", "nu", "tensile_strength", "shear_strength"}
+    if unknown:
+        raise SampleError(f"materials: unknown fields {sorted(unknown)}")
+    if "E" not in materials:
+        raise SampleError("materials: missing field 'E' (bond Young's modulus per component)")
+    return BondMaterials.create(**materials)
+
+
+def _particle_material(particle_material, density) -> ParticleMaterial:
+    """The particle material of :meth:`Sample.from_arrays`: a mapping or a :class:`ParticleMaterial`, with
+    ``density`` (when given) in place of its own."""
+    if isinstance(particle_material, ParticleMaterial):
+        pm_kw = {f.name: getattr(particle_material, f.name) for f in dataclasses.fields(ParticleMaterial)}
+    else:
+        pm_kw = dict(particle_material or {})
+    if density is not None:
+        pm_kw["density"] = density
+    return ParticleMaterial.create(**pm_kw)
+
+
 _DOMAIN_KINDS = ("box", "cylinder")
 
 
@@ -600,39 +564,16 @@ def _checked_domain(domain) -> Domain | None:
     if domain is None:
         return None
     if not isinstance(domain, tuple) or len(domain) != 3:
-        raise SampleError(f"domain must be a Domain(kind, lo, hi) or None, got {_shown(domain)}")
+        raise SampleError(f"domain must be a Domain(kind, lo, hi) or None, got {shown(domain)}")
     kind, lo, hi = domain
     if not isinstance(kind, str) or kind not in _DOMAIN_KINDS:
-        raise SampleError(f"domain kind must be one of {_DOMAIN_KINDS}, got {_shown(kind)}")
+        raise SampleError(f"domain kind must be one of {_DOMAIN_KINDS}, got {shown(kind)}")
     try:
         lo_a, hi_a = (np.asarray(v, dtype=np.float64) for v in (lo, hi))
     except (TypeError, ValueError, OverflowError):
-        raise SampleError(f"domain lo and hi must be 3 numbers each [m], got {_shown(lo)}, {_shown(hi)}") from None
+        raise SampleError(f"domain lo and hi must be 3 numbers each [m], got {shown(lo)}, {shown(hi)}") from None
     if lo_a.shape != (3,) or hi_a.shape != (3,) or not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
-        raise SampleError(f"domain lo and hi must be 3 finite numbers each [m], got {_shown(lo)}, {_shown(hi)}")
+        raise SampleError(f"domain lo and hi must be 3 finite numbers each [m], got {shown(lo)}, {shown(hi)}")
     if not np.all(hi_a > lo_a):
         raise SampleError(f"domain hi must exceed lo in x, y and z, got lo {lo_a.tolist()}, hi {hi_a.tolist()}")
     return Domain(kind, tuple(lo_a.tolist()), tuple(hi_a.tolist()))
-
-
-def _array(name: str, x) -> np.ndarray:
-    """``np.asarray(x)``, or a :class:`SampleError` naming ``name`` for what makes no array (ragged lists, ...)."""
-    try:
-        return np.asarray(x)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise SampleError(f"{name} must be an array of numbers, got {_shown(x)} ({exc})") from None
-
-
-def _float_array(name: str, x) -> np.ndarray:
-    arr = _array(name, x)
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
-        raise SampleError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
-    return arr.astype(np.float64)
-
-
-def _finite(name: str, arr: np.ndarray) -> None:
-    bad = ~np.isfinite(arr)
-    if bad.any():
-        rows = np.flatnonzero(bad.reshape(arr.shape[0], -1).any(axis=1)) if arr.ndim else np.array([0])
-        kind = "NaN" if np.isnan(arr).any() else "inf"
-        raise SampleError(f"{name} contains {kind} values at indices {_listed(rows)}")

@@ -47,7 +47,7 @@ def test_enable_writes_entries_and_switches_directory(tmp_path, jax_cache_config
     n_first = len(_entries(first))
     _compile_new_program()
     assert len(_entries(second)) >= 1 and len(_entries(first)) == n_first
-    entries, size = _cache._usage(second)
+    entries, size = _cache.usage(second)
     assert entries == len(_entries(second)) and size >= sum(p.stat().st_size for p in second.iterdir()) > 0
 
 

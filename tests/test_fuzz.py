@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import jaxbpm
-from tests import test_interop
+from tests.interop import test_dump
 from jaxbpm import io
 from jaxbpm.errors import JaxbpmError, SceneError
 from jaxbpm.interop import formats
@@ -258,7 +258,7 @@ def test_fuzz_csv(tmp_path):
     tally.finish("CSV", 650)
 
 
-DUMP = test_interop.DUMP.encode()  # two frames: atoms and a local bond list
+DUMP = test_dump.DUMP.encode()  # two frames: atoms and a local bond list
 
 
 def test_fuzz_lammps_dump(tmp_path):

@@ -5,7 +5,6 @@ import re
 
 import h5py
 import jax
-import meshio
 import numpy as np
 import pytest
 
@@ -128,7 +127,7 @@ def test_save_atomic_when_rename_fails(tmp_path, monkeypatch):
     def fail(src, dst):
         raise OSError("disk gone")
 
-    monkeypatch.setattr(io.os, "replace", fail)
+    monkeypatch.setattr(os, "replace", fail)
     with pytest.raises(OSError, match="disk gone"):
         io.save_sample(target, _multi())
     assert _listing(tmp_path) == ["s.h5"] and target.read_bytes() == before
@@ -146,7 +145,7 @@ def test_a_failed_save_names_its_target_and_stale_temporaries_go(tmp_path, monke
     def busy(src, dst):  # what the OS says when the rename fails names the hidden temporary file
         raise OSError(errno.EBUSY, "Device or resource busy", src)
 
-    monkeypatch.setattr(io.os, "replace", busy)
+    monkeypatch.setattr(os, "replace", busy)
     with pytest.raises(OSError, match=r"cannot write .*s\.h5: Device or resource busy") as err:
         io.save_sample(target, _chain())
     assert ".tmp" not in str(err.value) and _listing(tmp_path) == []
@@ -266,99 +265,12 @@ def test_invalid_content_is_a_sample_error(tmp_path):
         io.load_sample(path, verify=False)
 
 
-# ---------------------------------------------------------------------------------------------- VTK
-@pytest.mark.parametrize("suffix", [".vtu", ".vtk"])
-def test_export_vtk_readable(tmp_path, suffix):
-    sample = _multi()
-    n, nb = sample.n_particles, sample.n_bonds
-    disp = np.arange(3 * n, dtype=np.float64).reshape(n, 3)
-    force = np.linspace(-1.0, 1.0, nb)
-    path = io.export_vtk(tmp_path / f"s{suffix}", sample, point_data={"displacement": disp, "flag": np.arange(n) > 2},
-                         bond_data={"force": force})
-    assert path.suffix == suffix and _listing(tmp_path) == [path.name]
-    mesh = meshio.read(path)
-    assert mesh.points.shape == (n, 3) and np.allclose(mesh.points, sample.positions)
-    blocks = {c.type: c.data for c in mesh.cells}
-    assert blocks["vertex"].shape == (n, 1) and blocks["line"].shape == (nb, 2)
-    assert np.array_equal(blocks["line"], sample.bonds)
-    assert np.allclose(mesh.point_data["radius"], sample.radii)
-    assert np.allclose(mesh.point_data["mass"], sample.mass)
-    assert np.array_equal(mesh.point_data["coordination"], sample.coordination())
-    assert np.allclose(mesh.point_data["displacement"], disp)
-    assert np.array_equal(np.ravel(mesh.point_data["flag"]), np.arange(n) > 2)
-    line = [c.type for c in mesh.cells].index("line")
-    vert = 1 - line
-    assert np.allclose(mesh.cell_data["bond_radius"][line], sample.bond_radius)
-    assert np.array_equal(mesh.cell_data["material"][line], sample.bond_material)
-    assert np.allclose(mesh.cell_data["length"][line], sample.bond_length)
-    assert np.allclose(mesh.cell_data["force"][line], force)
-    assert np.isnan(mesh.cell_data["bond_radius"][vert]).all() and (mesh.cell_data["material"][vert] == -1).all()
-
-
-def test_export_vtk_without_bonds(tmp_path):
-    sample = Sample.from_arrays(np.eye(3), 0.2, np.zeros((0, 2), int), np.zeros(0))
-    for suffix in (".vtu", ".vtk"):
-        mesh = meshio.read(io.export_vtk(tmp_path / f"s{suffix}", sample))
-        assert [c.type for c in mesh.cells] == ["vertex"] and mesh.points.shape == (3, 3)
-
-
-@pytest.mark.parametrize("kw, match", [
-    ({"point_data": {"temperature": np.zeros(3)}}, "point_data\\['temperature'\\].*\\[6\\]"),
-    ({"point_data": {"u": np.zeros((6, 3, 3))}}, "point_data\\['u'\\]"),
-    ({"point_data": {"radius": np.zeros(6)}}, "built-in"),
-    ({"point_data": {"s": np.array(["a"] * 6)}}, "point_data\\['s'\\].*real numeric"),
-    ({"bond_data": {"force": np.zeros(8)}}, "bond_data\\['force'\\].*\\[7\\]"),
-])
-def test_export_vtk_bad_user_data(tmp_path, kw, match):
-    with pytest.raises(SampleError, match=match):
-        io.export_vtk(tmp_path / "s.vtu", _multi(), **kw)
-    assert _listing(tmp_path) == []
-
-
-def test_export_vtk_bad_suffix(tmp_path):
-    with pytest.raises(SampleFileError, match=r"\.vtu"):
-        io.export_vtk(tmp_path / "s.txt", _chain())
-
-
-def test_export_vtk_is_atomic(tmp_path, monkeypatch):
-    target = tmp_path / "s.vtu"
-    io.export_vtk(target, _chain())
-    before = target.read_bytes()
-
-    def boom(filename, mesh, file_format=None, **kw):
-        with open(filename, "w") as fh:
-            fh.write("<VTKFile half written")
-        raise RuntimeError("crash mid-write")
-
-    monkeypatch.setattr(meshio, "write", boom)
-    with pytest.raises(RuntimeError, match="crash mid-write"):
-        io.export_vtk(target, _multi())
-    assert _listing(tmp_path) == ["s.vtu"] and target.read_bytes() == before
-
-
 def test_public_api_documented():
     functions = {"save_sample", "load_sample", "export_vtk", "write_json", "atomic_write", "check_writable",
                  "save_local_map", "export_local_map_vtk", "plot_local_map"}
     assert set(io.__all__) == {"FORMAT", "FORMAT_VERSION"} | functions
     for name in functions:
         assert getattr(io, name).__doc__
-
-
-def test_write_json_round_trip_and_atomic(tmp_path, monkeypatch):
-    import json
-
-    target = tmp_path / "deep" / "r.json"
-    io.write_json(target, {"a": np.float64(1.5), "b": np.arange(3), "c": np.int32(4), "d": True})
-    assert json.loads(target.read_text()) == {"a": 1.5, "b": [0, 1, 2], "c": 4, "d": True}
-    before = target.read_bytes()
-
-    def boom(*a, **k):
-        raise RuntimeError("crash mid-write")
-
-    monkeypatch.setattr(json, "dump", boom)
-    with pytest.raises(RuntimeError, match="crash mid-write"):
-        io.write_json(target, {"a": 2})
-    assert target.read_bytes() == before and sorted(p.name for p in target.parent.iterdir()) == ["r.json"]
 
 
 @pytest.mark.parametrize("field", ["positions", "radii", "bonds", "materials/E"])

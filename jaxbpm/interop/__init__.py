@@ -2,9 +2,6 @@
 PFC, LAMMPS, Yade, MUSEN, translated exactly to and from jaxbpm's bond law), exchange formats
 (:mod:`~jaxbpm.interop.formats`: LAMMPS data and dump files, CSV, VTU and VTKHDF series for ParaView, LIGGGHTS and
 Yade files) and the ``jaxbpm convert`` / ``jaxbpm params`` commands (:mod:`~jaxbpm.interop.cli`).
-
-``jaxbpm.formats`` and ``jaxbpm.conventions`` are the old names of the two modules: they still import, with a
-deprecation warning, until the next release.
 """
 
 import importlib

@@ -9,9 +9,9 @@ import io
 
 import numpy as np
 
-from jaxbpm.interop._meta import _N_COEFFS
-from jaxbpm.interop.lammps import (_ATOM_COLUMNS, _SECTIONS, _coeff_row, _coeffs_head, _head_meta, _header,
-                                   _last_wins, _split, _table_arrays)
+from jaxbpm.interop._meta import N_COEFFS
+from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, coeff_row, coeffs_head, head_meta, header,
+                                           last_wins, split, table_arrays)
 
 __all__ = ["parse_fast"]
 
@@ -31,10 +31,29 @@ def _table(block: bytes, dtype) -> np.ndarray | None:
         return None
 
 
-def parse_fast(path, text: str, atom_style):
-    """What :func:`jaxbpm.interop.lammps._parse_lines` gives, each numeric section parsed in one go; ``None`` for any file that is not
-    plainly well formed (every check of :func:`jaxbpm.interop.lammps._parse_lines` passes), which is then read line by line (and its
-    error names the line). Only the checksum, metadata and header errors, which come first, are raised here."""
+class _Lines:
+    """The lines of a data file as byte ranges, and which of them do not start like a number (blank lines, section
+    names, comments, the header: few in a well-formed file)."""
+
+    def __init__(self, data: bytes, buf: np.ndarray, nl: np.ndarray):
+        self.data, self.nl, self.count = data, nl, len(nl)
+        self.starts = np.empty(self.count, np.int64)
+        self.starts[0], self.starts[1:] = 0, nl[:-1] + 1
+        self.special = np.flatnonzero(~_DATA_START[buf[self.starts]]).tolist()
+        self.special_set = set(self.special)
+
+    def line(self, k: int) -> str:
+        """Line ``k`` (from 0) without its end."""
+        return self.data[self.starts[k]:self.nl[k]].decode("utf-8", "surrogatepass")
+
+    def block(self, rows: tuple[int, int]) -> bytes:
+        """Lines ``rows[0]`` to ``rows[1] - 1`` with their ends."""
+        return self.data[self.starts[rows[0]]:self.nl[rows[1] - 1] + 1]
+
+
+def _lines(text: str) -> _Lines | None:
+    """The lines of ``text``, or ``None`` when it has line breaks other than ``\n``, other control characters than
+    tabs, no final newline, or over 10 000 lines that do not start like a number."""
     if not text.endswith("\n") or any(c in text for c in _BREAKS):
         return None
     data = text.encode("utf-8", "surrogatepass")
@@ -42,58 +61,54 @@ def parse_fast(path, text: str, atom_style):
     nl = np.flatnonzero(buf == 10)
     if np.count_nonzero(buf < 32) != len(nl) + text.count("\t"):  # other control characters
         return None
-    nlines = len(nl)
-    starts = np.empty(nlines, np.int64)
-    starts[0], starts[1:] = 0, nl[:-1] + 1
-    # lines that start like a number are numeric rows (not blank, not a section name); the others are few
-    special = np.flatnonzero(~_DATA_START[buf[starts]]).tolist()
-    if len(special) > 10_000:
-        return None
-    special_set = set(special)
+    lines = _Lines(data, buf, nl)
+    return None if len(lines.special) > 10_000 else lines
 
-    def line(k: int) -> str:
-        return data[starts[k]:nl[k]].decode("utf-8", "surrogatepass")
 
-    def block(rows: tuple[int, int]) -> bytes:
-        return data[starts[rows[0]]:nl[rows[1] - 1] + 1]
-
-    crc, meta = _head_meta(path, [line(k) for k in range(min(6, nlines))])
-    counts, i = _header(path, ((k + 1, line(k)) for k in range(1, nlines)))
+def _sections(lines: _Lines, counts: dict[str, int], i: int) -> dict[str, tuple[int, str, tuple[int, int]]] | None:
+    """``{name: (line number of its name, its comment, (first row, end row))}`` of the sections from line ``i``, or
+    ``None`` when a section is unknown, cut short or holds a line that is not a row."""
     sections: dict[str, tuple[int, str, tuple[int, int]]] = {}
-    while i < nlines:
+    special, special_set = lines.special, lines.special_set
+    while i < lines.count:
         if i not in special_set:
             return None
-        words, comment = _split(line(i))
+        words, comment = split(lines.line(i))
         if not words:
             i += 1
             continue
         name = " ".join(words)
-        if name not in _SECTIONS:
+        if name not in SECTIONS:
             return None
-        want, j = counts.get(_SECTIONS[name], 0), i + 1
+        want, j = counts.get(SECTIONS[name], 0), i + 1
         if want:
-            while j < nlines and j in special_set:  # blank lines before the rows
-                if _split(line(j))[0]:
+            while j < lines.count and j in special_set:  # blank lines before the rows
+                if split(lines.line(j))[0]:
                     return None
                 j += 1
             nxt = bisect.bisect_left(special, j)
-            if j + want > nlines or (nxt < len(special) and special[nxt] < j + want):
+            if j + want > lines.count or (nxt < len(special) and special[nxt] < j + want):
                 return None
         sections[name] = (i + 1, comment, (j, j + want))
         i = j + want
     if any(counts.get(key, 0) > 0 and name not in sections for name, key in (("Atoms", "atoms"), ("Bonds", "bonds"))):
         return None
-    # atoms
+    return sections
+
+
+def _atoms(lines: _Lines, sections, atom_style):
+    """``(ids, dia, dens, pos)`` of the Atoms section sorted by ID, or ``None`` where it is not plainly well formed
+    (unknown style, comments, a bad value, duplicate IDs, more than one density)."""
     if "Atoms" not in sections:
         return None
     _, comment, rows = sections["Atoms"]
     style = atom_style or (comment.strip() or None)
     n = rows[1] - rows[0]
-    if (style is not None and style not in _ATOM_COLUMNS) or n == 0:
+    if (style is not None and style not in ATOM_COLUMNS) or n == 0:
         return None
-    text_rows = block(rows)
-    ncols = len(line(rows[0]).split())
-    ncol = _ATOM_COLUMNS.get(style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(ncols))
+    text_rows = lines.block(rows)
+    ncols = len(lines.line(rows[0]).split())
+    ncol = ATOM_COLUMNS.get(style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(ncols))
     if b"#" in text_rows or ncol is None or ncols not in (ncol, ncol + 3):
         return None
     off = ncol - 7
@@ -108,10 +123,15 @@ def parse_fast(path, text: str, atom_style):
     ids, dia, dens, pos = ids[order], dia[order], dens[order], pos[order]
     if np.any(np.diff(ids) == 0) or np.any(dens != dens[0]):
         return None
-    # bonds: "id type atom1 atom2", each with jaxbpm's comment "# bond_radius material" or none without
+    return ids, dia, dens, pos
+
+
+def _bond_rows(lines: _Lines, sections):
+    """The Bonds section's rows ``id type atom1 atom2``, each with jaxbpm's comment ``# bond_radius material``
+    (columns ``rb``, ``m``) or none without; ``None`` where they are not so."""
     _, _, rows = sections.get("Bonds", (0, "", (0, 0)))
     nb = rows[1] - rows[0]
-    text_rows = block(rows) if nb else b""
+    text_rows = lines.block(rows) if nb else b""
     hashes = text_rows.count(b"#")
     fields = [("id", "i8"), ("t", "i8"), ("a1", "i8"), ("a2", "i8")]
     if nb == 0:
@@ -125,9 +145,16 @@ def parse_fast(path, text: str, atom_style):
             return None
     else:
         return None
-    if got is None or len(got) != nb:
+    return None if got is None or len(got) != nb else got
+
+
+def _bonds(lines: _Lines, sections, ids: np.ndarray, counts: dict[str, int]):
+    """``(bonds [nb, 2] as particle indices, types, bond radii from the comments, materials from the comments)``,
+    or ``None`` where a bond names a missing atom, joins an atom to itself or has a type outside the header's."""
+    got = _bond_rows(lines, sections)
+    if got is None:
         return None
-    t = got_t = got["t"]
+    n, nb, t = len(ids), len(got), got["t"]
     bonds = np.zeros((nb, 2), np.int64)
     for c, a in enumerate((got["a1"], got["a2"])):
         k = np.minimum(np.searchsorted(ids, a), n - 1)
@@ -136,31 +163,66 @@ def parse_fast(path, text: str, atom_style):
         bonds[:, c] = k
     if np.any(got["a1"] == got["a2"]) or np.any((t < 1) | (t > counts.get("bond types", 0))):
         return None
-    if hashes and nb:
+    if "rb" in got.dtype.names and nb:
         rb_c, mat_c = np.ascontiguousarray(got["rb"]), np.ascontiguousarray(got["m"])
     else:
         rb_c, mat_c = np.full(nb, np.nan), np.full(nb, -1)
-    # coefficients
-    table = _table_arrays({})
-    if "Bond Coeffs" in sections:
-        no, comment, rows = sections["Bond Coeffs"]
-        _coeffs_head(path, no, comment)
-        text_rows = block(rows) if rows[1] > rows[0] else b""
-        width = len(line(rows[0]).split()) if text_rows else 13
-        got = None if b"#" in text_rows or width not in (9, 13) else \
-            _table(text_rows, [("t", "i8")] + [(f"c{k}", "f8") for k in range(width - 1)]) if text_rows else \
-            np.zeros(0, [("t", "i8")] + [(f"c{k}", "f8") for k in range(12)])
-        if got is not None and len(got) == rows[1] - rows[0]:
-            vals = np.zeros((len(got), _N_COEFFS))
-            for k in range(width - 1):
-                vals[:, k] = got[f"c{k}"]
-            if not (np.any(np.isnan(vals)) or not np.all(np.isfinite(vals[:, :4]))):
-                table = _last_wins(got["t"], vals)
-                got = True
-        if got is not True:  # the rows line by line: the error names the line
-            tab = {}
-            for k in range(*rows):
-                key, row = _coeff_row(_split(line(k))[0], f"{path}:{k + 1}")
-                tab[key] = row
-            table = _table_arrays(tab)
-    return (crc, text[text.index("\n") + 1:], meta, pos, dia, dens, bonds, np.asarray(got_t, np.int64), rb_c, mat_c, table)
+    return bonds, np.asarray(t, np.int64), rb_c, mat_c
+
+
+def _coeffs(path, lines: _Lines, sections):
+    """The Bond Coeffs section as ``(types, coefficients)`` (:func:`table_arrays`): in one go when plainly well
+    formed, else line by line (whose error names the line)."""
+    if "Bond Coeffs" not in sections:
+        return table_arrays({})
+    no, comment, rows = sections["Bond Coeffs"]
+    coeffs_head(path, no, comment)
+    text_rows = lines.block(rows) if rows[1] > rows[0] else b""
+    width = len(lines.line(rows[0]).split()) if text_rows else 13
+    got = None if b"#" in text_rows or width not in (9, 13) else \
+        _table(text_rows, [("t", "i8")] + [(f"c{k}", "f8") for k in range(width - 1)]) if text_rows else \
+        np.zeros(0, [("t", "i8")] + [(f"c{k}", "f8") for k in range(12)])
+    if got is not None and len(got) == rows[1] - rows[0]:
+        vals = np.zeros((len(got), N_COEFFS))
+        for k in range(width - 1):
+            vals[:, k] = got[f"c{k}"]
+        if not (np.any(np.isnan(vals)) or not np.all(np.isfinite(vals[:, :4]))):
+            return last_wins(got["t"], vals)
+    tab = {}
+    for k in range(*rows):
+        key, row = coeff_row(split(lines.line(k))[0], f"{path}:{k + 1}")
+        tab[key] = row
+    return table_arrays(tab)
+
+
+def parse_fast(path, text: str, atom_style):
+    """What :func:`jaxbpm.interop.lammps.read_lammps_data` reads line by line, each numeric section parsed in one go.
+
+    Only the checksum, metadata and header errors, which come first, are raised here; any other irregularity
+    returns ``None``, and the file is then read line by line (whose error names the line).
+
+    Args:
+      path: the file, for messages.
+      text: its text.
+      atom_style: ``"bpm/sphere"``, ``"sphere"`` or ``None`` (from the Atoms comment or the column count).
+
+    Returns:
+      ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, (types, coefficients))``, as the
+      line-by-line reader gives it, or ``None`` for any file that is not plainly well formed.
+
+    Raises:
+      SampleFileError: a bad checksum field, metadata line or header line.
+    """
+    lines = _lines(text)
+    if lines is None:
+        return None
+    crc, meta = head_meta(path, [lines.line(k) for k in range(min(6, lines.count))])
+    counts, i = header(path, ((k + 1, lines.line(k)) for k in range(1, lines.count)))
+    sections = _sections(lines, counts, i)
+    atoms = None if sections is None else _atoms(lines, sections, atom_style)
+    bonds = None if atoms is None else _bonds(lines, sections, atoms[0], counts)
+    if bonds is None:
+        return None
+    _, dia, dens, pos = atoms
+    table = _coeffs(path, lines, sections)
+    return (crc, text[text.index("\n") + 1:], meta, pos, dia, dens, *bonds, table)

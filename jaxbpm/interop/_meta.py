@@ -8,6 +8,7 @@ import functools
 import json
 import math
 import numbers
+import pathlib
 import re
 import zlib
 
@@ -17,17 +18,33 @@ from jaxbpm.errors import ConventionError, SampleError, SampleFileError
 from jaxbpm.sample import Domain, Sample
 
 
-_META = "# jaxbpm "
-_N_COEFFS = 12  # Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b
-_BIG = 1.0e300  # LAMMPS thresholds for unbreakable bonds (LAMMPS needs finite numbers)
+META = "# jaxbpm "
+N_COEFFS = 12  # Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b
+BIG = 1.0e300  # LAMMPS thresholds for unbreakable bonds (LAMMPS needs finite numbers)
 
 
-def _r(x) -> str:
-    """Shortest exact decimal of a float."""
+def exact_text(x) -> str:
+    """The shortest decimal that reads back as the same float.
+
+    Args:
+      x: a real number.
+
+    Returns:
+      ``repr(float(x))``.
+    """
     return repr(float(x))
 
 
-def _meta(sample: Sample, **extra) -> dict:
+def meta_of(sample: Sample, **extra) -> dict:
+    """What a LAMMPS or CSV file's columns cannot hold of a sample: its materials, ``bond_contact`` and domain.
+
+    Args:
+      sample: the sample.
+      **extra: more fields (e.g. ``normalize``, ``particles``).
+
+    Returns:
+      The metadata (JSON-serialisable), ``format = "jaxbpm-exchange"``.
+    """
     from jaxbpm._version import __version__
 
     pm = sample.particle_material
@@ -43,16 +60,35 @@ def _meta(sample: Sample, **extra) -> dict:
     return out
 
 
-def _meta_line(meta: dict) -> str:
-    return _META + json.dumps(meta, separators=(",", ":"))
+def meta_line(meta: dict) -> str:
+    """The ``# jaxbpm {...}`` comment line of the metadata (one line of compact JSON).
+
+    Args:
+      meta: from :func:`meta_of`.
+
+    Returns:
+      The line, without its end.
+    """
+    return META + json.dumps(meta, separators=(",", ":"))
 
 
-def _parse_meta(text: str, where: str) -> dict | None:
-    """The metadata of a ``# jaxbpm {...}`` line (``None`` for any other line), its fields checked."""
-    if not text.startswith(_META):
+def parse_meta(text: str, where: str) -> dict | None:
+    """Read a ``# jaxbpm {...}`` line, its fields checked.
+
+    Args:
+      text: a line.
+      where: ``file:line`` for messages.
+
+    Returns:
+      The metadata, or ``None`` for any other line.
+
+    Raises:
+      SampleFileError: unreadable JSON, another format, or a field of the wrong type.
+    """
+    if not text.startswith(META):
         return None
     try:
-        meta = json.loads(text[len(_META):])
+        meta = json.loads(text[len(META):])
     except (ValueError, RecursionError) as exc:
         raise SampleFileError(f"{where}: unreadable jaxbpm header comment ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != "jaxbpm-exchange":
@@ -102,26 +138,60 @@ def _check_meta(meta: dict, where: str) -> None:
             bad(field, "a whole number >= 0")
 
 
-def _domain(meta: dict | None):
+def domain_of(meta: dict | None):
+    """The sample's domain recorded in the metadata.
+
+    Args:
+      meta: from :func:`parse_meta`, or ``None``.
+
+    Returns:
+      A :class:`~jaxbpm.sample.Domain`, or ``None`` when none is recorded.
+    """
     d = None if meta is None else meta.get("domain")
     return None if d is None else Domain(d["kind"], tuple(d["lo"]), tuple(d["hi"]))
 
 
 # ---------------------------------------------------------------------------------------------- checksums
-def _crc32(text: str) -> str:
-    """CRC-32 (zlib) of ``text`` encoded as UTF-8, as 8 lowercase hex digits."""
+def crc32(text: str) -> str:
+    """The CRC-32 (zlib) of ``text`` encoded as UTF-8.
+
+    Args:
+      text: the checksummed text.
+
+    Returns:
+      8 lowercase hex digits.
+    """
     return f"{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
 
 
-def _without_line(text: str, index: int) -> str:
-    """``text`` without its line ``index`` (0-based, as ``str.splitlines`` counts) and that line's break."""
+def without_line(text: str, index: int) -> str:
+    """``text`` without one of its lines and that line's break.
+
+    Args:
+      text: the text.
+      index: the line, from 0, as ``str.splitlines`` counts.
+
+    Returns:
+      The rest of the text.
+    """
     parts = text.splitlines(keepends=True)
     return "".join(parts[:index] + parts[index + 1:])
 
 
-def _checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
-    """The ``NAME=XXXXXXXX`` checksums (``names``, e.g. ``("crc32",)``) of a checksum line; malformed ones are an
-    error (the line was damaged)."""
+def checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
+    """Read the ``NAME=XXXXXXXX`` checksums of a checksum line.
+
+    Args:
+      line: the line.
+      where: ``file:line`` for messages.
+      names: the checksums it must hold, e.g. ``("crc32",)``.
+
+    Returns:
+      ``{name: 8 hex digits}``.
+
+    Raises:
+      SampleFileError: a checksum is missing or malformed (the line was damaged).
+    """
     out = {}
     for name in names:
         m = re.search(rf"(?:^|\s){name}=(\S*)", line)
@@ -132,19 +202,37 @@ def _checksums(line: str, where: str, names: tuple[str, ...]) -> dict[str, str]:
     return out
 
 
-def _verify(text: str, name: str, expected: str, path, where: str, how: str) -> None:
-    """``text`` has CRC-32 ``expected`` (checksum ``name`` on ``where``), else a :class:`SampleFileError` for
-    ``path`` saying how to accept an intended edit (``how``)."""
-    got = _crc32(text)
+def verify(text: str, name: str, expected: str, path, where: str, how: str) -> None:
+    """Check that ``text`` has the CRC-32 ``expected``.
+
+    Args:
+      text: the checksummed text.
+      name: the checksum's name (``crc32``), for the message.
+      expected: its recorded value.
+      path: the file, for the message.
+      where: where the checksum is written, for the message.
+      how: how to accept an intended edit, for the message.
+
+    Raises:
+      SampleFileError: the text does not match.
+    """
+    got = crc32(text)
     if got != expected:
         raise SampleFileError(f"{path}: the content does not match its CRC-32 checksum ({name}={expected} on {where}; "
                               f"the file gives {got}): the file is damaged, or was edited after jaxbpm wrote it. To "
                               f"accept an intended edit, {how} (the file is then read as it is)")
 
 
-def _names_file(read):
-    """``read(path, ...)`` whose :class:`SampleError` (content that makes no valid sample) and
-    :class:`ConventionError` (coefficients with no jaxbpm counterpart) name the file."""
+def names_file(read):
+    """Decorate a reader so that its content errors name the file.
+
+    Args:
+      read: ``read(path, ...)``.
+
+    Returns:
+      The reader, whose :class:`SampleError` (content that makes no valid sample) and :class:`ConventionError`
+      (coefficients with no jaxbpm counterpart) start with the path unless they name it already.
+    """
     @functools.wraps(read)
     def wrapper(path, *args, **kw):
         try:
@@ -154,3 +242,25 @@ def _names_file(read):
                 raise
             raise type(exc)(f"{path}: {exc}") from exc
     return wrapper
+
+
+def read_text(path: pathlib.Path) -> str:
+    """The text of ``path``, or a :class:`SampleFileError` saying that it is missing, a folder or not text.
+
+    Args:
+      path: the file.
+
+    Returns:
+      Its text (the platform's default encoding).
+
+    Raises:
+      SampleFileError: the file is missing, a directory or not decodable.
+    """
+    if not path.exists():
+        raise SampleFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise SampleFileError(f"{path}: is a directory, not a file")
+    try:
+        return path.read_text()
+    except UnicodeDecodeError as exc:
+        raise SampleFileError(f"{path}: not a text file ({exc})") from None

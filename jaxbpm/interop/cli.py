@@ -85,7 +85,11 @@ def _cmd_params(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add ``convert`` and ``params`` to the sub-parsers ``sub`` of the ``jaxbpm`` parser."""
+    """Add the ``convert`` and ``params`` commands to the ``jaxbpm`` parser.
+
+    Args:
+      sub: the parser's sub-parsers (``argparse``'s ``add_subparsers()``).
+    """
     from jaxbpm.interop._registry import CONVENTIONS, FORMATS, READERS  # (no JAX: --help answers at once)
 
     known = ", ".join(f"{ext} ({what})" for ext, what in FORMATS.items())

@@ -70,437 +70,22 @@ loading then differs:
 
 from __future__ import annotations
 
-import dataclasses
-import warnings
 from typing import Any
 
 import numpy as np
 
 from jaxbpm.errors import ConventionError
+from jaxbpm.interop._codes import (LammpsBpmRotational, MusenSolidBond, PFCParallelBond, YadeCohFrict, from_lammps,
+                                   from_musen, from_pfc, from_yade, to_lammps, to_musen, to_pfc, to_yade)
 from jaxbpm.interop._registry import CONVENTIONS  # (kept JAX-free for the CLI's help)
-from jaxbpm.physics.bond import BondStiffness, check_failure_rule, stiffness
+from jaxbpm.interop._translation import (InexactTranslationWarning, JaxbpmBond, as_float, from_stiffness, positive,
+                                         sample_bonds)
 
 __all__ = [
     "InexactTranslationWarning", "JaxbpmBond", "PFCParallelBond", "LammpsBpmRotational", "YadeCohFrict",
     "MusenSolidBond", "to_pfc", "from_pfc", "to_lammps", "from_lammps", "to_yade", "from_yade", "to_musen",
     "from_musen", "from_stiffness", "sample_bonds", "failure_index", "CONVENTIONS", "convert",
 ]
-
-_REL = 1e-9  # relative tolerance below which two translated quantities count as equal (round-off)
-
-
-class InexactTranslationWarning(UserWarning):
-    """A translation between bond conventions is not exact; the message states the size of the difference."""
-
-
-def _f(x) -> np.ndarray:
-    return np.asarray(x, dtype=np.float64)
-
-
-def _warn(msg: str) -> None:
-    warnings.warn(msg, InexactTranslationWarning, stacklevel=3)
-
-
-def _max_rel(a, b) -> float:
-    a, b = np.broadcast_arrays(_f(a), _f(b))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        both_inf = np.isinf(a) & np.isinf(b) & (np.sign(a) == np.sign(b))
-        rel = np.where(both_inf, 0.0, np.abs(a - b) / np.maximum(np.abs(b), np.finfo(float).tiny))
-    return float(np.max(rel)) if rel.size else 0.0
-
-
-def _positive(name: str, x) -> np.ndarray:
-    arr = _f(x)
-    if np.any(~(arr > 0)) or np.any(np.isnan(arr)):
-        raise ConventionError(f"{name} must be > 0, got {np.ravel(arr)[np.flatnonzero(~(np.ravel(arr) > 0))[:5]]}")
-    return arr
-
-
-def _strength(name: str, x) -> np.ndarray:
-    arr = _f(x)
-    if np.any(~(arr > 0)):
-        raise ConventionError(f"{name} must be > 0 (inf = unbreakable), got {np.ravel(arr)[:5]}")
-    return arr
-
-
-def _nu_from_ratio(kt_over_kn, what: str) -> np.ndarray:
-    """nu from k_t / k_n = 1 / (2 (1 + nu)); raises when nu leaves jaxbpm's range (-1, 0.5)."""
-    ratio = _f(kt_over_kn)
-    with np.errstate(divide="ignore"):
-        nu = 1.0 / (2.0 * ratio) - 1.0
-    bad = ~((nu > -1.0) & (nu < 0.5))
-    if np.any(bad):
-        r = float(np.ravel(np.broadcast_to(ratio, bad.shape))[np.flatnonzero(np.ravel(bad))[0]])
-        raise ConventionError(
-            f"{what}: shear/normal stiffness ratio k_t/k_n = {r:.6g} needs a Poisson ratio nu = "
-            f"{1 / (2 * r) - 1 if r > 0 else float('inf'):.6g}; jaxbpm's law k_t/k_n = 1/(2(1+nu)) with nu in "
-            f"(-1, 0.5) covers only k_t/k_n > 1/3")
-    return nu
-
-
-# ---------------------------------------------------------------------------------------------- jaxbpm
-@dataclasses.dataclass(frozen=True)
-class JaxbpmBond:
-    """jaxbpm's bond parameters, per bond (arrays broadcast).
-
-    E [Pa], nu [-], bond_radius r_b [m], tensile_strength and shear_strength [Pa] (``inf`` = unbreakable).
-    """
-
-    E: Any
-    nu: Any
-    bond_radius: Any
-    tensile_strength: Any = np.inf
-    shear_strength: Any = np.inf
-
-    def __post_init__(self):
-        for name in ("E", "nu", "bond_radius", "tensile_strength", "shear_strength"):
-            object.__setattr__(self, name, _f(getattr(self, name)))
-        _positive("E", self.E)
-        _positive("bond_radius", self.bond_radius)
-        _strength("tensile_strength", self.tensile_strength)
-        _strength("shear_strength", self.shear_strength)
-        if np.any(~((self.nu > -1) & (self.nu < 0.5))):
-            raise ConventionError(f"nu must lie in (-1, 0.5), got {np.ravel(self.nu)[:5]}")
-
-    @property
-    def area(self):
-        return np.pi * self.bond_radius**2
-
-    @property
-    def inertia(self):
-        return np.pi * self.bond_radius**4 / 4.0
-
-    @property
-    def polar(self):
-        return np.pi * self.bond_radius**4 / 2.0
-
-    def stiffness(self, length) -> BondStiffness:
-        """jaxbpm's four stiffnesses (Eq. 1-4) for initial length ``length`` [m]."""
-        return BondStiffness(*(np.asarray(k) for k in stiffness(self.E, self.nu, self.area, self.inertia,
-                                                                  self.polar, _positive("length", length))))
-
-
-def from_stiffness(kn, kt, ktw, kb, length, *, what: str = "stiffness") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(E, nu, r_b) of jaxbpm's law from four bond stiffnesses and the initial length.
-
-    k_b / k_n = r_b^2 / 4 gives r_b, k_t / k_n gives nu, then E = k_n L / A. jaxbpm's law ties the twisting
-    stiffness to the others (k_tw = k_b / (1 + nu)); a ``ktw`` that differs is warned about with the ratio.
-    """
-    kn, kt, ktw, kb = (_positive(n, v) for n, v in (("k_n", kn), ("k_t", kt), ("k_tw", ktw), ("k_b", kb)))
-    length = _positive("length", length)
-    nu = _nu_from_ratio(kt / kn, what)
-    rb = 2.0 * np.sqrt(kb / kn)
-    E = kn * length / (np.pi * rb**2)
-    ktw_law = kb / (1.0 + nu)
-    off = _max_rel(ktw_law, ktw)
-    if off > _REL:
-        _warn(f"{what}: the twisting stiffness cannot be represented exactly: jaxbpm's law gives k_tw = k_b/(1+nu) "
-              f"from the other three, which differs from the given one by up to {100 * off:.3g} % (normal, shear "
-              f"and bending stiffness are exact)")
-    return E, nu, rb
-
-
-def sample_bonds(sample) -> tuple[JaxbpmBond, np.ndarray, np.ndarray, np.ndarray]:
-    """Per-bond parameters of a :class:`~jaxbpm.sample.Sample`: ``(JaxbpmBond, length, radius1, radius2)``."""
-    m = sample.materials
-    bm = np.asarray(sample.bond_material)
-    b = np.asarray(sample.bonds)
-    rad = np.asarray(sample.radii)
-    bond = JaxbpmBond(_f(m.E)[bm], _f(m.nu)[bm], _f(sample.bond_radius), _f(m.tensile_strength)[bm],
-                      _f(m.shear_strength)[bm])
-    return bond, _f(sample.bond_length), rad[b[:, 0]], rad[b[:, 1]]
-
-
-# ---------------------------------------------------------------------------------------------- PFC
-@dataclasses.dataclass(frozen=True)
-class PFCParallelBond:
-    """PFC linear parallel bond (``linearpbond``) properties, per contact.
-
-    pb_kn, pb_ks: bond normal and shear stiffness per area [Pa/m]; pb_rmul: radius multiplier (bond radius =
-    pb_rmul min(R1, R2)); pb_ten: tensile strength [Pa]; pb_coh: cohesion [Pa]; pb_fa: friction angle [deg];
-    pb_mcf: moment contribution factor [-]. emod [Pa] and kratio [-] are the deformability-method inputs that give
-    pb_kn = emod / (R1 + R2) and pb_ks = pb_kn / kratio (informative; pb_kn, pb_ks are what PFC uses).
-    """
-
-    pb_kn: Any
-    pb_ks: Any
-    pb_rmul: Any
-    pb_ten: Any = np.inf
-    pb_coh: Any = np.inf
-    pb_fa: Any = 0.0
-    pb_mcf: Any = 1.0
-    emod: Any = None
-    kratio: Any = None
-
-    def stiffness(self, radius1, radius2) -> BondStiffness:
-        """PFC's own stiffnesses: k_n = pb_kn A, k_s = pb_ks A, k_tw = pb_ks J, k_b = pb_kn I."""
-        rb = _f(self.pb_rmul) * np.minimum(_f(radius1), _f(radius2))
-        area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
-        kn, ks = _f(self.pb_kn), _f(self.pb_ks)
-        return BondStiffness(kn * area, ks * area, ks * polar, kn * inertia)
-
-
-def to_pfc(bond: JaxbpmBond, length, radius1, radius2) -> PFCParallelBond:
-    """jaxbpm -> PFC linear parallel bond (exact, with pb_fa = 0 and pb_mcf = 1)."""
-    length, r1, r2 = _positive("length", length), _positive("radius1", radius1), _positive("radius2", radius2)
-    pb_kn = bond.E / length
-    kratio = 2.0 * (1.0 + bond.nu)
-    return PFCParallelBond(pb_kn=pb_kn, pb_ks=pb_kn / kratio, pb_rmul=bond.bond_radius / np.minimum(r1, r2),
-                           pb_ten=bond.tensile_strength, pb_coh=bond.shear_strength, pb_fa=np.zeros_like(pb_kn),
-                           pb_mcf=np.ones_like(pb_kn), emod=pb_kn * (r1 + r2), kratio=kratio)
-
-
-def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, emod=None, kratio=None,
-             pb_ten=np.inf, pb_coh=np.inf, pb_fa=0.0, pb_mcf=1.0) -> JaxbpmBond:
-    """PFC linear parallel bond -> jaxbpm. Give ``pb_kn``/``pb_ks`` or ``emod``/``kratio`` (deformability method,
-    L_pfc = R1 + R2). pb_fa != 0 or pb_mcf != 1 are not part of the translated bond (warned, with the size of the
-    difference); the DEM models them through its params ``bond_friction_angle`` and ``bond_moment_factor``."""
-    r1, r2, length = _positive("radius1", radius1), _positive("radius2", radius2), _positive("length", length)
-    if emod is not None or kratio is not None:
-        if emod is None or kratio is None or pb_kn is not None or pb_ks is not None:
-            raise ConventionError("PFC: give either pb_kn and pb_ks, or emod and kratio (deformability method)")
-        pb_kn = _positive("emod", emod) / (r1 + r2)
-        pb_ks = pb_kn / _positive("kratio", kratio)
-    elif pb_kn is None or pb_ks is None:
-        raise ConventionError("PFC: give either pb_kn and pb_ks, or emod and kratio (deformability method)")
-    pb_kn, pb_ks = _positive("pb_kn", pb_kn), _positive("pb_ks", pb_ks)
-    nu = _nu_from_ratio(pb_ks / pb_kn, "PFC (kratio = pb_kn/pb_ks must be < 3)")
-    rb = _positive("pb_rmul", pb_rmul) * np.minimum(r1, r2)
-    fa, mcf, coh = _f(pb_fa), _f(pb_mcf), _strength("pb_coh", pb_coh)
-    if np.any(fa != 0) and np.any(np.isfinite(coh)):
-        tan = float(np.max(np.abs(np.tan(np.radians(fa)))))
-        _warn(f"PFC pb_fa = {float(np.max(np.abs(fa))):.6g} deg is not part of the translated bond: its shear "
-              f"strength does not depend on the normal stress. Pure tension and pure shear are exact; shear under a "
-              f"normal stress sigma_n differs by -sigma_n tan(pb_fa) / pb_coh = -{tan:.4g} sigma_n / pb_coh (a "
-              f"tensile stress of half pb_coh: {-50 * tan:.3g} %). The DEM models it: params "
-              f"bond_friction_angle = radians(pb_fa)")
-    if np.any(mcf != 1):
-        beta = float(np.min(mcf))
-        _warn(f"PFC pb_mcf = {beta:.6g} is not part of the translated bond, which counts the full moments (pb_mcf = "
-              f"1). Pure tension and pure shear are exact; pure bending and pure twist break at {beta:.4g} x PFC's "
-              f"moment ({100 * (beta - 1):.3g} %). The DEM models it: params bond_moment_factor = pb_mcf")
-    return JaxbpmBond(pb_kn * length, nu, rb, _strength("pb_ten", pb_ten), coh)
-
-
-# ---------------------------------------------------------------------------------------------- LAMMPS
-@dataclasses.dataclass(frozen=True)
-class LammpsBpmRotational:
-    """LAMMPS ``bond_style bpm/rotational`` coefficients, per bond (type).
-
-    Kr, Ks [N/m] (``normalize yes``: [N]), Kt, Kb [N m/rad]; failure thresholds Fcr, Fcs [N], Tct, Tcb [N m].
-    """
-
-    Kr: Any
-    Ks: Any
-    Kt: Any
-    Kb: Any
-    Fcr: Any = np.inf
-    Fcs: Any = np.inf
-    Tct: Any = np.inf
-    Tcb: Any = np.inf
-    normalize: bool = False
-
-    def stiffness(self, length) -> BondStiffness:
-        """LAMMPS's stiffnesses: Kr, Ks (divided by the reference length r0 with ``normalize yes``), Kt, Kb."""
-        scale = 1.0 / _f(length) if self.normalize else 1.0
-        return BondStiffness(_f(self.Kr) * scale, _f(self.Ks) * scale, _f(self.Kt), _f(self.Kb))
-
-    def coefficients(self) -> np.ndarray:
-        """``[nb, 8]`` rows Kr Ks Kt Kb Fcr Fcs Tct Tcb (the order of ``bond_coeff``, before the dampings)."""
-        cols = np.broadcast_arrays(*(_f(getattr(self, k)) for k in ("Kr", "Ks", "Kt", "Kb", "Fcr", "Fcs", "Tct",
-                                                                     "Tcb")))
-        return np.stack([np.atleast_1d(c) for c in cols], axis=1)
-
-
-_SUMMED_RULE = ("LAMMPS bpm/rotational breaks a bond when Fr/Fcr + Fs/Fcs + Tb/Tcb + Tt/Tct >= 1 (one summed "
-                "rule); jaxbpm checks tension (F_n/A + M_b r_b/I) and shear (F_t/A + M_tw r_b/J) separately. The "
-                "thresholds are set so that pure tension, pure shear, pure bending and pure twist break at the same "
-                "load in both (0 % difference); under mixed loading LAMMPS breaks earlier: at equal tensile and shear "
-                "utilisation at half the load (-50 %), in general at max(a+b, c+d)/(a+b+c+d) of jaxbpm's failure "
-                "load (0.5 to 1), and compression (Fr < 0) lets LAMMPS bonds carry more shear. jaxbpm's scenes break "
-                "bonds by LAMMPS's rule with failure_rule='summed': strengths calibrated so hold in LAMMPS as they "
-                "are (pass failure_rule='summed' here to say so)")
-
-
-def to_lammps(bond: JaxbpmBond, length, *, normalize: bool = False,
-              failure_rule: str = "separate") -> LammpsBpmRotational:
-    """jaxbpm -> LAMMPS ``bpm/rotational`` (stiffness exact; strengths exact when they were calibrated under
-    ``failure_rule="summed"``, LAMMPS's rule; under another rule the difference is warned about when a strength is
-    finite)."""
-    k = bond.stiffness(length)
-    length = _f(length)
-    scale = length if normalize else 1.0
-    sig, tau, rb = bond.tensile_strength, bond.shear_strength, bond.bond_radius
-    finite = np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))
-    if finite and check_failure_rule(failure_rule, ConventionError) != "summed":
-        _warn(_SUMMED_RULE)
-    return LammpsBpmRotational(Kr=k.kn * scale, Ks=k.kt * scale, Kt=k.ktw, Kb=k.kb, Fcr=sig * bond.area,
-                               Fcs=tau * bond.area, Tct=tau * bond.polar / rb, Tcb=sig * bond.inertia / rb,
-                               normalize=normalize)
-
-
-def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True,
-                failure_rule: str = "separate") -> JaxbpmBond:
-    """LAMMPS ``bpm/rotational`` -> jaxbpm. ``breaking=False`` (LAMMPS's ``break no``) ignores the thresholds.
-
-    Warned: a Kt that jaxbpm's law cannot match (see :func:`from_stiffness`), thresholds whose bending/twisting
-    limits disagree with the tensile/shear ones, and the summed failure rule unless ``failure_rule="summed"`` (the
-    rule the jaxbpm scenes will break these bonds by).
-    """
-    k = p.stiffness(length)
-    E, nu, rb = from_stiffness(k.kn, k.kt, k.ktw, k.kb, length, what="LAMMPS bpm/rotational")
-    if not breaking:
-        return JaxbpmBond(E, nu, rb)
-    area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
-    sig = _positive("Fcr", p.Fcr) / area
-    tau = _positive("Fcs", p.Fcs) / area
-    for name, limit, law in (("Tcb", p.Tcb, sig * inertia / rb), ("Tct", p.Tct, tau * polar / rb)):
-        off = _max_rel(law, _positive(name, limit))
-        if off > _REL:
-            _warn(f"LAMMPS {name} cannot be represented exactly: jaxbpm's strengths fix it at "
-                  f"{'sigma_t I / r_b = Fcr r_b / 4' if name == 'Tcb' else 'tau_c J / r_b = Fcs r_b / 2'}, which "
-                  f"differs from the given one by up to {100 * off:.3g} % (pure "
-                  f"{'bending' if name == 'Tcb' else 'twist'} breaks at that moment in jaxbpm)")
-    if check_failure_rule(failure_rule, ConventionError) != "summed":
-        _warn(_SUMMED_RULE)
-    return JaxbpmBond(E, nu, rb, sig, tau)
-
-
-# ---------------------------------------------------------------------------------------------- Yade
-@dataclasses.dataclass(frozen=True)
-class YadeCohFrict:
-    """Yade ``CohFrictMat`` values (both particles of the bond made of this material), per bond.
-
-    young [Pa]; poisson = k_s / k_n [-] (Yade's meaning, not a Poisson ratio); alphaKr, alphaKtw [-];
-    normalCohesion, shearCohesion [Pa] (multiplied by min(R1, R2)^2, without pi, to give the adhesion forces);
-    rollingCohesion, twistingCohesion [Pa] (moments 0.25 and 0.5 x cohesion x min(R1, R2)^3).
-    The interaction values (``CohFrictPhys``) follow from :meth:`phys`.
-    """
-
-    young: Any
-    poisson: Any
-    alphaKr: Any
-    alphaKtw: Any
-    normalCohesion: Any = np.inf
-    shearCohesion: Any = np.inf
-    rollingCohesion: Any = None
-    twistingCohesion: Any = None
-
-    def phys(self, radius1, radius2) -> dict[str, np.ndarray]:
-        """``CohFrictPhys`` of a bond between spheres of radii R1, R2, as ``Ip2_CohFrictMat_CohFrictMat_CohFrictPhys``
-        computes it: kn, ks, kr, ktw [N/m, N m/rad] and normalAdhesion, shearAdhesion [N], rollingAdhesion,
-        twistingAdhesion [N m]."""
-        r1, r2 = _f(radius1), _f(radius2)
-        E, v = _f(self.young), _f(self.poisson)
-        kn = 2.0 * E * r1 * E * r2 / (E * r1 + E * r2)  # harmonic mean of E_a R_a and E_b R_b
-        ks = 2.0 * E * r1 * v * E * r2 * v / (E * r1 * v + E * r2 * v)
-        rmin = np.minimum(r1, r2)
-        roll = self.normalCohesion if self.rollingCohesion is None else self.rollingCohesion
-        twist = self.shearCohesion if self.twistingCohesion is None else self.twistingCohesion
-        return {"kn": kn, "ks": ks, "kr": r1 * r2 * ks * _f(self.alphaKr), "ktw": r1 * r2 * ks * _f(self.alphaKtw),
-                "normalAdhesion": _f(self.normalCohesion) * rmin**2, "shearAdhesion": _f(self.shearCohesion) * rmin**2,
-                "rollingAdhesion": 0.25 * _f(roll) * rmin**3, "twistingAdhesion": 0.5 * _f(twist) * rmin**3}
-
-    def stiffness(self, radius1, radius2) -> BondStiffness:
-        """Yade's stiffnesses (k_n, k_s, k_tw, k_r as k_b) from its own formulas."""
-        ph = self.phys(radius1, radius2)
-        return BondStiffness(ph["kn"], ph["ks"], ph["ktw"], ph["kr"])
-
-
-_MAX_RULE = ("Yade checks tension, shear, bending and twist separately (max(u_n, u_b, u_s, u_t) >= 1); jaxbpm adds "
-             "tension and bending, and shear and twist (F_n/A + M_b r_b/I, F_t/A + M_tw r_b/J). Pure tension, shear, "
-             "bending and twist break at the same load (0 %); tension plus bending at equal utilisation breaks at "
-             "twice the load in Yade (+100 %), in general at max(a+b, c+d)/max(a, b, c, d) of jaxbpm's failure load "
-             "(1 to 2). Yade's shear limit also grows by F_n tan(frictionAngle) unless frictionAngle = 0 or "
-             "cohesionDisablesFriction. jaxbpm's scenes break bonds by Yade's rule with failure_rule='max' (pass "
-             "failure_rule='max' here to say the strengths were calibrated so)")
-
-
-def to_yade(bond: JaxbpmBond, length, radius1, radius2, *, failure_rule: str = "separate") -> YadeCohFrict:
-    """jaxbpm -> Yade CohFrictMat values for each bond (stiffness exact per bond; Yade's materials belong to
-    particles, so one material reproduces all bonds only where the per-bond values agree)."""
-    k = bond.stiffness(length)
-    r1, r2 = _positive("radius1", radius1), _positive("radius2", radius2)
-    young = k.kn * (r1 + r2) / (2.0 * r1 * r2)
-    poisson = k.kt / k.kn
-    rmin, rb = np.minimum(r1, r2), bond.bond_radius
-    sig, tau = bond.tensile_strength, bond.shear_strength
-    finite = np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))
-    if finite and check_failure_rule(failure_rule, ConventionError) != "max":
-        _warn(_MAX_RULE)
-    return YadeCohFrict(young=young, poisson=poisson, alphaKr=k.kb / (r1 * r2 * k.kt),
-                        alphaKtw=k.ktw / (r1 * r2 * k.kt), normalCohesion=sig * bond.area / rmin**2,
-                        shearCohesion=tau * bond.area / rmin**2,
-                        rollingCohesion=4.0 * sig * bond.inertia / rb / rmin**3,
-                        twistingCohesion=2.0 * tau * bond.polar / rb / rmin**3)
-
-
-def from_yade(p: YadeCohFrict, radius1, radius2, length, *, failure_rule: str = "separate") -> JaxbpmBond:
-    """Yade CohFrictMat (one material for both particles) -> jaxbpm, per bond (the separate-checks rule is warned
-    about unless ``failure_rule="max"``, the rule the jaxbpm scenes will break these bonds by)."""
-    ph = p.phys(_positive("radius1", radius1), _positive("radius2", radius2))
-    E, nu, rb = from_stiffness(ph["kn"], ph["ks"], ph["ktw"], ph["kr"], length, what="Yade CohFrictMat")
-    area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
-    sig = _strength("normalCohesion", ph["normalAdhesion"]) / area
-    tau = _strength("shearCohesion", ph["shearAdhesion"]) / area
-    for name, limit, law in (("rollingCohesion", ph["rollingAdhesion"], sig * inertia / rb),
-                             ("twistingCohesion", ph["twistingAdhesion"], tau * polar / rb)):
-        off = _max_rel(law, limit)
-        if off > _REL:
-            _warn(f"Yade {name} cannot be represented exactly: jaxbpm's strengths fix the "
-                  f"{'bending' if name.startswith('rolling') else 'twisting'} failure moment, which differs from "
-                  f"Yade's by up to {100 * off:.3g} %")
-    finite = np.any(np.isfinite(sig)) or np.any(np.isfinite(tau))
-    if finite and check_failure_rule(failure_rule, ConventionError) != "max":
-        _warn(_MAX_RULE)
-    return JaxbpmBond(E, nu, rb, sig, tau)
-
-
-# ---------------------------------------------------------------------------------------------- MUSEN
-@dataclasses.dataclass(frozen=True)
-class MusenSolidBond:
-    """MUSEN elastic solid bond (``CModelSBElastic``), per bond: diameter [m], young_modulus [Pa] (its normal
-    stiffness), poisson_ratio [-] (tangential stiffness = shear modulus E / (2 (1 + nu))), normal_strength and
-    tangential_strength [Pa]."""
-
-    diameter: Any
-    young_modulus: Any
-    poisson_ratio: Any
-    normal_strength: Any = np.inf
-    tangential_strength: Any = np.inf
-
-    @property
-    def shear_modulus(self):
-        return _f(self.young_modulus) / (2.0 * (1.0 + _f(self.poisson_ratio)))
-
-    def stiffness(self, initial_length) -> BondStiffness:
-        """MUSEN's stiffnesses: E A / L, G A / L, 2 I G / L (normal moment), E I / L (tangential moment), with
-        A = pi d^2 / 4 (CrossCut) and I = pi d^4 / 64 (AxialMoment)."""
-        d, L = _f(self.diameter), _f(initial_length)
-        cross_cut, axial_moment = np.pi * d**2 / 4.0, np.pi * d**4 / 64.0
-        E, G = _f(self.young_modulus), self.shear_modulus
-        return BondStiffness(E * cross_cut / L, G * cross_cut / L, 2.0 * axial_moment * G / L, E * axial_moment / L)
-
-
-def to_musen(bond: JaxbpmBond) -> MusenSolidBond:
-    """jaxbpm -> MUSEN elastic solid bond (exact; MUSEN's breakage criterion 1 is jaxbpm's rule)."""
-    return MusenSolidBond(2.0 * bond.bond_radius, bond.E, bond.nu, bond.tensile_strength, bond.shear_strength)
-
-
-def from_musen(p: MusenSolidBond, *, criterion: int = 1) -> JaxbpmBond:
-    """MUSEN elastic solid bond -> jaxbpm. ``criterion`` is MUSEN's CONSIDER_BREAKAGE (1: standard, jaxbpm's rule;
-    2: separate checks, warned; 0: no breakage)."""
-    if criterion not in (0, 1, 2):
-        raise ConventionError(f"MUSEN CONSIDER_BREAKAGE must be 0, 1 or 2, got {criterion!r}")
-    if criterion == 0:
-        return JaxbpmBond(p.young_modulus, p.poisson_ratio, _f(p.diameter) / 2.0)
-    if criterion == 2:
-        _warn("MUSEN criterion 2 checks tension, bending (in tension only), shear and twist separately; jaxbpm adds "
-              "tension and bending, and shear and twist (MUSEN's criterion 1). Pure tension, shear, bending and "
-              "twist break at the same load (0 %); tension plus bending at equal utilisation breaks at twice the load "
-              "with criterion 2 (+100 %), in general at max(a+b, c+d)/max(a, b, c, d) of jaxbpm's failure load")
-    return JaxbpmBond(p.young_modulus, p.poisson_ratio, _f(p.diameter) / 2.0, p.normal_strength,
-                      p.tangential_strength)
 
 
 # ---------------------------------------------------------------------------------------------- failure rules
@@ -509,12 +94,21 @@ def failure_index(rule: str, normal, shear, twist, bend, bond: JaxbpmBond):
     ``rule`` ("jaxbpm", "lammps", "yade"), all with thresholds translated from ``bond``'s strengths; >= 1 breaks.
 
     Used to state and test the differences between the rules (see the module docstring).
+
+    Args:
+      rule: ``"jaxbpm"``, ``"lammps"`` or ``"yade"``.
+      normal: normal force F_n [N], > 0 in tension.
+      shear, twist, bend: ``|F_t|`` [N], ``|M_tw|``, ``|M_b|`` [N m].
+      bond: the jaxbpm parameters the thresholds are translated from.
+
+    Returns:
+      The failure index (arrays of the inputs' shape); >= 1 breaks.
     """
     rb = bond.bond_radius
-    u_n = _f(normal) / (bond.tensile_strength * bond.area)
-    u_b = np.abs(_f(bend)) / (bond.tensile_strength * bond.inertia / rb)
-    u_s = np.abs(_f(shear)) / (bond.shear_strength * bond.area)
-    u_t = np.abs(_f(twist)) / (bond.shear_strength * bond.polar / rb)
+    u_n = as_float(normal) / (bond.tensile_strength * bond.area)
+    u_b = np.abs(as_float(bend)) / (bond.tensile_strength * bond.inertia / rb)
+    u_s = np.abs(as_float(shear)) / (bond.shear_strength * bond.area)
+    u_t = np.abs(as_float(twist)) / (bond.shear_strength * bond.polar / rb)
     if rule == "jaxbpm":
         return np.maximum(u_n + u_b, u_s + u_t)
     if rule == "lammps":
@@ -558,7 +152,19 @@ def convert(source: str, target: str, values: dict[str, Any], *, radius1, radius
     """Translate one bond's parameters ``values`` (names of ``CONVENTIONS[source]``) into ``target``'s dataclass,
     for particles of radii ``radius1``, ``radius2`` and initial centre distance ``length`` (default R1 + R2).
 
-    ``normalize`` applies to a LAMMPS target. Unknown or missing parameter names raise :class:`ConventionError`.
+    Args:
+      source: a key of ``CONVENTIONS`` (``"jaxbpm"``, ``"pfc"``, ``"lammps"``, ``"yade"``, ``"musen"``).
+      target: likewise.
+      values: the parameters, by the names of ``CONVENTIONS[source]``.
+      radius1, radius2: the particles' radii [m].
+      length: initial centre distance [m]; default R1 + R2.
+      normalize: for a LAMMPS target, coefficients for ``normalize yes``.
+
+    Returns:
+      ``target``'s parameter dataclass.
+
+    Raises:
+      ConventionError: unknown or missing parameter names, or values with no counterpart.
     """
     for name in (source, target):
         if name not in CONVENTIONS:
@@ -567,15 +173,15 @@ def convert(source: str, target: str, values: dict[str, Any], *, radius1, radius
     unknown = sorted(set(values) - set(spec))
     if unknown:
         raise ConventionError(f"{source}: unknown parameters {unknown}; known: {list(spec)}")
-    r1, r2 = _positive("radius1", radius1), _positive("radius2", radius2)
-    length = r1 + r2 if length is None else _positive("length", length)
+    r1, r2 = positive("radius1", radius1), positive("radius2", radius2)
+    length = r1 + r2 if length is None else positive("length", length)
     given = {k: v for k, v in values.items() if v is not None}
     if source == "jaxbpm":
         ratio = given.pop("bond_radius_ratio", None)
         if ("bond_radius" in given) == (ratio is not None):
             raise ConventionError("jaxbpm: give exactly one of bond_radius and bond_radius_ratio")
         if ratio is not None:
-            given["bond_radius"] = _f(ratio) * np.minimum(r1, r2)
+            given["bond_radius"] = as_float(ratio) * np.minimum(r1, r2)
     either = {"pfc": {"pb_kn", "pb_ks", "emod", "kratio"}, "jaxbpm": {"bond_radius", "bond_radius_ratio"},
               "yade": {"rollingCohesion", "twistingCohesion"}}.get(source, set())
     missing = [k for k, d in spec.items() if d is None and k not in given and k not in either]

@@ -14,14 +14,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxbpm.interop import conventions
+from jaxbpm._atomic import atomic_write
 from jaxbpm.errors import SampleFileError
-from jaxbpm.io import atomic_write
+from jaxbpm.interop import conventions
+from jaxbpm.interop._meta import (checksums, crc32, domain_of, exact_text, meta_line, meta_of, names_file, parse_meta,
+                                  read_text, verify, without_line)
+from jaxbpm.interop.lammps import materials_from_bonds
 from jaxbpm.sample import Sample
-from jaxbpm.interop._meta import (_checksums, _crc32, _domain, _meta, _meta_line, _names_file, _parse_meta, _r,
-                                  _verify, _without_line)
-from jaxbpm.interop.lammps import _materials_from_bonds
-from jaxbpm.interop.lammps import _read_text
 
 
 def _bonds_path(path: pathlib.Path) -> pathlib.Path:
@@ -31,24 +30,29 @@ def _bonds_path(path: pathlib.Path) -> pathlib.Path:
 def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     """Write particles to ``path`` and bonds to ``<stem>_bonds.csv`` next to it (both atomic; exact decimals).
 
-    Returns the two paths.
+    Args:
+      path: the particles file.
+      sample: the sample.
+
+    Returns:
+      The particles and bonds files.
     """
     if not isinstance(sample, Sample):
         raise TypeError(f"write_csv expects a jaxbpm Sample, got {type(sample).__name__}")
     path = pathlib.Path(path)
     bpath = _bonds_path(path)
-    meta = _meta(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
+    meta = meta_of(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-    plines = [_meta_line(meta), "id,x,y,z,radius"]
-    plines += [f"{i},{_r(pos[i, 0])},{_r(pos[i, 1])},{_r(pos[i, 2])},{_r(rad[i])}" for i in range(sample.n_particles)]
+    plines = [meta_line(meta), "id,x,y,z,radius"]
+    plines += [f"{i},{exact_text(pos[i, 0])},{exact_text(pos[i, 1])},{exact_text(pos[i, 2])},{exact_text(rad[i])}" for i in range(sample.n_particles)]
     b, rb, bm = np.asarray(sample.bonds), np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
     m = sample.materials
     blines = ["i,j,bond_radius,material,E,nu,tensile_strength,shear_strength"]
-    blines += [f"{b[k, 0]},{b[k, 1]},{_r(rb[k])},{bm[k]},{_r(m.E[bm[k]])},{_r(m.nu[bm[k]])},"
-               f"{_r(m.tensile_strength[bm[k]])},{_r(m.shear_strength[bm[k]])}" for k in range(sample.n_bonds)]
+    blines += [f"{b[k, 0]},{b[k, 1]},{exact_text(rb[k])},{bm[k]},{exact_text(m.E[bm[k]])},{exact_text(m.nu[bm[k]])},"
+               f"{exact_text(m.tensile_strength[bm[k]])},{exact_text(m.shear_strength[bm[k]])}" for k in range(sample.n_bonds)]
     btext = "\n".join(blines) + "\n"
     ptext = "\n".join(plines) + "\n"
-    ptext += f"# crc32={_crc32(ptext)} bonds_crc32={_crc32(btext)}\n"
+    ptext += f"# crc32={crc32(ptext)} bonds_crc32={crc32(btext)}\n"
     out_b = atomic_write(bpath, lambda tmp: pathlib.Path(tmp).write_text(btext, encoding="utf-8"))
     out_p = atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(ptext, encoding="utf-8"))
     return out_p, out_b
@@ -68,13 +72,13 @@ class _Rows(NamedTuple):
 
 
 def _csv_rows(path: pathlib.Path) -> _Rows:
-    text = _read_text(path)
+    text = read_text(path)
     meta, rows, header, crc_line = None, [], None, None
     for no, line in enumerate(text.splitlines(), start=1):
         if line.lstrip().startswith("#"):
             if crc_line is None and _CHECKSUM_LINE.match(line.strip()):
                 crc_line = (no, line)
-            meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
+            meta = meta or parse_meta(line.strip(), f"{path}:{no}")
             continue
         try:
             row = next(csv.reader([line]), [])
@@ -119,13 +123,68 @@ def _column(path, header, rows, names, cast=float, required=True):
     return None, None
 
 
-@_names_file
+def _particles(path, header, rows) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
+    """The particles file's centres ``[n, 3]``, radii ``[n]`` and ``{particle id: row index}``."""
+    pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
+    rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
+    if rname in ("diameter", "d"):
+        rad = rad / 2.0
+    ids, _ = _column(path, header, rows, ("id", "ID"), cast=int, required=False)
+    if ids is None:
+        ids = np.arange(len(rows))
+    index = {}
+    for k, (no, _) in enumerate(rows):
+        if int(ids[k]) in index:
+            raise SampleFileError(f"{path}:{no}: duplicate particle id {ids[k]}")
+        index[int(ids[k])] = k
+    return pos, rad, index
+
+
+def _bond_pairs(path, bpath, bheader, brows, ends, index: dict[int, int]) -> np.ndarray:
+    """The bonds ``[nb, 2]`` as particle row indices, from the bonds file's particle id columns ``ends``."""
+    if not ends:
+        raise SampleFileError(f"{bpath}: missing particle columns i,j (or id1,id2) (columns: {','.join(bheader)})")
+    bonds = np.zeros((len(brows), 2), np.int64)
+    for k, (no, _) in enumerate(brows):
+        for c in range(2):
+            pid = int(ends[c][k])
+            if pid not in index:
+                raise SampleFileError(f"{bpath}:{no}: bond refers to particle id {pid}, which is not in {path.name}")
+            bonds[k, c] = index[pid]
+    return bonds
+
+
+def _check_bond_columns(bpath, brows, props: dict, bm: np.ndarray, mats: dict) -> None:
+    """The bonds file's material property columns ``props`` agree with the metadata's table ``mats``."""
+    for k, v in props.items():
+        if v is not None and len(v):
+            want = np.asarray(mats[k], float)[np.clip(bm, 0, len(mats[k]) - 1)]
+            bad = np.flatnonzero(~((v == want) | (np.isnan(v) & np.isnan(want))))
+            if bad.size:
+                no = brows[bad[0]][0]
+                raise SampleFileError(f"{bpath}:{no}: {k} = {float(v[bad[0]])!r} disagrees with material "
+                                      f"{int(bm[bad[0]])}'s {float(want[bad[0]])!r} in the header")
+
+
+@names_file
 def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, **sample_kw) -> Sample:
     """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
     file named in the particles file's metadata) CSV files.
 
-    See the module docstring for the columns. ``bond_radius_ratio`` is needed when the bonds file has no
-    ``bond_radius``/``bond_diameter`` column; ``sample_kw`` go to :meth:`Sample.from_arrays`.
+    See the module docstring for the columns.
+
+    Args:
+      path: the particles file.
+      bonds_path: the bonds file (default: see above).
+      bond_radius_ratio: needed when the bonds file has no ``bond_radius``/``bond_diameter`` column.
+      **sample_kw: more :meth:`Sample.from_arrays` keywords.
+
+    Returns:
+      The sample.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+      SampleError: the content does not make a valid sample.
     """
     path = pathlib.Path(path)
     prows = _csv_rows(path)
@@ -139,27 +198,16 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     bpath = pathlib.Path(bonds_path) if bonds_path is not None else _bonds_path(path)
     if bonds_path is None and not bpath.exists() and meta and meta.get("bonds_file"):
         bpath = path.with_name(meta["bonds_file"])
-    pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
-    rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
-    if rname in ("diameter", "d"):
-        rad = rad / 2.0
-    ids, _ = _column(path, header, rows, ("id", "ID"), cast=int, required=False)
-    if ids is None:
-        ids = np.arange(len(rows))
-    index = {}
-    for k, (no, _) in enumerate(rows):
-        if int(ids[k]) in index:
-            raise SampleFileError(f"{path}:{no}: duplicate particle id {ids[k]}")
-        index[int(ids[k])] = k
+    pos, rad, index = _particles(path, header, rows)
     kw = dict(sample_kw)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])
-        kw.setdefault("domain", _domain(meta))
+        kw.setdefault("domain", domain_of(meta))
     sums = None
     if prows.crc_line is not None:
         no, line = prows.crc_line
-        sums = _checksums(line, f"{path}:{no}", ("crc32", "bonds_crc32"))
+        sums = checksums(line, f"{path}:{no}", ("crc32", "bonds_crc32"))
     if not bpath.exists():
         if meta is not None or sums is not None:
             raise SampleFileError(f"{bpath}: no such file (the bonds of {path})")
@@ -185,17 +233,9 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     if sums is not None:  # the files read well: are they the ones jaxbpm wrote?
         no, line = prows.crc_line
         how = f"delete line {no} ({line.strip()!r}) of {path.name}"
-        _verify(_without_line(prows.text, no - 1), "crc32", sums["crc32"], path, f"line {no}", how)
-        _verify(brows_all.text, "bonds_crc32", sums["bonds_crc32"], bpath, f"line {no} of {path.name}", how)
-    if not ends:
-        raise SampleFileError(f"{bpath}: missing particle columns i,j (or id1,id2) (columns: {','.join(bheader)})")
-    bonds = np.zeros((nb, 2), np.int64)
-    for k, (no, _) in enumerate(brows):
-        for c in range(2):
-            pid = int(ends[c][k])
-            if pid not in index:
-                raise SampleFileError(f"{bpath}:{no}: bond refers to particle id {pid}, which is not in {path.name}")
-            bonds[k, c] = index[pid]
+        verify(without_line(prows.text, no - 1), "crc32", sums["crc32"], path, f"line {no}", how)
+        verify(brows_all.text, "bonds_crc32", sums["bonds_crc32"], bpath, f"line {no} of {path.name}", how)
+    bonds = _bond_pairs(path, bpath, bheader, brows, ends, index)
     rb, rbname = _column(bpath, bheader, brows, ("bond_radius", "bond_diameter"), required=False)
     if rbname == "bond_diameter":
         rb = rb / 2.0
@@ -207,19 +247,12 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
              for k in ("E", "nu", "tensile_strength", "shear_strength")}
     if meta is not None and bm is not None and "materials" not in kw:
         mats = meta["materials"]
-        for k, v in props.items():
-            if v is not None and len(v):
-                want = np.asarray(mats[k], float)[np.clip(bm, 0, len(mats[k]) - 1)]
-                bad = np.flatnonzero(~((v == want) | (np.isnan(v) & np.isnan(want))))
-                if bad.size:
-                    no = brows[bad[0]][0]
-                    raise SampleFileError(f"{bpath}:{no}: {k} = {float(v[bad[0]])!r} disagrees with material "
-                                          f"{int(bm[bad[0]])}'s {float(want[bad[0]])!r} in the header")
+        _check_bond_columns(bpath, brows, props, bm, mats)
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, materials=mats, **geom, **kw)
     if "materials" in kw:
         return Sample.from_arrays(pos, rad, bonds, bond_material=bm, **geom, **kw)
     defaults = {"E": 1.0e9, "nu": 0.25, "tensile_strength": np.inf, "shear_strength": np.inf}
     cols = {k: (v if v is not None else np.full(nb, defaults[k])) for k, v in props.items()}
-    mats, bm_auto = _materials_from_bonds(conventions.JaxbpmBond(cols["E"], cols["nu"], np.ones(nb),
+    mats, bm_auto = materials_from_bonds(conventions.JaxbpmBond(cols["E"], cols["nu"], np.ones(nb),
                                                                  cols["tensile_strength"], cols["shear_strength"]))
     return Sample.from_arrays(pos, rad, bonds, bond_material=bm_auto, materials=mats, **geom, **kw)

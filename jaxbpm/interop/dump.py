@@ -8,7 +8,7 @@ import pathlib
 import numpy as np
 
 from jaxbpm.errors import SampleFileError
-from jaxbpm.interop.lammps import _read_text
+from jaxbpm.interop._meta import read_text
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,10 +28,12 @@ class DumpFrame:
 
     @property
     def ids(self) -> np.ndarray:
+        """The atom IDs of an atoms frame, sorted: ``[n]`` int64."""
         return np.sort(self.columns["id"].astype(np.int64))
 
     @property
     def positions(self) -> np.ndarray:
+        """The atom positions ``[n, 3]`` [m] in the order of :attr:`ids` (scaled coordinates unscaled by the box)."""
         order = np.argsort(self.columns["id"], kind="stable")
         for names, scaled in ((("x", "y", "z"), False), (("xu", "yu", "zu"), False), (("xs", "ys", "zs"), True)):
             if all(c in self.columns for c in names):
@@ -42,14 +44,22 @@ class DumpFrame:
 
     @property
     def bond_atoms(self) -> np.ndarray:
+        """The two atom IDs of each entry of a local (bond) frame: ``[nb, 2]`` int64."""
         names = list(self.columns)
         a = next((c for c in names if "batom1" in c), names[0])
         b = next((c for c in names if "batom2" in c), names[1])
         return np.stack([self.columns[a], self.columns[b]], axis=1).astype(np.int64)
 
     def bonds(self, ids) -> np.ndarray:
-        """``bond_atoms`` as 0-based indices into particles with atom IDs ``ids`` (e.g. ``frame.ids`` of an atoms
-        frame, or particle index + 1 for a file written by :func:`write_lammps_data`)."""
+        """:attr:`bond_atoms` as 0-based particle indices.
+
+        Args:
+          ids: ``[n]`` the particles' atom IDs (e.g. ``frame.ids`` of an atoms frame, or particle index + 1 for a
+            file written by :func:`~jaxbpm.interop.lammps.write_lammps_data`).
+
+        Returns:
+          ``[nb, 2]`` int64 indices into ``ids``.
+        """
         ids = np.asarray(ids, np.int64)
         order = np.argsort(ids)
         ba = self.bond_atoms
@@ -63,9 +73,19 @@ class DumpFrame:
 
 
 def read_lammps_dump(path) -> list[DumpFrame]:
-    """All frames of a LAMMPS text dump (``dump atom/custom`` or ``dump local``); errors name the line."""
+    """Read all frames of a LAMMPS text dump (``dump atom/custom`` or ``dump local``).
+
+    Args:
+      path: the dump file.
+
+    Returns:
+      The frames, in file order.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+    """
     path = pathlib.Path(path)
-    lines = _read_text(path).splitlines()
+    lines = read_text(path).splitlines()
     frames, i = [], 0
 
     def expect(k: int, prefix: str) -> str:

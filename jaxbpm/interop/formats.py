@@ -73,8 +73,19 @@ def _kind(path: pathlib.Path, what: str) -> str:
 
 
 def read_sample(path, *, format: str | None = None, **kw) -> Sample:
-    """Read a sample from any readable format, chosen by suffix (``.h5``, ``.data``/``.lmp``, ``.csv``) or by
-    ``format`` (a key of :data:`READERS`: ``"liggghts"``, ``"yade"``, ...; any suffix)."""
+    """Read a sample from any readable format.
+
+    Args:
+      path: the file; its suffix gives the format (``.h5``, ``.data``/``.lmp``, ``.csv``) unless ``format`` does.
+      format: a key of :data:`READERS` (``"liggghts"``, ``"yade"``, ...), whatever the suffix.
+      **kw: the reader's keywords.
+
+    Returns:
+      The sample.
+
+    Raises:
+      SampleFileError: an unknown suffix or format, or a file the reader rejects.
+    """
     path = pathlib.Path(path)
     if format is not None:
         return _read_as(path, format, **kw)
@@ -97,8 +108,19 @@ def _read_as(path: pathlib.Path, format: str, **kw) -> Sample:
 
 
 def write_sample(path, sample: Sample, **kw) -> list[pathlib.Path]:
-    """Write a sample in the format chosen by suffix (``.h5``, ``.data``/``.lmp``, ``.csv``, ``.vtu``/``.vtk``);
-    returns the files written."""
+    """Write a sample in the format its suffix names.
+
+    Args:
+      path: the file (``.h5``, ``.data``/``.lmp``, ``.csv``, ``.vtu``/``.vtk``).
+      sample: the sample.
+      **kw: the writer's keywords.
+
+    Returns:
+      The files written (a CSV sample is two files).
+
+    Raises:
+      SampleFileError: a suffix with no sample writer.
+    """
     path = pathlib.Path(path)
     ext = _kind(path, "output")
     if ext in (".h5", ".hdf5"):
@@ -113,10 +135,25 @@ def write_sample(path, sample: Sample, **kw) -> list[pathlib.Path]:
 
 
 def convert(src, dst, *, sample=None, format: str | None = None, **kw) -> list[pathlib.Path]:
-    """Convert ``src`` to ``dst``, formats by suffix (``format``: read ``src`` as that key of :data:`READERS`
-    instead). A LAMMPS dump (``.dump``/``.lammpstrj``) converts to a ``.pvd`` VTU series or a ``.vtkhdf`` series
-    and needs ``sample`` (a Sample or a sample file) for radii and bonds; its atom IDs must be particle index + 1
-    (as :func:`write_lammps_data` numbers them). Returns the files written."""
+    """Convert a file to another format, formats by suffix.
+
+    A LAMMPS dump (``.dump``/``.lammpstrj``) converts to a ``.pvd`` VTU series or a ``.vtkhdf`` series and needs
+    ``sample`` for radii and bonds; its atom IDs must be particle index + 1 (as :func:`write_lammps_data` numbers
+    them).
+
+    Args:
+      src: the input file.
+      dst: the output file.
+      sample: a :class:`Sample` or a sample file (for a dump only).
+      format: read ``src`` as this key of :data:`READERS`, whatever its suffix.
+      **kw: the reader's keywords.
+
+    Returns:
+      The files written.
+
+    Raises:
+      SampleFileError: unknown formats, a dump without ``sample``, or a file the reader rejects.
+    """
     src, dst = pathlib.Path(src), pathlib.Path(dst)
     if format is not None:
         _kind(dst, "output")

@@ -10,29 +10,39 @@ from __future__ import annotations
 
 import dataclasses
 import pathlib
-import re
 import warnings
 from typing import Any, Mapping
 
 import numpy as np
 
-from jaxbpm.interop import conventions
+from jaxbpm._atomic import atomic_write
 from jaxbpm.errors import SampleError, SampleFileError
-from jaxbpm.io import atomic_write
+from jaxbpm.interop import conventions
+from jaxbpm.interop._lammps_fast import parse_fast
+from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, Line, coeff_row, coeffs_head, head_meta, header,
+                                           last_wins, split, table_arrays)
+from jaxbpm.interop._meta import (BIG, N_COEFFS, crc32, domain_of, exact_text, meta_line, meta_of, names_file,
+                                  read_text, verify, without_line)
 from jaxbpm.sample import ParticleMaterial, Sample
-from jaxbpm.interop._meta import (_BIG, _checksums, _crc32, _domain, _meta, _meta_line, _N_COEFFS, _names_file,
-                                  _parse_meta, _r, _verify, _without_line)
 
 
 def lammps_coefficients(sample: Sample, *, normalize: bool = False) -> np.ndarray:
-    """Per-bond ``bpm/rotational`` coefficients ``[nb, 12]`` (Kr Ks Kt Kb Fcr Fcs Tct Tcb, dampings 0) of a sample,
-    exact translations of its bond law (:func:`jaxbpm.interop.conventions.to_lammps`); infinite strengths become 1e300."""
+    """Per-bond ``bpm/rotational`` coefficients of a sample: exact translations of its bond law
+    (:func:`jaxbpm.interop.conventions.to_lammps`).
+
+    Args:
+      sample: the sample.
+      normalize: coefficients for LAMMPS's ``normalize yes`` (stiffnesses per unit length).
+
+    Returns:
+      ``[nb, 12]``: Kr Ks Kt Kb Fcr Fcs Tct Tcb and the dampings (0); infinite strengths become 1e300.
+    """
     bond, length, _, _ = conventions.sample_bonds(sample)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", conventions.InexactTranslationWarning)  # stated in the docs
         p = conventions.to_lammps(bond, length, normalize=normalize)
     c = p.coefficients().reshape(-1, 8)
-    c = np.where(np.isfinite(c), c, _BIG)
+    c = np.where(np.isfinite(c), c, BIG)
     return np.concatenate([c, np.zeros((c.shape[0], 4))], axis=1)
 
 
@@ -40,7 +50,7 @@ def _group_types(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """1-based type per bond (bonds with bit-identical coefficients share one, numbered by first appearance) and
     the ``[ntypes, 12]`` table."""
     if len(coeffs) == 0:
-        return np.zeros(0, np.int64), np.zeros((0, _N_COEFFS))
+        return np.zeros(0, np.int64), np.zeros((0, N_COEFFS))
     coeffs = np.ascontiguousarray(coeffs, dtype=np.float64)
     bits = coeffs.view(np.uint64)
     # a 64-bit hash of each row's bits groups the rows; the groups are exact when every row equals its group's first
@@ -63,7 +73,7 @@ def _group_types(coeffs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _rows(fmt: str, columns: list) -> str:
     """``fmt`` (``%``-format of one line, ``%s`` for each float column) applied to each row of ``columns`` (lists
-    of Python ints, or float arrays, written as :func:`_r` does), each line ended by a newline: one formatting call
+    of Python ints, or float arrays, written as :func:`exact_text` does), each line ended by a newline: one formatting call
     for all rows."""
     n = len(columns[0])
     if n == 0:
@@ -75,7 +85,7 @@ def _rows(fmt: str, columns: list) -> str:
 
 
 def _reprs(values: np.ndarray) -> list[str]:
-    """``[_r(v) for v in values]``, each distinct value (bit for bit) formatted once."""
+    """``[exact_text(v) for v in values]``, each distinct value (bit for bit) formatted once."""
     values = np.asarray(values).astype(np.float64)
     uniq, inv = np.unique(values.view(np.uint64), return_inverse=True)
     if 2 * len(uniq) > len(values):
@@ -84,14 +94,22 @@ def _reprs(values: np.ndarray) -> list[str]:
 
 
 def _coeff_line(t: int, row) -> str:
-    return f"{t} " + " ".join(_r(v) for v in row)
+    return f"{t} " + " ".join(exact_text(v) for v in row)
 
 
 def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational break yes smooth no") -> pathlib.Path:
-    """Write an include file for a LAMMPS input: an optional ``bond_style`` line, then one ``bond_coeff`` line per
-    row of ``table`` (``[ntypes, 8 or 12]``; missing dampings are 0). ``bond_style=None`` writes coefficients only."""
+    """Write an include file for a LAMMPS input, atomically.
+
+    Args:
+      path: the file.
+      table: ``[ntypes, 8 or 12]`` coefficients, one ``bond_coeff`` line per row (missing dampings are 0).
+      bond_style: the ``bond_style`` line written first; ``None``: coefficients only.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
     table = np.asarray(table, dtype=np.float64)
-    if table.ndim != 2 or table.shape[1] not in (8, _N_COEFFS):
+    if table.ndim != 2 or table.shape[1] not in (8, N_COEFFS):
         raise SampleError(f"bond coefficient table must have shape [ntypes, 8] or [ntypes, 12], got {table.shape}")
     if table.shape[1] == 8:
         table = np.concatenate([table, np.zeros((len(table), 4))], axis=1)
@@ -105,10 +123,20 @@ def write_lammps_coeffs(path, table, *, bond_style: str | None = "bpm/rotational
 
 
 def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
-    """``bond_coeff`` lines of a LAMMPS input file: ``({type: 12 coefficients}, normalize)`` (``normalize`` from a
-    ``bond_style bpm/rotational ... normalize yes`` line). Errors name the line."""
+    """Read the ``bond_coeff`` lines of a LAMMPS input file.
+
+    Args:
+      path: the input file.
+
+    Returns:
+      ``({type: 12 coefficients}, normalize)``, ``normalize`` from a ``bond_style bpm/rotational ... normalize yes``
+      line.
+
+    Raises:
+      SampleFileError: a missing file, another bond style or a malformed line (named).
+    """
     path = pathlib.Path(path)
-    text = _read_text(path)
+    text = read_text(path)
     coeffs, normalize = {}, False
     for no, raw in enumerate(text.splitlines(), start=1):
         words = raw.split("#", 1)[0].split()
@@ -121,28 +149,9 @@ def read_lammps_coeffs(path) -> tuple[dict[int, np.ndarray], bool]:
             normalize = "normalize" in kw and kw.index("normalize") + 1 < len(kw) and \
                 kw[kw.index("normalize") + 1] in ("yes", "1", "true")
         elif words[0] == "bond_coeff":
-            t, row = _coeff_row(words[1:], f"{path}:{no}")
+            t, row = coeff_row(words[1:], f"{path}:{no}")
             coeffs[t] = row
     return coeffs, normalize
-
-
-def _coeff_row(words: list[str], where: str) -> tuple[int, np.ndarray]:
-    if len(words) not in (9, 13):
-        raise SampleFileError(f"{where}: bpm/rotational coefficients need a type and 12 values (Kr Ks Kt Kb Fcr Fcs "
-                              f"Tct Tcb gamma_r gamma_s gamma_t gamma_b) or 8 without dampings; got "
-                              f"{len(words) - 1} values")
-    try:
-        t = int(words[0])
-        row = np.array([float(w) for w in words[1:]])
-    except ValueError:
-        raise SampleFileError(f"{where}: bond coefficients must be a type number and numbers, got "
-                              f"{' '.join(words)!r}") from None
-    if np.isnan(row).any() or not np.isfinite(row[:4]).all():
-        raise SampleFileError(f"{where}: bond coefficients must be numbers, the stiffnesses Kr Ks Kt Kb finite; got "
-                              f"{' '.join(words)!r}")
-    if len(row) == 8:
-        row = np.concatenate([row, np.zeros(4)])
-    return t, row
 
 
 def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_types=None, bond_types=None,
@@ -171,7 +180,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     n, nb = sample.n_particles, sample.n_bonds
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     b = np.asarray(sample.bonds)
-    coeffs = lammps_coefficients(sample, normalize=normalize) if nb else np.zeros((0, _N_COEFFS))
+    coeffs = lammps_coefficients(sample, normalize=normalize) if nb else np.zeros((0, N_COEFFS))
     if bond_types is None:
         btype, table = _group_types(coeffs)
     else:
@@ -179,7 +188,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
         if btype.shape != (nb,) or (nb and btype.min() < 1):
             raise SampleError(f"bond_types must hold {nb} types >= 1, got shape {btype.shape}")
         ntype = int(btype.max()) if nb else 0
-        table = np.zeros((ntype, _N_COEFFS))
+        table = np.zeros((ntype, N_COEFFS))
         first = np.full(ntype, -1)
         for k in range(nb - 1, -1, -1):
             first[btype[k] - 1] = k
@@ -199,17 +208,17 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
     from jaxbpm._version import __version__
 
-    lines = [_meta_line(_meta(sample, normalize=bool(normalize))), "",
+    lines = [meta_line(meta_of(sample, normalize=bool(normalize))), "",
              f"{n} atoms", f"{int(atype.max())} atom types", f"{nb} bonds", f"{max(len(table), 1)} bond types", "",
-             *(f"{_r(lo[c])} {_r(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
+             *(f"{exact_text(lo[c])} {exact_text(hi[c])} {a}lo {a}hi" for c, a in enumerate("xyz")), "",
              "Atoms # bpm/sphere", ""]
-    # the text is what the line-by-line form "\n".join(lines) + "\n" gives (ids, types: %d; floats: repr, i.e. _r),
+    # the text is what the line-by-line form "\n".join(lines) + "\n" gives (ids, types: %d; floats: repr, i.e. exact_text),
     # formatted a whole section at a time
     parts = ["\n".join(lines) + "\n",
-             _rows(f"%d 1 %d %s {_r(density)} %s %s %s",
+             _rows(f"%d 1 %d %s {exact_text(density)} %s %s %s",
                    [list(range(1, n + 1)), atype.tolist(), 2.0 * rad, *(pos[:, c] for c in range(3))])]
     if coefficients and len(table):
-        parts.append("\nBond Coeffs # bpm/rotational\n\n" + _rows("%d" + " %s" * _N_COEFFS, [
+        parts.append("\nBond Coeffs # bpm/rotational\n\n" + _rows("%d" + " %s" * N_COEFFS, [
             list(range(1, len(table) + 1)), *np.asarray(table, np.float64).T]))
     if nb:
         rb, bm = np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
@@ -219,7 +228,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     body = "".join(parts)
     head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
                      f"jaxbpm {__version__}")
-    text = f"{head} crc32={_crc32(body)}\n{body}"
+    text = f"{head} crc32={crc32(body)}\n{body}"
 
     def write(tmp):
         pathlib.Path(tmp).write_text(text, encoding="utf-8")
@@ -227,34 +236,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     return atomic_write(path, write)
 
 
-def _read_text(path: pathlib.Path) -> str:
-    if not path.exists():
-        raise SampleFileError(f"{path}: no such file")
-    if path.is_dir():
-        raise SampleFileError(f"{path}: is a directory, not a file")
-    try:
-        return path.read_text()
-    except UnicodeDecodeError as exc:
-        raise SampleFileError(f"{path}: not a text file ({exc})") from None
-
-
-_SECTIONS = {"Atoms": "atoms", "Velocities": "atoms", "Masses": "atom types", "Bonds": "bonds",
-             "Bond Coeffs": "bond types", "Pair Coeffs": "atom types", "Angles": "angles", "Dihedrals": "dihedrals",
-             "Impropers": "impropers", "Ellipsoids": "ellipsoids", "Lines": "lines", "Triangles": "triangles",
-             "Bodies": "bodies", "Angle Coeffs": "angle types", "Dihedral Coeffs": "dihedral types",
-             "Improper Coeffs": "improper types"}
-_HEADER = re.compile(r"^\s*([-+0-9.eE]+)(?:\s+([-+0-9.eE]+))?(?:\s+([-+0-9.eE]+))?\s+([a-z][a-z /]*[a-z])\s*$")
-_ATOM_COLUMNS = {"bpm/sphere": 8, "sphere": 7}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Line:
-    no: int
-    words: list[str]
-    comment: str
-
-
-@_names_file
+@names_file
 def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
                      breaking: bool = True, bond_radius_ratio: float | None = None,
                      materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
@@ -276,21 +258,22 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         :meth:`Sample.from_arrays`.
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ...).
 
+    Returns:
+      The sample, particles in the order of their atom IDs.
+
     Raises:
       SampleFileError: the file is missing or malformed (the message names the line).
       SampleError: the content does not make a valid sample.
       ConventionError: the coefficients have no jaxbpm counterpart.
     """
     path = pathlib.Path(path)
-    text = _read_text(path)
-    from jaxbpm.interop._lammps_fast import parse_fast
-
+    text = read_text(path)
     got = parse_fast(path, text, atom_style)
     crc, body, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table = \
         got if got is not None else _parse_lines(path, text, atom_style)
     nb = len(bonds)
     if crc is not None:  # the file read well: is it the one jaxbpm wrote?
-        _verify(body, "crc32", crc, path, "line 1", f"delete 'crc32={crc}' from line 1 of {path.name}")
+        verify(body, "crc32", crc, path, "line 1", f"delete 'crc32={crc}' from line 1 of {path.name}")
     if coeffs is not None:
         if isinstance(coeffs, (str, pathlib.Path)):
             extra_table, extra_norm = read_lammps_coeffs(coeffs)
@@ -299,16 +282,16 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         else:
             extra_table = {}
             for t, v in coeffs.items():
-                _, extra_table[int(t)] = _coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
-        extra_keys, extra_rows = _table_arrays(extra_table)
-        table = _last_wins(np.concatenate([table[0], extra_keys]), np.concatenate([table[1], extra_rows]))
+                _, extra_table[int(t)] = coeff_row([str(t)] + [repr(float(x)) for x in v], f"coeffs[{t}]")
+        extra_keys, extra_rows = table_arrays(extra_table)
+        table = last_wins(np.concatenate([table[0], extra_keys]), np.concatenate([table[1], extra_rows]))
     if normalize is None:
         normalize = bool(meta.get("normalize", False)) if meta else False
     kw = dict(sample_kw)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])
-        kw.setdefault("domain", _domain(meta))
+        kw.setdefault("domain", domain_of(meta))
     pm = kw.pop("particle_material", None) or {}
     if isinstance(pm, ParticleMaterial):
         pm = {f.name: getattr(pm, f.name) for f in dataclasses.fields(ParticleMaterial)}
@@ -350,77 +333,20 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
         t = int(btype[np.flatnonzero(np.any(coef[:, 8:] != 0, axis=1))[0]])
         warnings.warn(f"{path}: bond type {t} has bond damping (gamma) coefficients; jaxbpm's bonds are undamped and "
                       f"ignores them", conventions.InexactTranslationWarning, stacklevel=2)
-    limits = np.where(coef[:, 4:8] >= 0.999 * _BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
+    limits = np.where(coef[:, 4:8] >= 0.999 * BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
     p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
                                         normalize=normalize)
     bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
-    mats, bm = _materials_from_bonds(bond)
+    mats, bm = materials_from_bonds(bond)
     return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
                               particle_material=pm, **kw)
 
 
-def _table_arrays(table: Mapping[int, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``{type: 12 coefficients}`` as sorted types and their rows (types outside int64 name no bond: dropped)."""
-    keys = sorted(t for t in table if -2 ** 63 <= t < 2 ** 63)
-    return (np.array(keys, np.int64).reshape(-1),
-            np.array([table[t] for t in keys], np.float64).reshape(-1, _N_COEFFS))
-
-
-def _last_wins(keys: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted distinct ``keys`` and, for each, the row of its last occurrence (as a dict filled in order keeps)."""
-    u, idx = np.unique(keys[::-1], return_index=True)
-    return u, rows[::-1][idx]
-
-
-def _header(path, numbered) -> tuple[dict[str, int], int]:
-    """The counts of the header lines ``numbered`` (``(line number, text)`` from line 2 on) and the index of the
-    line of the first section."""
-    counts: dict[str, int] = {}
-    body_start = None
-    for no, s in numbered:
-        words = _split(s)[0]
-        if not words:
-            continue
-        name = " ".join(words)
-        if name in _SECTIONS:
-            body_start = no - 1
-            break
-        m = _HEADER.match(name)
-        if not m:
-            raise SampleFileError(f"{path}:{no}: cannot read header line {s.strip()!r}")
-        key = m.group(4)
-        if m.group(2) is None:
-            try:
-                counts[key] = int(m.group(1))
-            except ValueError:
-                raise SampleFileError(f"{path}:{no}: the count of {key!r} must be a whole number") from None
-    if body_start is None:
-        raise SampleFileError(f"{path}: no Atoms section")
-    for key in ("atoms",):
-        if key not in counts:
-            raise SampleFileError(f"{path}: header lacks the '{key}' count")
-    return counts, body_start
-
-
-def _head_meta(path, first: list[str]):
-    """The checksum of the title line and the jaxbpm metadata of the first (up to 6) lines ``first``."""
-    crc = _checksums(first[0], f"{path}:1", ("crc32",))["crc32"] if first and "crc32=" in first[0] else None
-    meta = None
-    for no, line in enumerate(first[:6], start=1):
-        meta = meta or _parse_meta(line.strip(), f"{path}:{no}")
-    return crc, meta
-
-
-def _parse_lines(path, text: str, atom_style):
-    """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
-    rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
-    raw = text.splitlines()
-    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
-    crc, meta = _head_meta(path, raw[:6])
-    # header
-    counts, body_start = _header(path, enumerate(raw[1:], start=2))
-    lines = [_Line(i + 1, *_split(s)) for i, s in enumerate(raw)]
-    sections: dict[str, tuple[_Line, list[_Line]]] = {}
+def _line_sections(path, raw: list[str], counts: dict[str, int], body_start: int) -> dict[str, tuple[Line, list[Line]]]:
+    """``{name: (its name's line, its rows)}`` of the sections from line ``body_start`` on, each with the row count
+    the header declares; errors name the line."""
+    lines = [Line(i + 1, *split(s)) for i, s in enumerate(raw)]
+    sections: dict[str, tuple[Line, list[Line]]] = {}
     i = body_start
     while i < len(lines):
         ln = lines[i]
@@ -428,23 +354,27 @@ def _parse_lines(path, text: str, atom_style):
             i += 1
             continue
         name = " ".join(ln.words)
-        if name not in _SECTIONS:
+        if name not in SECTIONS:
             raise SampleFileError(f"{path}:{ln.no}: unknown section {raw[ln.no - 1].strip()!r} (or a "
                                   f"{'section line too many' if sections else 'misplaced line'})")
-        want = counts.get(_SECTIONS[name], 0)
+        want = counts.get(SECTIONS[name], 0)
         rows, i = [], i + 1
         while len(rows) < want:
             if i >= len(lines):
                 raise SampleFileError(f"{path}:{len(lines)}: section {name} ended after {len(rows)} of {want} lines")
             if lines[i].words:
-                if " ".join(lines[i].words) in _SECTIONS:
+                if " ".join(lines[i].words) in SECTIONS:
                     raise SampleFileError(f"{path}:{lines[i].no}: section {name} ended after {len(rows)} of {want} "
                                           f"lines")
                 rows.append(lines[i])
             i += 1
         sections[name] = (ln, rows)
-    # a count the header declares is a section the file must hold (a file cut before its Bonds section would
-    # otherwise read as a sample without bonds)
+    return sections
+
+
+def _check_complete(path, text: str, raw: list[str], counts: dict[str, int], sections) -> None:
+    """Raise a :class:`SampleFileError` for a file cut short: a section the header declares rows for is missing (a
+    file cut before its Bonds section would otherwise read as a sample without bonds), or the last line is cut."""
     for name, key in (("Atoms", "atoms"), ("Bonds", "bonds")):
         if counts.get(key, 0) > 0 and name not in sections:
             raise SampleFileError(f"{path}: the header declares {counts[key]} {key} but the file has no {name} section "
@@ -452,19 +382,25 @@ def _parse_lines(path, text: str, atom_style):
     if text and not text.endswith(("\n", "\r")) and raw[-1].split("#")[0].strip():
         raise SampleFileError(f"{path}:{len(raw)}: the file ends in the middle of a line (truncated?): "
                               f"{raw[-1].strip()!r}")
-    # atoms
-    head, rows = sections.get("Atoms", (None, []))
+
+
+def _atom_style(path, sections, atom_style) -> str | None:
+    """The atom style given, or named by the Atoms section's comment; ``None``: from each line's column count."""
+    head, _ = sections.get("Atoms", (None, []))
     style = atom_style or (head.comment.strip() if head is not None and head.comment.strip() else None)
-    if style is not None and style not in _ATOM_COLUMNS:
+    if style is not None and style not in ATOM_COLUMNS:
         raise SampleFileError(f"{path}:{head.no if head else 1}: atom style {style!r} is not supported (bpm/sphere "
                               f"or sphere)")
+    return style
+
+
+def _atom_rows(path, raw: list[str], rows: list[Line], style: str | None):
+    """``(ids, dia, dens, pos)`` of the Atoms rows in file order; errors name the line."""
     n = len(rows)
-    if n == 0:
-        raise SampleFileError(f"{path}: the Atoms section is empty")
     ids, dia, dens, pos = np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros((n, 3))
     for k, ln in enumerate(rows):
         st = style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(len(ln.words))
-        ncol = _ATOM_COLUMNS.get(st)
+        ncol = ATOM_COLUMNS.get(st)
         if ncol is None or len(ln.words) not in (ncol, ncol + 3):
             raise SampleFileError(
                 f"{path}:{ln.no}: Atoms line has {len(ln.words)} values, expected 8 (bpm/sphere: id mol type "
@@ -483,6 +419,17 @@ def _parse_lines(path, text: str, atom_style):
         if not np.all(np.isfinite(pos[k])):
             raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has a coordinate that is not finite: "
                                   f"{raw[ln.no - 1].strip()!r}")
+    return ids, dia, dens, pos
+
+
+def _atoms_by_line(path, raw: list[str], sections, atom_style):
+    """``(ids, dia, dens, pos)`` of the Atoms section sorted by ID: unique IDs, one density; errors name the
+    line."""
+    style = _atom_style(path, sections, atom_style)
+    _, rows = sections.get("Atoms", (None, []))
+    if not rows:
+        raise SampleFileError(f"{path}: the Atoms section is empty")
+    ids, dia, dens, pos = _atom_rows(path, raw, rows, style)
     order = np.argsort(ids, kind="stable")
     dup = np.flatnonzero(np.diff(ids[order]) == 0)
     if dup.size:
@@ -493,8 +440,13 @@ def _parse_lines(path, text: str, atom_style):
         k = int(np.flatnonzero(dens != dens[0])[0])
         raise SampleFileError(f"{path}:{atom_line[k]}: atom density {float(dens[k])!r} differs from "
                               f"{float(dens[0])!r}; a jaxbpm sample has one particle density")
+    return ids, dia, dens, pos
+
+
+def _bonds_by_line(path, raw: list[str], sections, ids: np.ndarray, counts: dict[str, int]):
+    """``(bonds [nb, 2] as particle indices, types, bond radii and materials from jaxbpm's comments)`` of the
+    Bonds section; errors name the line."""
     index = {int(a): k for k, a in enumerate(ids)}
-    # bonds
     _, brows = sections.get("Bonds", (None, []))
     nb = len(brows)
     bonds, btype = np.zeros((nb, 2), np.int64), np.zeros(nb, np.int64)
@@ -523,29 +475,46 @@ def _parse_lines(path, text: str, atom_style):
                 rb_c[k], mat_c[k] = float(extra[0]), int(extra[1])
             except (ValueError, OverflowError):  # not jaxbpm's comment: the coefficients are translated
                 rb_c[k], mat_c[k] = np.nan, -1
-    # coefficients
+    return bonds, btype, rb_c, mat_c
+
+
+def _coeffs_by_line(path, sections) -> tuple[np.ndarray, np.ndarray]:
+    """The Bond Coeffs section as ``(types, coefficients)`` (:func:`table_arrays`); errors name the line."""
     table: dict[int, np.ndarray] = {}
     if "Bond Coeffs" in sections:
         head, crows = sections["Bond Coeffs"]
-        _coeffs_head(path, head.no, head.comment)
+        coeffs_head(path, head.no, head.comment)
         for ln in crows:
-            t, row = _coeff_row(ln.words, f"{path}:{ln.no}")
+            t, row = coeff_row(ln.words, f"{path}:{ln.no}")
             table[t] = row
-    return (crc, _without_line(text, 0), meta, pos, dia, dens, bonds, btype, rb_c, mat_c, _table_arrays(table))
+    return table_arrays(table)
 
 
-def _coeffs_head(path, no: int, comment: str) -> None:
-    if comment.strip() and comment.strip() != "bpm/rotational":
-        raise SampleFileError(f"{path}:{no}: Bond Coeffs are for {comment.strip()!r}; jaxbpm reads bpm/rotational")
+def _parse_lines(path, text: str, atom_style):
+    """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
+    rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
+    raw = text.splitlines()
+    # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
+    crc, meta = head_meta(path, raw[:6])
+    counts, body_start = header(path, enumerate(raw[1:], start=2))
+    sections = _line_sections(path, raw, counts, body_start)
+    _check_complete(path, text, raw, counts, sections)
+    ids, dia, dens, pos = _atoms_by_line(path, raw, sections, atom_style)
+    bonds = _bonds_by_line(path, raw, sections, ids, counts)
+    return (crc, without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections))
 
 
-def _split(s: str) -> tuple[list[str], str]:
-    body, _, comment = s.partition("#")
-    return body.split(), comment
+def materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:
+    """A material table for translated bonds: one component per distinct (E, nu, tensile, shear) (to 1e-12
+    relative), numbered in the order of their first bond.
 
+    Args:
+      bond: per-bond jaxbpm parameters (arrays ``[nb]`` or scalars).
 
-def _materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:
-    """One material component per distinct (E, nu, tensile, shear) (to 1e-12 relative), numbered by first bond."""
+    Returns:
+      ``(materials, bond_material)``: ``{"E", "nu", "tensile_strength", "shear_strength": [k]}`` and ``[nb]`` int32
+      component indices.
+    """
     cols = [np.broadcast_to(np.asarray(getattr(bond, k), float), np.shape(bond.bond_radius))
             for k in ("E", "nu", "tensile_strength", "shear_strength")]
     table = np.stack(cols, axis=1)

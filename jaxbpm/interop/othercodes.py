@@ -24,11 +24,11 @@ import pathlib
 
 import numpy as np
 
+from jaxbpm._atomic import atomic_write
 from jaxbpm.errors import SampleFileError
-from jaxbpm.interop._meta import _names_file, _r
+from jaxbpm.interop._meta import exact_text, names_file, read_text
 from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
-from jaxbpm.interop.lammps import _read_text, read_lammps_data
-from jaxbpm.io import atomic_write
+from jaxbpm.interop.lammps import read_lammps_data
 from jaxbpm.sample import Sample
 
 __all__ = ["read_liggghts_data", "read_liggghts_dump", "read_yade_text", "write_yade_text", "YADE_FORMATS"]
@@ -37,10 +37,21 @@ YADE_FORMATS = {"x_y_z_r": 4, "x_y_z_r_matId": 5, "x_y_z_r_attrs": None}  # name
 
 
 def read_liggghts_data(path, *, bond_radius_ratio: float | None = None, materials=None, **sample_kw) -> Sample:
-    """Read a LIGGGHTS data file (``atom_style granular``) into a :class:`Sample`: particles ordered by atom ID;
-    bonds from a ``Bonds`` section (``id type atom1 atom2``) if there is one, with radius ``bond_radius_ratio``
-    times the smaller particle's radius and ``materials`` (default one component, see
-    :meth:`Sample.from_arrays`). ``sample_kw`` go to :meth:`Sample.from_arrays`; errors name the line."""
+    """Read a LIGGGHTS data file (``atom_style granular``) into a :class:`Sample`.
+
+    Args:
+      path: the data file.
+      bond_radius_ratio: bond radius over the smaller particle's radius, for the bonds of a ``Bonds`` section
+        (``id type atom1 atom2``), if there is one.
+      materials: the bond material table (default one component, see :meth:`Sample.from_arrays`).
+      **sample_kw: more :meth:`Sample.from_arrays` keywords.
+
+    Returns:
+      The sample, particles ordered by atom ID.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+    """
     kw = dict(sample_kw)
     if bond_radius_ratio is not None:
         kw.update(bond_radius_ratio=bond_radius_ratio, materials=materials)
@@ -50,12 +61,21 @@ def read_liggghts_data(path, *, bond_radius_ratio: float | None = None, material
 
 
 def read_liggghts_dump(path) -> list[DumpFrame]:
-    """All frames of a LIGGGHTS text dump (``dump custom``, e.g. ``id type x y z vx vy vz radius``): a LAMMPS
-    text dump, read by :func:`jaxbpm.interop.dump.read_lammps_dump`; errors name the line."""
+    """Read all frames of a LIGGGHTS text dump (``dump custom``, e.g. ``id type x y z vx vy vz radius``).
+
+    Args:
+      path: the dump, a LAMMPS text dump (:func:`jaxbpm.interop.dump.read_lammps_dump`).
+
+    Returns:
+      The frames, in file order.
+
+    Raises:
+      SampleFileError: a missing or malformed file (the line is named).
+    """
     return read_lammps_dump(path)
 
 
-@_names_file
+@names_file
 def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: float = 0.5, **sample_kw) -> Sample:
     """Read spheres written by Yade's ``export.textExt`` (formats ``x_y_z_r``, ``x_y_z_r_matId``,
     ``x_y_z_r_attrs``; a file without a ``#format`` line is ``x_y_z_r``, as in Yade) into a :class:`Sample`.
@@ -66,6 +86,9 @@ def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: fl
         :func:`jaxbpm.generate.random_packing` does); ``None``: no bonds.
       bond_radius_ratio: bond radius over the smaller particle's radius.
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``materials``, ``particle_material``, ...).
+
+    Returns:
+      The sample, particles in file order.
     """
     from jaxbpm.generate import bond_pairs
 
@@ -82,7 +105,7 @@ def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: fl
 def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
     """Centres ``[n, 3]`` and radii ``[n]`` of a textExt file; errors name the line."""
     fmt, rows = "x_y_z_r", []
-    for no, line in enumerate(_read_text(path).splitlines(), start=1):
+    for no, line in enumerate(read_text(path).splitlines(), start=1):
         words = line.split()
         if not words:
             continue
@@ -113,14 +136,24 @@ def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def write_yade_text(path, sample: Sample, *, comment: str | None = None) -> pathlib.Path:
-    """Write the particles of ``sample`` as Yade's ``export.textExt`` ``x_y_z_r`` layout (tab-separated, exact
-    decimals), atomically; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')``. Bonds are not written
-    (Yade makes its cohesive bonds from contacts)."""
+    """Write the particles of ``sample`` in Yade's ``export.textExt`` ``x_y_z_r`` layout, atomically.
+
+    Tab-separated, exact decimals; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')``. Bonds are not
+    written (Yade makes its cohesive bonds from contacts).
+
+    Args:
+      path: the text file.
+      sample: the sample.
+      comment: a comment line written after the ``#format`` line.
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+    """
     if not isinstance(sample, Sample):
         raise TypeError(f"write_yade_text expects a jaxbpm Sample, got {type(sample).__name__}")
     if comment is not None and (comment.splitlines() != [comment]):
         raise SampleFileError(f"{path}: comment must be one line of text, got {comment!r}")
     pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
     head = "#format x_y_z_r\n" + (f"# {comment}\n" if comment else "")
-    body = "".join(f"{_r(x)}\t{_r(y)}\t{_r(z)}\t{_r(r)}\n" for (x, y, z), r in zip(pos.tolist(), rad.tolist()))
+    body = "".join(f"{exact_text(x)}\t{exact_text(y)}\t{exact_text(z)}\t{exact_text(r)}\n" for (x, y, z), r in zip(pos.tolist(), rad.tolist()))
     return atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(head + body, encoding="utf-8"))

@@ -108,8 +108,16 @@ class VTKHDFSeries:
 
     def write(self, time: float, *, positions=None, displacement=None, intact=None,
               point_data: Mapping[str, Any] | None = None, bond_data: Mapping[str, Any] | None = None) -> int:
-        """Append one step (arguments as :meth:`jaxbpm.interop.vtu.VTUSeries.write`; every step must give the same
-        ``point_data`` and ``bond_data`` names) and flush the file; returns the step's index."""
+        """Append one step and flush the file.
+
+        Args:
+          time: the step's time [s].
+          positions, displacement, intact, point_data, bond_data: as :meth:`jaxbpm.interop.vtu.VTUSeries.write`;
+            every step must give the same ``point_data`` and ``bond_data`` names.
+
+        Returns:
+          The step's index.
+        """
         if self._file is None:
             raise SampleFileError(f"{self.path}: the series is closed")
         s = self.sample

@@ -7,10 +7,11 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from jaxbpm._atomic import atomic_write
+from jaxbpm._vtk import user_data
 from jaxbpm.errors import SampleError, SampleFileError
-from jaxbpm.io import atomic_write, _user_data
+from jaxbpm.interop._meta import exact_text
 from jaxbpm.sample import Sample
-from jaxbpm.interop._meta import _r
 
 
 class VTUSeries:
@@ -37,7 +38,15 @@ class VTUSeries:
 
     def write(self, time: float, *, positions=None, displacement=None, intact=None,
               point_data: Mapping[str, Any] | None = None, bond_data: Mapping[str, Any] | None = None) -> pathlib.Path:
-        """Write one step (atomically) and update the collection; returns the ``.vtu`` path."""
+        """Write one step (atomically) and update the collection.
+
+        Args:
+          time: the step's time [s].
+          positions, displacement, intact, point_data, bond_data: see :func:`step_arrays`.
+
+        Returns:
+          The step's ``.vtu`` path.
+        """
         import meshio
 
         s = self.sample
@@ -66,14 +75,30 @@ class VTUSeries:
         root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
         coll = ET.SubElement(root, "Collection")
         for t, name in self.steps:
-            ET.SubElement(coll, "DataSet", timestep=_r(t), group="", part="0", file=name)
+            ET.SubElement(coll, "DataSet", timestep=exact_text(t), group="", part="0", file=name)
         tree = ET.ElementTree(root)
         ET.indent(tree)
         atomic_write(self.path, lambda tmp: tree.write(tmp, encoding="utf-8", xml_declaration=True))
 
 
 def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data, bond_data):
-    """The points ``[n, 3]``, point data and bond data of one step of a series (see :class:`VTUSeries`)."""
+    """The points, point data and bond data of one step of a series (see :class:`VTUSeries`).
+
+    Args:
+      s: the series' sample.
+      who: the caller, for messages.
+      positions: ``[n, 3]`` particle centres [m], or ``None``.
+      displacement: ``[n, 3]`` from the sample's positions [m], or ``None`` (not both with ``positions``).
+      intact: ``[nb]`` booleans, or ``None`` (all intact).
+      point_data: ``{name: [n] or [n, k]}`` extra per-particle fields, or ``None``.
+      bond_data: ``{name: [nb] or [nb, k]}`` extra per-bond fields, or ``None``.
+
+    Returns:
+      ``(points [n, 3], point data, bond data)``.
+
+    Raises:
+      SampleError: a wrong shape, both ``positions`` and ``displacement``, or a bad user field.
+    """
     n, nb = s.n_particles, s.n_bonds
     ref = np.asarray(s.positions, np.float64)
     if positions is not None and displacement is not None:
@@ -95,16 +120,27 @@ def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data
     broken = np.bincount(b[~ok].ravel(), minlength=n).astype(np.int32)
     pdata = {"radius": np.asarray(s.radii, np.float64), "displacement": disp, "broken_bonds": broken,
              "coordination": np.bincount(b[ok].ravel(), minlength=n).astype(np.int32)}
-    pdata.update(_user_data("point_data", point_data, n, "particle", set(pdata)))
+    pdata.update(user_data("point_data", point_data, n, "particle", set(pdata)))
     bdata = {"intact": ok.astype(np.int32), "material": np.asarray(s.bond_material, np.int32)}
     bdata.update({k: v.astype(np.float64) for k, v in
-                  _user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
+                  user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
     return pos, pdata, bdata
 
 
 def write_vtu_series(pvd_path, sample: Sample, frames: Iterable[Mapping[str, Any]]) -> pathlib.Path:
-    """Write ``frames`` (mappings with ``time`` and the keywords of :meth:`VTUSeries.write`) as a VTU series;
-    returns the ``.pvd`` path."""
+    """Write a VTU series.
+
+    Args:
+      pvd_path: the ``.pvd`` collection file (the ``.vtu`` files go beside it).
+      sample: the sample the frames belong to.
+      frames: mappings with ``time`` and the keywords of :meth:`VTUSeries.write`.
+
+    Returns:
+      The ``.pvd`` path.
+
+    Raises:
+      SampleError: a frame without ``time``, or no frames.
+    """
     series = VTUSeries(pvd_path, sample)
     for frame in frames:
         frame = dict(frame)

@@ -27,8 +27,16 @@ _CELL = [("bond_radius", "/bond_radius"), ("material", "/bond_material"), ("leng
 
 
 def write_xdmf(sample_path, xdmf_path=None) -> pathlib.Path:
-    """Write the XDMF 3 companion of the sample file ``sample_path`` (default: the same name with ``.xdmf``),
-    atomically; it refers to the sample file by its name, so keep the two side by side.
+    """Write the XDMF 3 companion of a sample file, atomically.
+
+    It refers to the sample file by its name, so keep the two side by side.
+
+    Args:
+      sample_path: the HDF5 sample file (:func:`jaxbpm.io.save_sample`).
+      xdmf_path: the companion; default the same name with ``.xdmf``.
+
+    Returns:
+      The companion's path.
 
     Raises:
       SampleFileError: the sample file cannot be read (see :func:`jaxbpm.io.load_sample`).

@@ -166,9 +166,9 @@ def _concrete(params, name: str, expected: str, error):
             raise TypeError
         return np.asarray(arr, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
-        from jaxbpm.sample import _shown
+        from jaxbpm._text import shown
 
-        raise error(f"params[{name!r}] must be {expected}, got {_shown(value)}") from None
+        raise error(f"params[{name!r}] must be {expected}, got {shown(value)}") from None
 
 
 def _float_dtype():

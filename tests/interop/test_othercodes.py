@@ -1,103 +1,14 @@
-"""VTKHDF series, LIGGGHTS and Yade files (jaxbpm.interop.vtkhdf, jaxbpm.interop.othercodes)."""
+"""LIGGGHTS data and dump files and Yade text files (jaxbpm.interop.othercodes)."""
 
-import shutil
 import textwrap
 
-import h5py
 import numpy as np
 import pytest
 
 from jaxbpm import generate
-from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.errors import SampleFileError
 from jaxbpm.interop import formats
 from jaxbpm.sample import Sample
-
-
-def _lattice():
-    return generate.lattice("sc", (4, 3, 2), 1e-3)
-
-
-# ============================================================================================== VTKHDF series
-def test_vtkhdf_series_stores_the_topology_once(tmp_path):
-    sample = _lattice()
-    n, nb = sample.n_particles, sample.n_bonds
-    rng = np.random.default_rng(0)
-    steps = []
-    with formats.VTKHDFSeries(tmp_path / "run.vtkhdf", sample) as series:
-        for k in range(3):
-            intact = np.ones(nb, bool)
-            intact[:k] = False
-            pos = np.asarray(sample.positions) + 1e-4 * k * rng.standard_normal((n, 3))
-            steps.append((0.5 * k, pos, intact, rng.standard_normal(nb)))
-            assert series.write(0.5 * k, positions=pos, intact=intact, bond_data={"force": steps[-1][3]}) == k
-    with h5py.File(tmp_path / "run.vtkhdf", "r") as f:
-        root = f["VTKHDF"]
-        assert list(root.attrs["Version"]) == [2, 1] and root.attrs["Type"] == b"UnstructuredGrid"
-        # one topology: a vertex per particle, then a line per bond
-        assert root["Connectivity"].shape == (n + 2 * nb,)
-        np.testing.assert_array_equal(root["Connectivity"][n:].reshape(-1, 2), sample.bonds)
-        np.testing.assert_array_equal(root["Types"][:], [1] * n + [3] * nb)
-        assert root["Offsets"].shape == (n + nb + 1,) and root["Offsets"][-1] == n + 2 * nb
-        assert list(root["NumberOfPoints"]) == [n] and list(root["NumberOfCells"]) == [n + nb]
-        st = root["Steps"]
-        assert st.attrs["NSteps"] == 3
-        np.testing.assert_array_equal(st["Values"][:], [0.0, 0.5, 1.0])
-        np.testing.assert_array_equal(st["PointOffsets"][:], [0, n, 2 * n])
-        for name in ("CellOffsets", "ConnectivityIdOffsets", "PartOffsets"):
-            np.testing.assert_array_equal(st[name][:], [0, 0, 0])
-        np.testing.assert_array_equal(st["NumberOfParts"][:], [1, 1, 1])
-        np.testing.assert_array_equal(st["PointDataOffsets/radius"][:], [0, 0, 0])  # stored once
-        assert root["PointData/radius"].shape == (n,)
-        for k, (_, pos, intact, force) in enumerate(steps):
-            at = st["PointOffsets"][k]
-            np.testing.assert_array_equal(root["Points"][at:at + n], pos)
-            c = st["CellDataOffsets/intact"][k]
-            np.testing.assert_array_equal(root["CellData/intact"][c + n:c + n + nb], intact)
-            assert np.all(root["CellData/intact"][c:c + n] == -1)
-            c = st["CellDataOffsets/force"][k]
-            np.testing.assert_array_equal(root["CellData/force"][c + n:c + n + nb], force)
-            d = st["PointDataOffsets/displacement"][k]
-            np.testing.assert_allclose(root["PointData/displacement"][d:d + n], pos - np.asarray(sample.positions))
-
-
-def test_vtkhdf_series_errors(tmp_path):
-    sample = _lattice()
-    (tmp_path / "old.vtkhdf").write_bytes(b"keep me")
-    with pytest.raises(SampleFileError, match="exists"):
-        formats.VTKHDFSeries(tmp_path / "old.vtkhdf", sample)
-    assert (tmp_path / "old.vtkhdf").read_bytes() == b"keep me"
-    with pytest.raises(SampleFileError, match=".vtkhdf"):
-        formats.VTKHDFSeries(tmp_path / "run.vtu", sample)
-    series = formats.VTKHDFSeries(tmp_path / "run.vtkhdf", sample)
-    series.write(0.0, point_data={"v": np.zeros((sample.n_particles, 3))})
-    with pytest.raises(SampleError, match="same arrays"):
-        series.write(1.0)
-    with pytest.raises(SampleError, match="shape"):
-        series.write(1.0, positions=np.zeros((2, 3)), point_data={"v": np.zeros((sample.n_particles, 3))})
-    # the file on disk holds the steps written so far (flushed after each): what a run that stops leaves
-    shutil.copyfile(tmp_path / "run.vtkhdf", tmp_path / "stopped.vtkhdf")
-    with h5py.File(tmp_path / "stopped.vtkhdf", "r") as f:
-        assert f["VTKHDF/Steps"].attrs["NSteps"] == 1 and f["VTKHDF/Points"].shape == (sample.n_particles, 3)
-    series.close()
-    with pytest.raises(SampleFileError, match="closed"):
-        series.write(2.0)
-
-
-def test_convert_dump_to_vtkhdf(tmp_path):
-    sample = _lattice()
-    n = sample.n_particles
-    pos = np.asarray(sample.positions)
-    lines = []
-    for step in (0, 10):
-        lines += ["ITEM: TIMESTEP", str(step), "ITEM: NUMBER OF ATOMS", str(n), "ITEM: BOX BOUNDS pp pp pp",
-                  "-1 1", "-1 1", "-1 1", "ITEM: ATOMS id x y z"]
-        lines += [f"{i + 1} {x + 1e-5 * step!r} {y!r} {z!r}" for i, (x, y, z) in enumerate(pos.tolist())]
-    (tmp_path / "run.dump").write_text("\n".join(lines) + "\n")
-    written = formats.convert(tmp_path / "run.dump", tmp_path / "run.vtkhdf", sample=sample)
-    assert written == [tmp_path / "run.vtkhdf"]
-    with h5py.File(written[0], "r") as f:
-        assert list(f["VTKHDF/Steps/Values"]) == [0.0, 10.0]
-        np.testing.assert_allclose(f["VTKHDF/Points"][n:, 0], pos[:, 0] + 1e-4)
 
 
 # ============================================================================================== LIGGGHTS

@@ -1,0 +1,307 @@
+"""The checks of the arrays a :class:`~jaxbpm.sample.Sample` is built from, one function per input, each raising a
+:class:`~jaxbpm.errors.SampleError` that names the problem and the offending indices (the steps of
+:meth:`Sample.from_arrays <jaxbpm.sample.Sample.from_arrays>`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxbpm._text import shown
+from jaxbpm.errors import SampleError
+
+__all__ = ["MAX_LISTED", "listed", "array", "float_array", "finite", "checked_positions", "checked_radii",
+           "checked_bonds", "bond_lengths", "checked_bond_radius", "checked_bond_material"]
+
+MAX_LISTED = 10  # how many offending indices an error message lists
+
+
+def listed(idx) -> str:
+    """Indices for an error message: the first :data:`MAX_LISTED`, and how many in all when there are more.
+
+    Args:
+      idx: integer indices.
+
+    Returns:
+      ``"[0, 3, 7]"`` or ``"[0, 1, ..., 9] ... (25 in all)"``.
+    """
+    idx = np.asarray(idx).tolist()
+    more = f" ... ({len(idx)} in all)" if len(idx) > MAX_LISTED else ""
+    return f"{idx[:MAX_LISTED]}{more}"
+
+
+def array(name: str, x) -> np.ndarray:
+    """``np.asarray(x)``, or a :class:`SampleError` naming ``name`` for what makes no array (ragged lists, ...).
+
+    Args:
+      name: the input's name, for the message.
+      x: the input.
+
+    Returns:
+      ``x`` as a NumPy array.
+
+    Raises:
+      SampleError: ``x`` makes no array.
+    """
+    try:
+        return np.asarray(x)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise SampleError(f"{name} must be an array of numbers, got {shown(x)} ({exc})") from None
+
+
+def float_array(name: str, x) -> np.ndarray:
+    """``x`` as a float64 array, or a :class:`SampleError` when it is not real numbers.
+
+    Args:
+      name: the input's name, for the message.
+      x: the input (integers or floats).
+
+    Returns:
+      ``x`` as float64.
+
+    Raises:
+      SampleError: ``x`` makes no array, or not one of real numbers.
+    """
+    arr = array(name, x)
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise SampleError(f"{name} must be a real numeric array, got dtype {arr.dtype}")
+    return arr.astype(np.float64)
+
+
+def finite(name: str, arr: np.ndarray) -> None:
+    """Raise a :class:`SampleError` naming the rows of ``arr`` that hold NaN or inf.
+
+    Args:
+      name: the input's name, for the message.
+      arr: a float array; its rows are the first axis.
+
+    Raises:
+      SampleError: some value is not finite.
+    """
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        rows = np.flatnonzero(bad.reshape(arr.shape[0], -1).any(axis=1)) if arr.ndim else np.array([0])
+        kind = "NaN" if np.isnan(arr).any() else "inf"
+        raise SampleError(f"{name} contains {kind} values at indices {listed(rows)}")
+
+
+def checked_positions(positions) -> np.ndarray:
+    """The particle centres, checked.
+
+    Args:
+      positions: ``[n, 3]`` particle centres [m], ``n >= 1``.
+
+    Returns:
+      ``[n, 3]`` float64.
+
+    Raises:
+      SampleError: wrong shape, no particles, or values that are not finite.
+    """
+    pos = float_array("positions", positions)
+    if pos.ndim != 2 or pos.shape[1] != 3:
+        raise SampleError(f"positions must have shape [n, 3], got {pos.shape}")
+    if pos.shape[0] == 0:
+        raise SampleError("positions: the sample has no particles")
+    finite("positions", pos)
+    return pos
+
+
+def checked_radii(radii, n: int) -> np.ndarray:
+    """The particle radii, checked: positive, and such that mass (r^3) and inertia (r^5) are finite and > 0.
+
+    Args:
+      radii: ``[n]`` or a scalar [m].
+      n: the number of particles.
+
+    Returns:
+      ``[n]`` float64.
+
+    Raises:
+      SampleError: wrong shape, values not finite, not positive, or out of float64's range for the inertia.
+    """
+    rad = float_array("radii", radii)
+    if rad.ndim == 0:
+        rad = np.full(n, float(rad))
+    if rad.shape != (n,):
+        raise SampleError(f"radii must have shape [{n}] (one per particle), got {rad.shape}")
+    finite("radii", rad)
+    bad = np.flatnonzero(rad <= 0)
+    if bad.size:
+        raise SampleError(f"radii must be > 0; non-positive radius at particles {listed(bad)}")
+    with np.errstate(over="ignore", under="ignore"):
+        bad = np.flatnonzero(~(np.isfinite(rad ** 5) & (rad ** 5 > 0)))
+    if bad.size:
+        raise SampleError(f"radii must lie where mass and inertia are finite and > 0 in float64 (about 1e-60 to "
+                          f"1e60 m); bad radius {rad[bad[0]]:g} m at particles {listed(bad)}")
+    return rad
+
+
+def _integer_pairs(bonds) -> np.ndarray:
+    """``bonds`` as an integer ``[nb, 2]`` array (whole floats accepted), empty inputs as ``[0, 2]``."""
+    b = array("bonds", bonds)
+    if b.size == 0:
+        b = np.zeros((0, 2), dtype=np.int32)
+    if b.ndim != 2 or b.shape[1] != 2:
+        raise SampleError(f"bonds must have shape [nb, 2], got {b.shape}")
+    if not np.issubdtype(b.dtype, np.integer):
+        if np.issubdtype(b.dtype, np.floating) and np.all(np.isfinite(b)) and np.all(b == np.round(b)):
+            b = b.astype(np.int64)
+        else:
+            raise SampleError(f"bonds must hold integer particle indices, got dtype {b.dtype}")
+    return b
+
+
+def _no_duplicates(b: np.ndarray, n: int) -> None:
+    """Raise a :class:`SampleError` naming repeated pairs of the sorted bonds ``b [nb, 2]``."""
+    key = b[:, 0].astype(np.int64) * n + b[:, 1]
+    order = np.argsort(key, kind="stable")
+    dup = order[1:][key[order][1:] == key[order][:-1]]
+    if dup.size:
+        first = order[np.searchsorted(key[order], key[dup[0]])]
+        raise SampleError(
+            f"duplicate bonds ((i, j) and (j, i) count as the same) at bonds {listed(np.sort(dup))}; "
+            f"e.g. bond {dup[0]} repeats bond {first} = {b[dup[0]].tolist()}")
+
+
+def checked_bonds(bonds, n: int) -> np.ndarray:
+    """The bonded pairs, checked and each sorted (``i < j``).
+
+    Args:
+      bonds: ``[nb, 2]`` integer particle indices (whole floats accepted); the order within a pair does not matter.
+      n: the number of particles.
+
+    Returns:
+      ``[nb, 2]`` int32 with ``i < j`` in each row, in the given order of the bonds.
+
+    Raises:
+      SampleError: wrong shape or type, missing particles, self-bonds or duplicate pairs.
+    """
+    b = _integer_pairs(bonds)
+    bad = np.flatnonzero(((b < 0) | (b >= n)).any(axis=1))
+    if bad.size:
+        raise SampleError(
+            f"bonds reference missing particles (valid indices are 0..{n - 1}); bad bonds {listed(bad)}, "
+            f"e.g. bond {bad[0]} = {b[bad[0]].tolist()}")
+    bad = np.flatnonzero(b[:, 0] == b[:, 1])
+    if bad.size:
+        raise SampleError(f"self-bonds (a particle bonded to itself) at bonds {listed(bad)}")
+    b = np.sort(b, axis=1).astype(np.int32)
+    if b.shape[0]:
+        _no_duplicates(b, n)
+    return b
+
+
+def bond_lengths(pos: np.ndarray, rad: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The initial bond lengths, checked: not zero, not far beyond the particles' reach, and far longer than the
+    float64 round-off of the positions they are differences of.
+
+    Args:
+      pos: ``[n, 3]`` checked positions [m].
+      rad: ``[n]`` checked radii [m].
+      b: ``[nb, 2]`` checked bonds.
+
+    Returns:
+      ``[nb]`` float64 lengths [m].
+
+    Raises:
+      SampleError: zero-length bonds, bonds over 1000 times their particles' radii long, or positions so far from
+        the origin that float64 cannot resolve the bond lengths.
+    """
+    with np.errstate(over="ignore"):  # (a length that overflows is caught below as far too long)
+        length = np.linalg.norm(pos[b[:, 1]] - pos[b[:, 0]], axis=1)
+    bad = np.flatnonzero(length <= 1e-9 * np.max(rad))
+    if bad.size:
+        raise SampleError(f"zero-length bonds (coincident particles) at bonds {listed(bad)}")
+    gap = length / (rad[b[:, 0]] + rad[b[:, 1]])
+    bad = np.flatnonzero(gap > 1e3)
+    if bad.size:
+        raise SampleError(f"bonds must join neighbours: bonds {listed(bad)} are more than 1000 times the sum of "
+                          f"their particles' radii long (e.g. bond {bad[0]}: {length[bad[0]]:.4g} m)")
+    # the bond vectors are differences of positions: their float64 round-off (eps |x|) must stay far below
+    # the bond lengths, or a sample far from the origin gets bonds of the wrong length
+    if b.shape[0]:
+        scale = np.maximum(np.abs(pos[b[:, 0]]).max(axis=1), np.abs(pos[b[:, 1]]).max(axis=1))
+        rel = np.finfo(np.float64).eps * scale / length
+        bad = np.flatnonzero(rel > 1e-9)
+        if bad.size:
+            raise SampleError(f"positions lie too far from the origin for their bond lengths in float64 "
+                              f"(round-off {rel.max():.2g} of a bond length, at bonds {listed(bad)}): recentre "
+                              "the sample (subtract its centre from the positions)")
+    return length
+
+
+def _ratio(bond_radius_ratio) -> float:
+    """``bond_radius_ratio`` as a finite positive float, or a :class:`SampleError`."""
+    try:
+        if isinstance(bond_radius_ratio, (str, bytes, bool)):
+            raise TypeError
+        ratio = float(bond_radius_ratio)
+    except (TypeError, ValueError, OverflowError):
+        ratio = float("nan")
+    if not np.isfinite(ratio) or ratio <= 0:
+        raise SampleError(f"bond_radius_ratio must be finite and > 0, got {shown(bond_radius_ratio)}")
+    return ratio
+
+
+def checked_bond_radius(bond_radius, bond_radius_ratio, rad: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The bond radii, given or as a ratio of the smaller particle's radius, checked.
+
+    Args:
+      bond_radius: ``[nb]`` or scalar [m], or ``None``.
+      bond_radius_ratio: a number, or ``None``; exactly one of the two is given.
+      rad: ``[n]`` checked radii [m].
+      b: ``[nb, 2]`` checked bonds.
+
+    Returns:
+      ``[nb]`` float64 bond radii [m].
+
+    Raises:
+      SampleError: both or neither given, a bad ratio, wrong shape, or values not finite and positive.
+    """
+    if (bond_radius is None) == (bond_radius_ratio is None):
+        raise SampleError("give exactly one of bond_radius and bond_radius_ratio")
+    if bond_radius_ratio is not None:
+        return _ratio(bond_radius_ratio) * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
+    nb = b.shape[0]
+    rb = float_array("bond_radius", bond_radius)
+    if rb.ndim == 0:
+        rb = np.full(nb, float(rb))
+    if rb.shape != (nb,):
+        raise SampleError(f"bond_radius must be a scalar or have shape [{nb}], got {rb.shape}")
+    finite("bond_radius", rb)
+    bad = np.flatnonzero(rb <= 0)
+    if bad.size:
+        raise SampleError(f"bond_radius must be > 0; non-positive at bonds {listed(bad)}")
+    return rb
+
+
+def checked_bond_material(bond_material, nb: int, n_materials: int) -> np.ndarray:
+    """The material component of each bond, checked against the table's size.
+
+    Args:
+      bond_material: ``[nb]`` or scalar integer component indices, or ``None`` (all 0).
+      nb: the number of bonds.
+      n_materials: the number of components in the material table.
+
+    Returns:
+      ``[nb]`` int32.
+
+    Raises:
+      SampleError: wrong shape or type, or an index outside the table.
+    """
+    if bond_material is None:
+        bm = np.zeros(nb, dtype=np.int32)
+    else:
+        bm = array("bond_material", bond_material)
+        if bm.ndim == 0:
+            bm = np.full(nb, bm)
+        if bm.shape != (nb,):
+            raise SampleError(f"bond_material must have shape [{nb}], got {bm.shape}")
+        if not np.issubdtype(bm.dtype, np.integer):
+            raise SampleError(f"bond_material must hold integer component indices, got dtype {bm.dtype}")
+        bm = bm.astype(np.int32)
+    bad = np.flatnonzero((bm < 0) | (bm >= n_materials))
+    if bad.size:
+        raise SampleError(
+            f"unknown material index (the table has {n_materials} components, 0..{n_materials - 1}) at bonds "
+            f"{listed(bad)}, e.g. index {bm[bad[0]]}")
+    return bm

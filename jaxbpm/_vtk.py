@@ -1,0 +1,118 @@
+"""VTK export of a sample for ParaView (``.vtu`` XML or ``.vtk`` legacy, through meshio), and the check of the extra
+per-particle and per-bond fields a user adds to it (also used by the VTU series of :mod:`jaxbpm.interop.vtu`).
+:func:`export_vtk` is public as :func:`jaxbpm.io.export_vtk`."""
+
+from __future__ import annotations
+
+import pathlib
+from typing import Any, Mapping
+
+import numpy as np
+
+from jaxbpm._atomic import atomic_write
+from jaxbpm.errors import SampleError, SampleFileError
+from jaxbpm.sample import Sample
+
+__all__ = ["export_vtk", "user_data"]
+
+_VTK_FORMATS = {".vtu": "vtu", ".vtk": "vtk"}
+
+
+def user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
+              reserved: set[str]) -> dict[str, np.ndarray]:
+    """Check the extra fields a user adds to a VTK file (:func:`export_vtk`, the VTU series).
+
+    Args:
+      kind: the argument's name for messages (``"point_data"``, ``"bond_data"``).
+      data: ``{name: [count] or [count, k]}`` real (or boolean) arrays, or ``None``.
+      count: the rows each field must have.
+      what: what a row is, for messages (``"particle"``, ``"bond"``).
+      reserved: the names of the built-in fields, which a user field may not take.
+
+    Returns:
+      ``{name: array}`` (booleans as uint8).
+
+    Raises:
+      SampleError: a field has a bad name, type or shape (the field is named).
+    """
+    out: dict[str, np.ndarray] = {}
+    for name, value in (data or {}).items():
+        if not isinstance(name, str) or not name:
+            raise SampleError(f"{kind}: field names must be non-empty strings, got {name!r}")
+        if name in reserved:
+            raise SampleError(f"{kind}[{name!r}]: the name is taken by a built-in field ({sorted(reserved)})")
+        arr = np.asarray(value)
+        if arr.dtype == bool:
+            arr = arr.astype(np.uint8)
+        if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+            raise SampleError(f"{kind}[{name!r}]: must be a real numeric array, got dtype {arr.dtype}")
+        if arr.ndim not in (1, 2) or arr.shape[0] != count or (arr.ndim == 2 and arr.shape[1] < 1):
+            raise SampleError(
+                f"{kind}[{name!r}]: expected shape [{count}] or [{count}, k] (one row per {what}), got {arr.shape}")
+        out[name] = arr
+    return out
+
+
+def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = None,
+               bond_data: Mapping[str, Any] | None = None) -> pathlib.Path:
+    """Write particles and bonds to a VTK file for ParaView, atomically.
+
+    The points are the particle centres [m]. Two cell blocks: ``vertex`` (one cell per particle, in particle
+    order) and ``line`` (one cell per bond, in bond order; left out when the sample has no bonds, since legacy
+    VTK cannot hold an empty block).
+
+    Point data: ``radius`` [m], ``mass`` [kg], ``coordination`` (bonds per particle), then ``point_data``.
+    Cell data, per bond: ``bond_radius`` [m], ``material`` (component index), ``length`` [m] (initial bond
+    length), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
+    the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for ``material``.
+    In ParaView, glyph the points with spheres scaled by ``radius`` and show the lines as tubes.
+
+    Args:
+      path: ``*.vtu`` (VTK XML unstructured grid, preferred) or ``*.vtk`` (legacy); the suffix picks the format.
+      sample: the sample.
+      point_data: ``{name: [n] or [n, k]}`` extra per-particle fields (e.g. displacement ``[n, 3]``).
+      bond_data: ``{name: [nb] or [nb, k]}`` extra per-bond fields (e.g. bond force ``[nb]``).
+
+    Returns:
+      ``path`` as a :class:`pathlib.Path`.
+
+    Raises:
+      SampleError: a user field has the wrong shape or type, or reuses a built-in name (the field is named).
+      SampleFileError: the suffix is neither ``.vtu`` nor ``.vtk``.
+      TypeError: ``sample`` is not a :class:`Sample`.
+    """
+    import meshio
+
+    if not isinstance(sample, Sample):
+        raise TypeError(f"export_vtk expects a jaxbpm Sample, got {type(sample).__name__}")
+    target = pathlib.Path(path)
+    file_format = _VTK_FORMATS.get(target.suffix.lower())
+    if file_format is None:
+        raise SampleFileError(
+            f"{target}: cannot tell the VTK format from the suffix {target.suffix!r}; use .vtu (XML) or .vtk (legacy)")
+
+    n, nb = sample.n_particles, sample.n_bonds
+    pdata = {
+        "radius": np.asarray(sample.radii, dtype=np.float64),
+        "mass": np.asarray(sample.mass, dtype=np.float64),
+        "coordination": np.asarray(sample.coordination(), dtype=np.int32),
+    }
+    pdata.update(user_data("point_data", point_data, n, "particle", set(pdata)))
+    bdata = {
+        "bond_radius": np.asarray(sample.bond_radius, dtype=np.float64),
+        "material": np.asarray(sample.bond_material, dtype=np.int32),
+        "length": np.asarray(sample.bond_length, dtype=np.float64),
+    }
+    bdata.update({k: v.astype(np.float64) for k, v in
+                  user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
+
+    cells = [("vertex", np.arange(n, dtype=np.int64)[:, None])]
+    if nb:
+        cells.append(("line", np.asarray(sample.bonds, dtype=np.int64)))
+    cell_data = {}
+    for name, arr in bdata.items():
+        filler = np.full((n,) + arr.shape[1:], -1 if name == "material" else np.nan, dtype=arr.dtype)
+        cell_data[name] = [filler, arr] if nb else [filler]
+    mesh = meshio.Mesh(np.asarray(sample.positions, dtype=np.float64), cells, point_data=pdata,
+                       cell_data=cell_data)
+    return atomic_write(target, lambda tmp: meshio.write(tmp, mesh, file_format=file_format))

@@ -1,0 +1,47 @@
+"""The ``jaxbpm convert`` and ``jaxbpm params`` commands."""
+
+import meshio
+import numpy as np
+
+from jaxbpm import cli, io
+from tests.interop.samples import _assert_same, _multi
+
+
+# ============================================================================================== CLI
+def test_cli_convert_and_params(tmp_path, capsys):
+    sample = _multi()
+    io.save_sample(tmp_path / "s.h5", sample)
+    for src, dst in (("s.h5", "s.data"), ("s.data", "s.csv"), ("s.csv", "t.h5"), ("t.h5", "t.vtu")):
+        assert cli.main(["convert", str(tmp_path / src), str(tmp_path / dst)]) == 0
+    out = capsys.readouterr().out
+    assert "wrote" in out and "s_bonds.csv" in out
+    _assert_same(sample, io.load_sample(tmp_path / "t.h5"))
+    assert meshio.read(tmp_path / "t.vtu").points.shape == (sample.n_particles, 3)
+
+    assert cli.main(["params", "--from", "pfc", "--to", "jaxbpm", "emod=1e9", "kratio=2.5", "pb_rmul=0.5",
+                     "--radius1", "1e-3", "--json"]) == 0
+    import json
+
+    res = json.loads(capsys.readouterr().out)
+    assert np.isclose(res["parameters"]["E"], 1e9) and np.isclose(res["parameters"]["nu"], 0.25)
+    assert np.isclose(res["parameters"]["bond_radius"], 0.5e-3)
+    assert cli.main(["params", "--from", "jaxbpm", "--to", "lammps", "E=1e9", "nu=0.25", "bond_radius_ratio=0.5",
+                     "tensile_strength=5e6", "--radius1", "1e-3"]) == 0
+    out, err = capsys.readouterr()
+    assert "Kr" in out and "warning:" in err and "summed" in err
+    assert cli.main(["params", "--from", "yade", "--to", "jaxbpm", "young=1e9", "poisson=0.3", "alphaKr=2",
+                     "alphaKtw=2", "--radius1", "1e-3"]) == 2
+    assert "error:" in capsys.readouterr().err
+    pos = np.asarray(sample.positions)
+    rows = "\n".join(f"{i + 1} 1 {pos[i, 0] + 1e-3} {pos[i, 1]} {pos[i, 2]}" for i in range(sample.n_particles))
+    (tmp_path / "run.dump").write_text(f"ITEM: TIMESTEP\n5\nITEM: NUMBER OF ATOMS\n{sample.n_particles}\n"
+                                       f"ITEM: BOX BOUNDS ff ff ff\n-9 9\n-9 9\n-9 9\nITEM: ATOMS id type x y z\n"
+                                       f"{rows}\n")
+    assert cli.main(["convert", str(tmp_path / "run.dump"), str(tmp_path / "run.pvd"), "--sample",
+                     str(tmp_path / "s.h5")]) == 0
+    capsys.readouterr()
+    step = meshio.read(tmp_path / "run_000000.vtu")
+    np.testing.assert_allclose(step.point_data["displacement"][:, 0], 1e-3, rtol=1e-9)
+    (tmp_path / "bad.data").write_text("title\n\n2 atoms\n\nAtoms\n\n1 1 1 1.0 1.0 0 0 0\n")
+    assert cli.main(["convert", str(tmp_path / "bad.data"), str(tmp_path / "x.h5")]) == 2
+    assert "bad.data:7: section Atoms ended after 1 of 2 lines" in capsys.readouterr().err
