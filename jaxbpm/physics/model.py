@@ -481,6 +481,4 @@ def contact_params(E: float, nu: float, friction: float, restitution: float, dty
     return _contact_params_jit(a(E), a(nu), a(friction), a(restitution), damping=damping)
 
 
-
-
 _contact_params_jit = jax.jit(contact_mod.contact_params, static_argnames=("damping",))
