@@ -50,10 +50,17 @@ import dataclasses
 import math
 import numbers
 import time
+from typing import Callable
 
 import numpy as np
 
+from jaxbpm import dsm
+from jaxbpm._options import resolve_options, SolverOptions
+from jaxbpm.dsm.options import DSM
 from jaxbpm.errors import SceneError, SolveError
+from jaxbpm.physics.model import check_params
+from jaxbpm.result import Result, settle
+from jaxbpm.sample import Sample
 
 __all__ = ["choose", "solve_auto", "DEFAULT_TOL", "ROUTES", "OPTIONS"]
 
@@ -181,7 +188,7 @@ def _dem_only(sample, scene) -> str | None:
     allowed = getattr(scene, "methods", None)
     if allowed is not None and not ({"dsm", "ste"} & set(allowed)):
         return f"{type(scene).__name__} is modelled by the DEM only (methods={tuple(allowed)})"
-    if not isinstance(scene, UniaxialCompression):
+    if not isinstance(scene, UniaxialCompression):  # scene.methods: once every scene declares its solvers
         return (f"the static methods were validated on uniaxial compression only, not on {type(scene).__name__}: "
                 "the DEM")
     if sample_breaks(sample, getattr(scene, "breakage", None)):
@@ -197,16 +204,14 @@ def _linear_options(tol) -> dict:
 
 def _probe(sample, scene, params, tol):
     """The cheap linear pass: ``(share, bonds_result, linearised_result, seconds, note)``."""
-    from jaxbpm.solving import _solve
-
     layers = scene if not scene.uses_walls else dataclasses.replace(scene, boundary="layers")
     t = time.perf_counter()
     res_b = res_c = None
     note = ""
+    linear = DSM(nonlinear=False, throw=False, **_linear_options(tol))
     try:
-        res_b = _solve(sample, dataclasses.replace(layers, contacts=False), "dsm", params,
-                       {"nonlinear": False, "throw": False, **_linear_options(tol)})
-        res_c = _solve(sample, layers, "dsm", params, {"nonlinear": False, "throw": False, **_linear_options(tol)})
+        res_b = dsm.solve_scene(sample, dataclasses.replace(layers, contacts=False), params, linear)
+        res_c = dsm.solve_scene(sample, layers, params, linear)
     except (SceneError, SolveError) as exc:  # e.g. particles held by contacts only: no bonds-only answer
         note = f"; the linear pass failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})"
     seconds = time.perf_counter() - t
@@ -237,6 +242,11 @@ class Choice:
     probe: dict = dataclasses.field(default_factory=dict)
     geometric_error: float | None = None
 
+    @property
+    def solver_options(self) -> SolverOptions:
+        """The options object of the chosen solver (``options`` checked)."""
+        return resolve_options(self.method, self.options)
+
     def record(self) -> dict:
         """The ``stats["method_choice"]`` entry."""
         share = self.contact_share
@@ -255,9 +265,26 @@ _DESCRIBE = {"ste": "the STE", "dsm_bonds": "the linear DSM on the bonds alone",
 
 
 def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
-    """The cheapest route whose measured error envelope is within ``tol`` (see the module docstring); on a scene
-    with Hertz contacts this runs the linear pass that measures the contacts' share of the stiffness."""
-    tol = check_tol(tol)
+    """The cheapest route whose error envelope is within ``tol`` (see the module docstring).
+
+    On a scene with Hertz contacts this runs the linear pass that measures the contacts' share of the stiffness.
+
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      tol: the relative stiffness error allowed against the DEM, in (0, 1).
+      params: parameters overriding the sample's (``None``: its own).
+
+    Returns:
+      The :class:`Choice`.
+    """
+    if params is not None:
+        params = check_params(params, sample)
+    return _choose(sample, scene, check_tol(tol), params)
+
+
+def _choose(sample, scene, tol, params) -> Choice:
+    """:func:`choose` with ``tol`` and ``params`` checked."""
     reason = _dem_only(sample, scene)
     if reason is not None:
         return Choice("dem", {}, "dem", reason, scene, tol)
@@ -325,12 +352,20 @@ def _probe_compile_time(choice) -> float:
     return sum(r.compile_time for r in probes.values())
 
 
-def solve_auto(sample, scene, params, options):
-    """``jaxbpm.solve(..., method="auto", tol=..., throw=..., progress=...)``."""
-    from jaxbpm.result import settle
-    from jaxbpm.sample import Sample
-    from jaxbpm.solving import _solve
+def solve_auto(sample, scene, params, options: dict, solve: Callable[..., Result]) -> Result:
+    """``jaxbpm.solve(..., method="auto", tol=..., throw=..., progress=...)``.
 
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      params: parameters (``None``: the sample's own), checked here.
+      options: ``tol``, ``throw`` and ``progress``.
+      solve: ``solve(sample, scene, params, options_object) -> Result``, the solvers' dispatch
+        (:func:`jaxbpm.solving.solve` passes its own).
+
+    Returns:
+      The chosen solver's :class:`~jaxbpm.result.Result`, ``stats["method_choice"]`` saying which and why.
+    """
     unknown = sorted(set(options) - set(OPTIONS))
     if unknown:
         raise SceneError(f"method='auto' takes only {', '.join(OPTIONS)}; got {', '.join(map(repr, unknown))} "
@@ -341,35 +376,45 @@ def solve_auto(sample, scene, params, options):
     throw = options.get("throw", True)
     if not isinstance(throw, bool):
         raise SceneError(f"throw must be True or False, got {throw!r}")
-    if params is not None:
-        from jaxbpm.physics.model import check_params
-
+    if params is not None:  # once per solve: the solvers below take them as they are
         params = check_params(params, sample)
     t0 = time.perf_counter()
+    choice = _choose(sample, scene, tol, params)
+    result, fallback, total, compile_time = _answer(sample, choice, params, options, throw, solve, t0)
+    _account(result, choice, fallback, total, compile_time)
+    return result
+
+
+def _answer(sample, choice: Choice, params, options, throw, solve, t0):
+    """The chosen solver's result: ``(result, fallback, seconds, compile_time)`` (``fallback``: why the nonlinear
+    DSM gave way to the DEM, else ``None``)."""
     fallback = None
-    choice = choose(sample, scene, tol, params=params)
     if choice.route in choice.probe:  # the linear pass is the answer: no second solve
         result = dataclasses.replace(choice.probe[choice.route], stats=dict(choice.probe[choice.route].stats))
         result = settle(result, throw)
         total = choice.probe_time
         compile_time = _probe_compile_time(choice)
     else:
-        opts = dict(choice.options, throw=throw)
-        if choice.method == "dem" and "progress" in options:
-            opts["progress"] = options["progress"]
+        progress = {"progress": options["progress"]} if "progress" in options else {}
+        opts = choice.solver_options.replace(throw=throw, **(progress if choice.method == "dem" else {}))
         if choice.route == "dsm_nonlinear":  # accepted where Newton converges, else the DEM
-            first = _solve(sample, choice.scene, "dsm", params, dict(choice.options, throw=False))
+            first = solve(sample, choice.scene, params, opts.replace(throw=False))
             if first.status == "converged":
                 result = first
             else:
-                fallback = {"status": first.status, "failure": first.stats.get("failure"),
+                fallback = {"status": str(first.status), "failure": first.stats.get("failure"),
                             "wall_time": first.wall_time}
-                dem_opts = {"throw": throw, **({"progress": options["progress"]} if "progress" in options else {})}
-                result = _solve(sample, choice.scene, "dem", params, dem_opts)
+                result = solve(sample, choice.scene, params, resolve_options("dem", {"throw": throw, **progress}))
         else:
-            result = _solve(sample, choice.scene, choice.method, params, opts)
+            result = solve(sample, choice.scene, params, opts)
         total = time.perf_counter() - t0
         compile_time = result.compile_time + _probe_compile_time(choice)
+    return result, fallback, total, compile_time
+
+
+def _account(result, choice: Choice, fallback, total, compile_time) -> None:
+    """The choice's time in ``result`` (the linear pass counts as setup and compilation) and its
+    ``stats["method_choice"]``."""
     # the wall time covers the choice (the linear pass) and the answer; what is not the answer's own compile or
     # run counts as setup
     extra_compile = compile_time - result.compile_time
@@ -381,4 +426,3 @@ def solve_auto(sample, scene, params, options):
     if fallback is not None:
         record.update(method="dem", route="dem", options={}, fallback=fallback,
                       why=record["why"] + f"; the nonlinear DSM stopped with status {fallback['status']!r}: the DEM")
-    return result

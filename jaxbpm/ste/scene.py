@@ -14,9 +14,11 @@ import numpy as np
 
 from jaxbpm._compile import compile_clock, Program, put, SetupCache, traced
 from jaxbpm.errors import SceneError
-from jaxbpm.physics.model import check_params, default_params
+from jaxbpm.physics.model import default_params
+from jaxbpm.result import settle, timed_result
 from jaxbpm.sample import Sample
 from jaxbpm.ste.estimator import Estimator, estimator
+from jaxbpm.ste.options import ESTIMATOR_OPTIONS, STE
 from jaxbpm.ste.tensor import body_tensor, isotropic_fit, local_tensors, moduli
 
 __all__ = ["layer_stiffness", "wall_series", "SceneGeometry", "scene_geometry", "scene_stiffness",
@@ -159,23 +161,46 @@ def scene_stiffness(est: Estimator, params, sample: Sample, scene, *, layered: b
 def _check_scene(scene):
     from jaxbpm.scenes import UniaxialCompression
 
-    if not isinstance(scene, UniaxialCompression):
+    methods = getattr(scene, "methods", None)
+    # scene.methods: the isinstance goes once every scene declares the solvers it supports
+    if (methods is not None and "ste" not in methods) or not isinstance(scene, UniaxialCompression):
         raise SceneError(f"the STE knows the UniaxialCompression scene, got {type(scene).__name__}")
 
 
-def stiffness_function(sample: Sample, scene, *, layered: bool = False, pad: bool = True, **options):
+def _estimator_for(sample, scene, options: STE):
+    """``(est, geometry, wall_law)`` of ``sample`` and ``scene``: the setup :func:`solve_scene` and
+    :func:`stiffness_function` share, kept for the last few samples."""
+    key = (scene, options.replace(layered=False, throw=True))  # (what the estimator does not depend on: one key)
+    return _setups.get(sample, key, lambda: _setup(sample, scene, options))
+
+
+def stiffness_function(sample: Sample, scene, options: STE | None = None, **overrides):
     """A pure function ``params -> K`` [N/m] of ``scene`` estimated by the STE (``jit``/``grad``/``vmap``-able,
-    e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``). ``options`` go to :func:`estimator`. The
-    estimator is the one :func:`solve_scene` keeps for the sample (padded to its size class unless ``pad=False``),
-    and a call with concrete parameters runs the program :func:`solve_scene` compiled (no compilation when the
-    process solved a sample of that class before)."""
+    e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``).
+
+    The estimator is the one :func:`solve_scene` keeps for the sample (padded to its size class unless
+    ``pad=False``), and a call with concrete parameters runs the program :func:`solve_scene` compiled (no
+    compilation when the process solved a sample of that class before).
+
+    Args:
+      sample: the bonded sample.
+      scene: a :class:`~jaxbpm.scenes.UniaxialCompression`.
+      options: the :class:`~jaxbpm.ste.options.STE` options (``None``: the defaults).
+      **overrides: options overriding those of ``options`` (``layered=True``, ...).
+
+    Returns:
+      ``stiffness(params) -> K``.
+    """
+    options = STE() if options is None else options
+    if overrides:
+        options = options.replace(**overrides)
     _check_scene(scene)
-    est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
-                                lambda: _setup(sample, scene, pad, options))
+    est, geo, law = _estimator_for(sample, scene, options)
+    layered = bool(options.layered)
 
     def stiffness(params):
         if not traced(params):
-            return solve_program(est, params, geo, layered=bool(layered), walls=law)[0][0]
+            return solve_program(est, params, geo, layered=layered, walls=law)[0][0]
         return _scene_stiffness(est, params, geo, layered, law)[0]
 
     return stiffness
@@ -193,40 +218,53 @@ solve_program = Program(_outputs, static_argnames=("layered", "walls"), prime=2)
 _setups = SetupCache()
 
 
-def _setup(sample, scene, pad, options):
-    est = estimator(sample, scene, pad=pad, **options)
+def _setup(sample, scene, options: STE):
+    est = estimator(sample, scene, pad=options.pad, **{k: getattr(options, k) for k in ESTIMATOR_OPTIONS})
     return (est,) + scene_geometry(est, sample, scene)
 
 
-def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pad: bool = True, throw: bool = True,
-                **options):
-    """Estimate the stiffness of ``scene`` with the STE; see :func:`jaxbpm.solve` (``method="ste"``).
+def solve_scene(sample: Sample, scene, params=None, options: STE | None = None):
+    """Estimate the stiffness of ``scene`` with the STE (what ``jaxbpm.solve(..., method="ste")`` runs).
 
-    pad: pad the estimator to its size class (:func:`estimator`), so that samples of similar size share one
-    compiled program (the result is the same to round-off). throw: raise :class:`~jaxbpm.errors.NotFiniteError`
-    when the stiffness is not finite (``False``: return the result with ``status="not_finite"``).
-    ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``, ``E_y``, ``E_z`` [Pa], ``nu`` (3x3),
-    ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls), ``skipped`` (singular particles),
-    ``surface`` (surface particles left out of the averages), ``clamped`` (particles of the scene's fixed and driven
-    sets, which follow the affine field),
-    ``particles``, ``bonds``, ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``,
-    ``k_top`` [N/m], ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
+    Args:
+      sample: the bonded sample.
+      scene: a :class:`~jaxbpm.scenes.UniaxialCompression`.
+      params: parameters checked by :func:`jaxbpm.physics.model.check_params` (``None``: the sample's own).
+      options: the :class:`~jaxbpm.ste.options.STE` options (``None``: the defaults).
+
+    Returns:
+      The :class:`~jaxbpm.result.Result`. Its ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``,
+      ``E_y``, ``E_z`` [Pa], ``nu`` (3x3), ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls),
+      ``skipped`` (singular particles), ``surface`` (surface particles left out of the averages), ``clamped``
+      (particles of the scene's fixed and driven sets, which follow the affine field), ``particles``, ``bonds``,
+      ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``, ``k_top`` [N/m],
+      ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
+
+    Raises:
+      NotFiniteError: with ``options.throw``, a stiffness that is not finite.
     """
-    from jaxbpm.result import Result, settle
-
+    options = STE() if options is None else options
     t0 = time.perf_counter()
     _check_scene(scene)
     params = default_params(sample) if params is None else params
-    params = check_params(params, sample)
     with compile_clock() as setup_compile:  # programs the setup compiles count as compilation
-        est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
-                                    lambda: _setup(sample, scene, pad, options))
+        est, geo, law = _estimator_for(sample, scene, options)
     setup_time = time.perf_counter() - t0 - setup_compile.seconds
-    out, compile_time, run_time = solve_program(est, params, geo, layered=bool(layered), walls=law)
+    out, compile_time, run_time = solve_program(est, params, geo, layered=bool(options.layered), walls=law)
     compile_time += setup_compile.seconds
     k, parts, e, nu, e_iso, nu_iso = jax.tree_util.tree_map(np.asarray, out)
     length, area = float(geo.length), float(geo.area)
     delta = scene.strain * length
+    stats = _stats(est, scene, parts, e, nu, e_iso, nu_iso, options.layered, setup_time)
+    k = float(k)
+    # what is neither setup nor compilation (moving the outputs to the host) counts as run time
+    return settle(timed_result("ste", t0, stiffness=k, gauge_length=length, area=area,
+                               displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
+                               compile_time=compile_time, setup_time=setup_time, stats=stats), options.throw)
+
+
+def _stats(est: Estimator, scene, parts, e, nu, e_iso, nu_iso, layered, setup_time) -> dict:
+    """The result's ``stats`` from the program's outputs (host arrays)."""
     stats = {"tensor": parts["tensor"].tolist(), "E_x": float(e[0]), "E_y": float(e[1]), "E_z": float(e[2]),
              "nu": nu.tolist(), "E_iso": float(e_iso), "nu_iso": float(nu_iso), "K_body": float(parts["K_body"]),
              "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface, "clamped": est.clamped,
@@ -239,10 +277,4 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
     for name in ("k_bottom", "k_top", "n_bottom", "n_top"):
         if name in parts:
             stats[name] = float(parts[name]) if name.startswith("k") else int(parts[name])
-    k = float(k)
-    wall = time.perf_counter() - t0
-    # what is neither setup nor compilation (moving the outputs to the host) counts as run time
-    return settle(Result(method="ste", stiffness=k, youngs_modulus=k * length / area, gauge_length=length,
-                         area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
-                         wall_time=wall, setup_time=setup_time, compile_time=compile_time,
-                         run_time=wall - setup_time - compile_time, stats=stats, state=None), throw)
+    return stats
