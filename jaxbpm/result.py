@@ -18,21 +18,33 @@ STATUSES = tuple(s.value for s in Status)
 
 @dataclasses.dataclass
 class Result:
-    """Outcome of :func:`jaxbpm.solve` on a scene.
+    """Outcome of :func:`jaxbpm.solve` on a scene, the same for every solver.
 
-    stiffness: K = dF/d(displacement) over the linear range [N/m]. youngs_modulus: E = K l / A [Pa].
-    displacement, force: the loading curve [m], [N] (compression positive); strain, stress: the same over l and A.
-    gauge_length l [m], area A [m^2]. wall_time [s]: what the call took, ``setup_time + compile_time + run_time``:
-    setup_time (building the model, estimator, geometry, preconditioner or neighbour list, on the host), compile_time
-    (tracing and compiling the solver's programs; 0 when this process, or the persistent compilation cache, had them)
-    and run_time (the solver's kernel, run once). stats: solver details (steps, time step, critical time step,
-    iterations, ...). state: the solver's final state (for restarts and inspection).
-    interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
-    stats cover the part that was run (stiffness NaN when the fit range was not reached).
-    status: a :class:`~jaxbpm.status.Status` (a ``str``: ``result.status == "converged"``), the same for every
-    method; ``ok`` is ``status == "converged"``. With ``throw=True`` (the default of every method) a status other
-    than ``"converged"`` raises its ``Status.error`` (which carries this result); ``throw=False`` returns the result
-    and leaves the status to the caller. ``stats["failure"]`` says what went wrong.
+    With ``throw=True`` (the default of every solver) a status other than ``"converged"`` raises its
+    ``Status.error`` (which carries this result); ``throw=False`` returns the result and leaves the status to the
+    caller.
+
+    Attributes:
+      method: the solver (``"dem"``, ``"dsm"``, ``"ste"``).
+      stiffness: K = dF/d(displacement) over the linear range [N/m].
+      youngs_modulus: E = K l / A [Pa].
+      gauge_length: l [m].
+      area: A [m^2].
+      displacement: ``[m]`` the loading curve's displacements [m] (compression positive); ``strain`` is the same
+        over l.
+      force: ``[m]`` its forces [N]; ``stress`` is the same over A.
+      wall_time: what the call took [s], ``setup_time + compile_time + run_time``.
+      compile_time: tracing and compiling the solver's programs [s] (0 when this process, or the persistent
+        compilation cache, had them).
+      run_time: the solver's kernel, run once [s].
+      stats: solver details (steps, time step, critical time step, iterations, ...); ``stats["failure"]`` says
+        what went wrong.
+      state: the solver's final state (for restarts and inspection).
+      interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
+        stats cover the part that was run (stiffness NaN when the fit range was not reached).
+      setup_time: building the model, estimator, geometry, preconditioner or neighbour list, on the host [s].
+      status: a :class:`~jaxbpm.status.Status` (a ``str``: ``result.status == "converged"``); ``ok`` is
+        ``status == "converged"``.
     """
 
     method: str
@@ -70,15 +82,27 @@ class Result:
 
     @property
     def strain(self) -> np.ndarray:
+        """``[m]`` the loading curve's strains, displacement / gauge length."""
         return self.displacement / self.gauge_length
 
     @property
     def stress(self) -> np.ndarray:
+        """``[m]`` the loading curve's stresses [Pa], force / area."""
         return self.force / self.area
 
     def stress_at(self, strains) -> np.ndarray:
         """The stress [Pa] at the given strains, interpolated linearly on the loading curve (a stress-strain vector
-        target, e.g. Irazabal et al.'s 17 equispaced strains). Strains beyond the curve are an error."""
+        target, e.g. Irazabal et al.'s 17 equispaced strains).
+
+        Args:
+          strains: ``[k]`` strains within the loading curve.
+
+        Returns:
+          ``[k]`` the stresses [Pa].
+
+        Raises:
+          ValueError: a strain beyond the curve.
+        """
         strains = np.asarray(strains, np.float64)
         e = self.strain
         if len(e) == 0 or np.any(strains < min(e[0], 0.0) - 1e-12) or np.any(strains > e[-1] * (1 + 1e-9)):
@@ -87,6 +111,7 @@ class Result:
                          if e[0] > 0 else self.stress)
 
     def summary(self) -> str:
+        """The result as lines of text: method, stiffness, modulus, times and the scalar stats."""
         lines = [
             f"method            {self.method}",
             f"stiffness K       {self.stiffness:.6g} N/m",

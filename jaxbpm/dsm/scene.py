@@ -28,11 +28,19 @@ from jaxbpm.scenes import lateral_stats
 
 
 def boundary_inputs(sample, scene, rotations=None):
-    """What a static solve of ``scene`` needs of the boundary: ``(model, free [n, nd], fixed [n], driven [n],
-    u_p [n, nd], walls, (length, area, delta))`` -- the bonds' model, the free DOFs and the clamped layers, the
-    prescribed DOFs at full load (the driven layer moved by ``delta = strain * length`` against the axis), the
-    walls at full load ``(points [W, 3], normals [W, 3])`` or ``None``, and the gauge length, area and
-    displacement."""
+    """What a static solve of ``scene`` needs of the boundary.
+
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      rotations: rotational DOFs (``None``: the model's choice).
+
+    Returns:
+      ``(model, free [n, nd], fixed [n], driven [n], u_p [n, nd], walls, (length, area, delta))``: the bonds'
+      model, the free DOFs and the clamped layers, the prescribed DOFs at full load (the driven layer moved by
+      ``delta = strain * length`` against the axis), the walls at full load ``(points [W, 3], normals [W, 3])`` or
+      ``None``, and the gauge length, area and displacement.
+    """
     model = scene.model(sample, rotations=rotations, contacts=False)
     length, area = scene.geometry(sample)
     delta = scene.strain * length
@@ -47,8 +55,16 @@ def boundary_inputs(sample, scene, rotations=None):
 
 
 def wall_touching(sample, scene, delta):
-    """``[n]``: the particles within half a mean radius (plus the load's travel ``delta``) of either wall, which the
-    walls hold; ``None`` without walls."""
+    """The particles the walls hold.
+
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      delta: the load's travel [m].
+
+    Returns:
+      ``[n]`` the particles within half a mean radius (plus ``delta``) of either wall; ``None`` without walls.
+    """
     if not scene.uses_walls:
         return None
     ax = scene.axis

@@ -32,6 +32,15 @@ def layer_stiffness(est: Estimator, params, gauge_length, area):
     layer has none), cross-section ``A_k = V_k / h`` from the volume its particles represent; compliance of the
     stack ``sum_k h / (E_k A_k)`` over the sample's extent, scaled to the gauge length. ``area`` is used only to
     keep the units when a layer holds no particle at all (it then counts with ``area``).
+
+    Args:
+      est: the estimator.
+      params: the bond parameters.
+      gauge_length: l [m].
+      area: A [m^2].
+
+    Returns:
+      K [N/m].
     """
     ax = est.axis
     c = local_tensors(est, params)
@@ -68,8 +77,21 @@ class SceneGeometry(NamedTuple):
 
 
 def scene_geometry(est: Estimator, sample: Sample, scene, fraction: float | None = None):
-    """``(SceneGeometry, wall_law)`` of ``scene`` on ``sample`` for ``est`` (``wall_law`` ``None`` without walls).
-    NumPy work on the host; the masks have ``est.n`` rows (padding rows touch nothing)."""
+    """What the STE needs of ``scene`` besides the estimator (NumPy work on the host).
+
+    Args:
+      est: the estimator (the masks get its ``est.n`` rows; padding rows touch nothing).
+      sample: the bonded sample.
+      scene: the scene.
+      fraction: where the walls are linearised, a fraction of the target displacement (``None``: the middle of
+        the fit range).
+
+    Returns:
+      ``(SceneGeometry, wall_law)``; ``wall_law`` is ``None`` without walls.
+
+    Raises:
+      SceneError: a wall law the STE does not know, or linear walls without a stiffness.
+    """
     length, area = scene.geometry(sample)
     dtype = est.model.positions0.dtype
     n, law, ws = est.n, None, 0.0
@@ -129,7 +151,16 @@ def wall_series(k_body, est: Estimator, scene, sample: Sample, fraction: float |
     A wall's stiffness is the sum of the tangent stiffnesses of the particles touching it, each carrying an equal
     share of the force ``F = K * s * delta`` the sample carries at the middle ``s`` of the scene's fit range
     (``delta`` = target displacement); ``K`` and ``F`` are solved for together (fixed point).
-    Returns ``(K, {"k_bottom", "k_top", "n_bottom", "n_top"})``.
+
+    Args:
+      k_body: the body's stiffness [N/m].
+      est: the estimator.
+      scene: the scene (with walls).
+      sample: the bonded sample.
+      fraction: as in :func:`scene_geometry`.
+
+    Returns:
+      ``(K, {"k_bottom", "k_top", "n_bottom", "n_top"})``.
     """
     geo, law = scene_geometry(est, sample, scene, fraction)
     return _wall_series(k_body, est.model.radii, geo, law)
@@ -151,8 +182,15 @@ def _scene_stiffness(est: Estimator, params, geo: SceneGeometry, layered: bool, 
 def scene_stiffness(est: Estimator, params, sample: Sample, scene, *, layered: bool = False):
     """Stiffness K [N/m] of ``scene`` from the STE: ``E_axis A / l`` (or the layered model), walls in series.
 
-    Returns ``(K, parts)`` with ``parts = {"K_body", "E_axis", "tensor", ...}`` (jnp values). ``est.axis`` is the
-    load axis (the estimator is built for the scene).
+    Args:
+      est: the estimator built for the scene (``est.axis`` is the load axis).
+      params: the bond parameters.
+      sample: the bonded sample.
+      scene: the scene.
+      layered: the layered springs-in-series model.
+
+    Returns:
+      ``(K, parts)`` with ``parts = {"K_body", "E_axis", "tensor", ...}`` (jnp values).
     """
     geo, law = scene_geometry(est, sample, scene)
     return _scene_stiffness(est, params, geo, layered, law)

@@ -12,12 +12,12 @@ SHARED = "dsm-packing-contacts"
 KN = 1e9 * np.pi * (0.5 * R) ** 2 / (2 * R)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def column():
     return jaxbpm.generate.lattice("sc", (3, 3, 6), R, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def packing():
     s = jaxbpm.generate.box(200, seed=3, mean_radius=R, packing_fraction=0.5)
     return s.largest_cluster()
