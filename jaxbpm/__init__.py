@@ -26,7 +26,7 @@ __all__ = [
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
 _LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options",
-         "physics", "sample", "result",
+         "physics", "sample", "result", "status",
          "formats", "conventions")  # (the last two: old names of jaxbpm.interop's modules, deprecated)
 # names loaded on first use: name -> the module that defines it
 _LAZY_NAMES = {

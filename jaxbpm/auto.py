@@ -229,7 +229,7 @@ def _probe(sample, scene, params, tol):
     except (SceneError, SolveError) as exc:  # e.g. particles held by contacts only: no bonds-only answer
         note = f"; the linear pass failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})"
     seconds = time.perf_counter() - t
-    ok = [r is not None and r.status == "converged" and np.isfinite(r.stiffness) and r.stiffness > 0
+    ok = [r is not None and r.status.ok and np.isfinite(r.stiffness) and r.stiffness > 0
           for r in (res_b, res_c)]
     if not all(ok):
         if not note:
@@ -425,7 +425,7 @@ def _answer(sample, choice: Choice, params, options, throw, solve, t0):
         opts = choice.solver_options.replace(throw=throw, **(progress if choice.method == "dem" else {}))
         if choice.route == "dsm_nonlinear":  # accepted where Newton converges, else the DEM
             first = solve(sample, choice.scene, params, opts.replace(throw=False))
-            if first.status == "converged":
+            if first.status.ok:
                 result = first
             else:
                 fallback = {"status": str(first.status), "failure": first.stats.get("failure"),
