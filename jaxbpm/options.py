@@ -7,7 +7,7 @@ DSM's and the STE's options in :mod:`jaxbpm.dsm.options` and :mod:`jaxbpm.ste.op
 from __future__ import annotations
 
 from jaxbpm._options import (
-    flag, optional, optional_path, option, positive, progress, SolverOptions, unit_interval, whole)
+    flag, optional, optional_path, option, positive, progress, shown, SolverOptions, unit_interval, whole)
 from jaxbpm.errors import OptionsError
 
 __all__ = ["DEM"]
@@ -17,8 +17,6 @@ def _neighbors(name, v):
     from jaxbpm.neighbors import NeighborSettings
 
     if v is not None and not isinstance(v, NeighborSettings):
-        from jaxbpm._options import shown
-
         raise OptionsError(f"{name} must be a jaxbpm.dem.NeighborSettings or None, got {shown(v)}")
 
 
