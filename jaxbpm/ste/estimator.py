@@ -133,10 +133,9 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
       clamp_layers: the particles the scene clamps (boundary ``"layers"`` or ``fixed``/``driven`` masks; not walls)
         follow the affine field (no fluctuation), as their prescribed displacements do in the DEM and the DSM,
         instead of relaxing like free one-sided surface particles (the paper's form, the default). Exact on a
-        clamped simple-cubic lattice (to round-off, where the default is 2.1 % low on 10 x 10 x 20); on random
-        packings the estimate is then 3-6 % stiffer than the default and further from the DEM (a 1k / 3k box:
-        +8.4 % / +7.4 % against +2.6 % / +4.0 %): the relaxing end layers offset most of the affine estimate's
-        excess stiffness in the interior.
+        clamped simple-cubic lattice (to round-off; the default is low there); on random packings the estimate is
+        then stiffer than the default and further from the DEM: the relaxing end layers offset most of the affine
+        estimate's excess stiffness in the interior.
       dofs: 3 (translations, the paper's form) or 6 (translations and rotations) per particle.
       first_neighbour: the first-neighbour-only form (Eq. 33-35) instead of Eq. 32.
       contacts: override ``scene.contacts``.
@@ -148,9 +147,8 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
       volumes: ``[n]`` particle volumes V^n [m^3] to use instead of particle volume / global solid fraction.
       precision: ``"float64"`` (default) or ``"float32"``: the float type of the estimate's arithmetic. The
         geometry is always built in the float type JAX gives (float64 with x64 on) and then cast. float32 runs the
-        estimate 2-3x faster on CPU and moves it by ~1e-7 relative (the estimate itself is 5-20 % from the DEM);
-        reverse-mode gradients lose more (~2e-3 relative on a 1k-particle packing: the backward pass sums terms
-        that cancel), and finite differences drown in rounding: calibrate with float64 (the default).
+        estimate faster and moves it by ~1e-7 relative; reverse-mode gradients lose more (the backward pass sums
+        terms that cancel), and finite differences drown in rounding: calibrate with float64 (the default).
       pad: pad particles, pairs and layers to their size class (:func:`jaxbpm._compile.size_class`) so that samples
         of similar size share compiled programs. Padding particles are singular (no interaction, zero volume),
         padding pairs have zero stiffness: every result is that of the unpadded estimator (the local tensors and

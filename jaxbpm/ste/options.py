@@ -46,7 +46,7 @@ class STE(SolverOptions):
       surface_depth: particles closer than this to the sample's boundary [m] are left out of the averages
         (``None``: one mean particle diameter; 0 keeps every non-singular particle).
       volumes: ``[n]`` particle volumes V^n [m^3] (``None``: particle volume / global solid fraction).
-      precision: ``"float64"``, or ``"float32"``: 2-3x faster, ~1e-7 relative change (calibrate with float64).
+      precision: ``"float64"``, or ``"float32"``: faster, ~1e-7 relative change (calibrate with float64).
       pad: the estimator is padded to the sample's size class and kept for the last few samples, so that samples
         of similar size share one compiled program (the same result to round-off).
       throw: raise :class:`~jaxbpm.errors.NotFiniteError` when the stiffness is not finite (``False``: return the

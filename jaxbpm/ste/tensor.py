@@ -171,9 +171,9 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     ``sum_m N^m Gamma^m`` (regrouped by the neighbour) over the particles.
 
     The algebra of :func:`_fluctuations3` (which the local tensors use) with the per-particle sums D, B and N
-    gathered by one scatter per pair end into one ``[n, 63]`` array (30 % faster on CPU than a scatter per sum). The
-    two passes over the pairs fold over chunks of pairs on large samples (:func:`~jaxbpm.physics.chunks.fold_chunks`:
-    at a million particles the whole-sample per-pair rows were 3.6 GiB of scratch memory)."""
+    gathered by one scatter per pair end into one ``[n, 63]`` array (fewer scatters than one per sum). The two passes
+    over the pairs fold over chunks of pairs on large samples (:func:`~jaxbpm.physics.chunks.fold_chunks`), which
+    bounds the per-pair scratch memory."""
     K = coupling(est, params).reshape(-1, 9)
     n, d, dtype = est.n, est.d, est.d.dtype
     pairs = est.pairs
@@ -217,7 +217,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
         phi = gamma + jnp.where(free, _mul(A, hat), 0.0)  # Eq. 24 + 29
     t = gram.reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
     # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: one matrix product each that
-    # contracts (particle, a) -- rows [n * 3, 9] on both sides (4x faster on CPU than per-particle products summed)
+    # contracts (particle, a) -- rows [n * 3, 9] on both sides (faster on CPU than per-particle products summed)
     bw = (w[:, None, None, None] * B.reshape(n, 3, 3, 3)).transpose(0, 2, 3, 1).reshape(3 * n, 9)
     t = t - _gram(bw, phi.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
     if neighbours:
