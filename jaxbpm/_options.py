@@ -48,7 +48,14 @@ Check = Callable[[str, Any], None]
 
 
 def shown(v) -> str:
-    """``v`` for a message: plain numbers (``0.5``, not ``np.float64(0.5)``), shortened."""
+    """A value as an error message shows it: plain numbers (``0.5``, not ``np.float64(0.5)``), shortened.
+
+    Args:
+      v: the value.
+
+    Returns:
+      Its text.
+    """
     from jaxbpm.sample import _shown
 
     return _shown(v)
@@ -58,14 +65,29 @@ def shown(v) -> str:
 
 
 def positive(name: str, v) -> None:
-    """A finite number > 0."""
+    """A finite number > 0.
+
+    Args:
+      name: the option's name (the message names it).
+      v: its value.
+
+    Raises:
+      OptionsError: ``v`` is not a finite number > 0.
+    """
     if isinstance(v, bool) or not isinstance(v, numbers.Real) or not (v > 0 and math.isfinite(v)):
         raise OptionsError(f"{name} must be a positive number, got {shown(v)}")
 
 
 def unit_interval(lo_open: bool = True, hi_closed: bool = True) -> Check:
-    """The check of a number in the unit interval, ``(0, 1]`` by default (``lo_open=False``: 0 allowed;
-    ``hi_closed=False``: 1 excluded)."""
+    """The check of a number in the unit interval.
+
+    Args:
+      lo_open: 0 excluded (``False``: allowed).
+      hi_closed: 1 allowed (``False``: excluded).
+
+    Returns:
+      ``check(name, v)``, raising :class:`~jaxbpm.errors.OptionsError` for a value outside the interval.
+    """
     def check(name, v):
         ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and (v > 0 if lo_open else v >= 0) and (
             v <= 1 if hi_closed else v < 1)
@@ -76,7 +98,15 @@ def unit_interval(lo_open: bool = True, hi_closed: bool = True) -> Check:
 
 
 def fraction(name: str, v) -> None:
-    """A number in ``(0, 1]``."""
+    """A number in ``(0, 1]``.
+
+    Args:
+      name: the option's name (the message names it).
+      v: its value.
+
+    Raises:
+      OptionsError: ``v`` is not a number in (0, 1].
+    """
     _FRACTION(name, v)
 
 
@@ -84,7 +114,16 @@ _FRACTION = unit_interval()
 
 
 def whole(name: str, v, minimum: int = 1) -> None:
-    """A whole number >= ``minimum`` (not ``True``, not ``3.0``)."""
+    """A whole number >= ``minimum`` (not ``True``, not ``3.0``).
+
+    Args:
+      name: the option's name (the message names it).
+      v: its value.
+      minimum: the least value allowed.
+
+    Raises:
+      OptionsError: ``v`` is not a whole number >= ``minimum``.
+    """
     if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < minimum:
         raise OptionsError(f"{name} must be a whole number >= {minimum}, got {shown(v)}")
 
@@ -100,7 +139,14 @@ def _same_choice(v, a) -> bool:
 
 
 def choice(*allowed) -> Check:
-    """The check of one of ``allowed`` (``None``, strings or whole numbers)."""
+    """The check of one of a few values.
+
+    Args:
+      *allowed: the values (``None``, strings or whole numbers).
+
+    Returns:
+      ``check(name, v)``, raising :class:`~jaxbpm.errors.OptionsError` for any other value.
+    """
     def check(name, v):
         if not any(_same_choice(v, a) for a in allowed):
             names = [repr(a) for a in allowed]
@@ -110,13 +156,28 @@ def choice(*allowed) -> Check:
 
 
 def flag(name: str, v) -> None:
-    """``True`` or ``False`` (not 1, not ``np.True_`` arrays)."""
+    """``True`` or ``False`` (not 1, not NumPy booleans).
+
+    Args:
+      name: the option's name (the message names it).
+      v: its value.
+
+    Raises:
+      OptionsError: ``v`` is not a bool.
+    """
     if not isinstance(v, bool):
         raise OptionsError(f"{name} must be True or False, got {shown(v)}")
 
 
 def optional(check: Check) -> Check:
-    """``check``, with ``None`` allowed (the solver's own default)."""
+    """A check that lets ``None`` through (the solver's own default).
+
+    Args:
+      check: the check of the other values.
+
+    Returns:
+      ``check(name, v)`` for values other than ``None``.
+    """
     def optional_check(name, v):
         if v is not None:
             check(name, v)
@@ -124,13 +185,29 @@ def optional(check: Check) -> Check:
 
 
 def optional_path(name: str, v) -> None:
-    """A file path (``str`` or ``os.PathLike``) or ``None``."""
+    """A file path (``str`` or ``os.PathLike``) or ``None``.
+
+    Args:
+      name: the option's name (the message names it).
+      v: its value.
+
+    Raises:
+      OptionsError: ``v`` is neither.
+    """
     if v is not None and not isinstance(v, (str, os.PathLike)):
         raise OptionsError(f"{name} must be a file path (a str or pathlib.Path) or None, got {shown(v)}")
 
 
 def progress(name: str, v) -> None:
-    """``True``, ``False``, ``None`` or a callable ``progress(steps_done, steps_total, elapsed_s)``."""
+    """``True``, ``False``, ``None`` or a callable ``progress(steps_done, steps_total, elapsed_s)``.
+
+    Args:
+      name: the option's name (the message names it).
+      v: its value.
+
+    Raises:
+      OptionsError: ``v`` is none of these.
+    """
     if v is not None and not isinstance(v, bool) and not callable(v):
         raise OptionsError(f"{name} must be True, False (or None) or a callable progress(steps_done, steps_total, "
                            f"elapsed_s), got {shown(v)}")
@@ -140,8 +217,16 @@ def progress(name: str, v) -> None:
 
 
 def option(default=None, check: Check | None = None, *, doc: str = ""):
-    """A field of a :class:`SolverOptions` class: its ``default``, its ``check(name, value)`` (run when an object
-    is built) and a one-line ``doc``."""
+    """A field of a :class:`SolverOptions` class.
+
+    Args:
+      default: the option's default (immutable: a number, a string, ``None``, a bool).
+      check: ``check(name, value)``, run when an object is built (``None``: any value).
+      doc: a one-line description (the class's ``Attributes:`` section documents the option).
+
+    Returns:
+      The ``dataclasses.field``.
+    """
     return dataclasses.field(default=default, metadata={"check": check, "doc": doc})
 
 
@@ -175,6 +260,9 @@ class SolverOptions:
     A subclass sets ``method`` (the solver's name) and declares its options with :func:`option`; it becomes a frozen,
     keyword-only dataclass (no decorator needed). Use :class:`jaxbpm.DEM`, :class:`jaxbpm.DSM` or
     :class:`jaxbpm.STE`.
+
+    Attributes:
+      method: the solver's name (a class variable).
 
     Raises:
       OptionsError: an unknown option (with the closest names) or a value out of its range (naming the option).
@@ -234,7 +322,13 @@ class SolverOptions:
 
 
 def options_class(method: str) -> type[SolverOptions]:
-    """The options class of the solver ``method`` (``"dem"``, ``"dsm"``, ``"ste"``), imported on first use.
+    """The options class of a solver, imported on first use.
+
+    Args:
+      method: ``"dem"``, ``"dsm"`` or ``"ste"``.
+
+    Returns:
+      Its :class:`SolverOptions` subclass.
 
     Raises:
       OptionsError: an unknown solver name.
@@ -259,6 +353,13 @@ def _load(method: str) -> type[SolverOptions]:
 def resolve_options(method, options: dict) -> SolverOptions:
     """The options object of a solve: from a solver name (``"dsm"``) or an options object, with keyword ``options``
     overriding its values, checked.
+
+    Args:
+      method: a solver's name or a :class:`SolverOptions`.
+      options: option names and values.
+
+    Returns:
+      The options object.
 
     Raises:
       OptionsError: an unknown solver, an unknown option or a value out of range.
