@@ -25,7 +25,7 @@ __all__ = [
 ]
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
-_LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options",
+_LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop", "options",
          "physics", "sample", "result",
          "formats", "conventions")  # (the last two: old names of jaxbpm.interop's modules, deprecated)
 # names loaded on first use: name -> the module that defines it
@@ -33,7 +33,7 @@ _LAZY_NAMES = {
     "Sample": "jaxbpm.sample", "BondMaterials": "jaxbpm.sample", "ParticleMaterial": "jaxbpm.sample",
     "Domain": "jaxbpm.sample", "SampleSummary": "jaxbpm.sample", "solve": "jaxbpm.solving",
     "Result": "jaxbpm.result", "DEM": "jaxbpm.options", "DSM": "jaxbpm.options", "STE": "jaxbpm.options",
-    "count_compilations": "jaxbpm._compile", "solve_batch": "jaxbpm.batched",
+    "count_compilations": "jaxbpm._compile", "solve_batch": "jaxbpm.dem.batched",
 }
 
 

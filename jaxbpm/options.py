@@ -93,7 +93,7 @@ def _progress(name, v):
 
 
 def _neighbors(name, v):
-    from jaxbpm.neighbors import NeighborSettings
+    from jaxbpm.dem.neighbors import NeighborSettings
 
     if v is not None and not isinstance(v, NeighborSettings):
         raise SceneError(f"{name} must be a jaxbpm.dem.NeighborSettings or None, got {_shown(v)}")
@@ -152,7 +152,7 @@ _CHECKS = {
 def accepted(method: str) -> tuple[str, ...]:
     """The option names ``method`` takes (from the solver's own signature: one list, no copy to keep in step)."""
     if method == "dem":
-        from jaxbpm.solving import _solve_dem as fn
+        from jaxbpm.dem.scene import solve_scene as fn
     elif method == "dsm":
         from jaxbpm.dsm import solve_scene as fn
     elif method == "ste":

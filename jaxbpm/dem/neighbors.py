@@ -1,6 +1,6 @@
-"""The DEM's contact candidates: jax-md neighbour lists owned on the host (box, origin, re-allocation) or, for large
-samples on the CPU, lists built on the host by a k-d tree (:class:`HostList`); the candidate pairs they give (bonded
-pairs masked where bonds replace contacts) and the per-contact state carried across a rebuild. jax-md is imported
+"""The DEM's contact candidates: jax-md neighbour lists owned on the host (box, origin, re-allocation) or, on the
+CPU, lists built on the host by a k-d tree (:class:`HostList`); the candidate pairs they give (bonded pairs masked
+where bonds replace contacts) and the per-contact state carried across a rebuild. jax-md is imported
 only when a scene has contacts and uses its lists.
 """
 
@@ -99,11 +99,9 @@ class _Neighbors:
 _CELL_LIST_FNS: dict = {}  # cell-list functions by neighbour-list settings (see _Neighbors.allocate)
 
 #: from this many particles on the CPU the DEM's candidate list is built on the host (a k-d tree, between steps)
-#: instead of by jax-md's cell list inside the step: the cell list fills a dense ``[n, 27 x cell capacity]``
-#: candidate array at every (re)build, which at 1M particles took the run past 22 GiB before its first chunk. On the
-#: CPU the host list is as fast or faster at every size and compiles less (UCS to failure with contacts, one core,
-#: wall of the solve: 500 particles 5.6 s against 6.6 s, 2k 8.1 s against 9.0 s, 8k 35.2 s against 39.8 s, the same
-#: rebuilds), so it is the CPU's list from the first particle; accelerators keep jax-md's (no host round trip)
+#: instead of by jax-md's cell list inside the step (which fills a dense ``[n, 27 x cell capacity]`` candidate array
+#: at every build); 0: the host list is the CPU's list from the first particle. Accelerators keep jax-md's (no host
+#: round trip)
 HOST_LIST_MIN = 0
 
 
@@ -219,7 +217,7 @@ def _remap_index(old_pairs, new_pairs, n):
 
 class _Near(NamedTuple):
     """The pairs within reach: the candidates that are not bonded pairs (those have their contact evaluated on the
-    bond list, see :func:`jaxbpm.dem.step`) whose surfaces are closer than ``margin`` when the list was built. While
+    bond list, see :func:`jaxbpm.dem.stepper.step`) whose surfaces are closer than ``margin`` when the list was built. While
     no particle has moved more than ``margin / 2`` since then, no other such candidate can touch, so each step's
     contact law runs on these pairs only, without testing and packing the whole candidate list (a second, tighter
     Verlet list inside the candidate list).
@@ -241,8 +239,7 @@ class _Near(NamedTuple):
 def near_size(count: int, capacity: int) -> int:
     """Slots for ``count`` pairs within reach: a quarter more (and 64), rounded up to one of 8 to 16 sizes an octave
     (runs on one sample, or samples of similar size, share the compiled chunk), at most ``capacity``. The contact law
-    runs on every slot, so slots sized to the candidate list (a third of it) ran it on up to 1.5x the pairs within
-    reach, and on 348k slots where no pair was within reach (bonds replacing contacts on an unbroken sample)."""
+    runs on every slot: the slots follow the pairs within reach, not the candidate list's size."""
     want = int(1.25 * count) + 64
     grain = 1 << max(want.bit_length() - 4, 0)
     return max(min(-(-want // grain) * grain, capacity), 1)
