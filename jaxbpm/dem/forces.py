@@ -113,7 +113,7 @@ def _near_forces(model: Model, params, load: Loading, state: DEMState, pairs, va
 def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMState, near: _Near, rebuilt, dt,
                margin):
     """The contact law on the bonded pairs (on the bond list, with the bond law: one pass, one scatter) and on the
-    other pairs within reach (:class:`jaxbpm.neighbors._Near`), found again when stale (the candidate list was
+    other pairs within reach (:class:`jaxbpm.dem.neighbors._Near`), found again when stale (the candidate list was
     rebuilt, a particle moved more than ``margin / 2``). Returns the step's forces, moments, wall reactions, intact
     mask and break modes, the pairs within reach (their ``overflow`` set when they did not fit their slots: the chunk
     is then run again with more) and the bonded pairs' new springs."""
