@@ -41,6 +41,7 @@ from jaxbpm.dem.stepper import _start
 from jaxbpm.errors import SceneError, SimulationInterrupted, SolveError
 from jaxbpm.result import Result, settle
 from jaxbpm.sample import Sample
+from jaxbpm.status import Status
 
 __all__ = ["solve_batch"]
 
@@ -138,20 +139,18 @@ def _run_chunks(model, params, load, state, dt, damping, origin, n_steps, vector
 
 
 def _solve_batch(sample, scene, method, params_batch, vectorize, options) -> list[Result]:
-    from jaxbpm.options import options_for
+    from jaxbpm._options import resolve_options
 
-    method, options = options_for(method, options)
-    _check(sample, scene, method, options)
+    options = resolve_options(method, options)
+    _check(sample, scene, options)
     members = _members(params_batch, sample)
-    options = {k: v for k, v in options.items() if k not in _PER_RUN}
-    throw = options.pop("throw", True)
     t0 = time.perf_counter()
     with compile_clock() as compiling:
-        results = _run_batch(t0, compiling, sample, scene, members, bool(vectorize), **options)
+        results = _run_batch(t0, compiling, sample, scene, members, bool(vectorize), options)
     for r in results:
         settle(r, False)
-    failed = [r for r in results if r.status in ("unstable", "not_finite")]
-    if throw and failed:
+    failed = [r for r in results if r.status in (Status.UNSTABLE, Status.NOT_FINITE)]
+    if options.throw and failed:
         # the error settle raises for the first failing member, carrying every member's result
         try:
             settle(failed[0], True)
@@ -161,8 +160,9 @@ def _solve_batch(sample, scene, method, params_batch, vectorize, options) -> lis
     return results
 
 
-def _check(sample, scene, method, options) -> None:
+def _check(sample, scene, options) -> None:
     """What a batch cannot run: another method, a file per run, a scene with contacts."""
+    method, options = options.method, options.asdict()
     if method != "dem":
         raise SceneError(f"solve_batch runs the DEM only, not {method!r}: solve the {method.upper()} runs one by one "
                          "with jaxbpm.solve (each is one linear solve; there are no time steps to share)")
@@ -194,12 +194,12 @@ class _Chunks:
     interrupted: bool = False
 
 
-def _run_batch(t0, compiling, sample, scene, members, vectorize, *, dt=None, safety=0.5, damping=0.7,
-               loading_time=None, transits=40.0, chunk=None, progress=False, neighbors=None, max_records=2000,
-               pad=True):
-    the_plan = plan(sample, scene, members, dt=dt, safety=safety, damping=damping, loading_time=loading_time,
-                    transits=transits, chunk=chunk, pad=pad)
-    report = _progress_fn(the_plan.progress(progress))
+def _run_batch(t0, compiling, sample, scene, members, vectorize, options) -> list[Result]:
+    """The batch's plan, its members' initial states, its chunks and every member's result."""
+    the_plan = plan(sample, scene, members, dt=options.dt, safety=options.safety, damping=options.damping,
+                    loading_time=options.loading_time, transits=options.transits, chunk=options.chunk,
+                    pad=options.pad)
+    report = _progress_fn(the_plan.progress(options.progress))
     # the members' initial states and per-run constants, each by the program a single run uses, then stacked
     started = [_start(the_plan.model, p, the_plan.load, None) for p in members]
     state, pre = _stack([s for s, _ in started]), _stack([c for _, c in started])
@@ -214,7 +214,7 @@ def _run_batch(t0, compiling, sample, scene, members, vectorize, *, dt=None, saf
     timing = {"setup_time": setup, "compile_time": compile_time, "run_time": wall - setup - compile_time,
               "wall_time": wall}
     host = jax.tree_util.tree_map(np.asarray, ran.done)
-    results = [_member_result(sample, scene, the_plan, ran, host, b, timing, vectorize, max_records)
+    results = [_member_result(sample, scene, the_plan, ran, host, b, timing, vectorize, options.max_records)
                for b in range(len(members))]
     if ran.interrupted:
         stop = SimulationInterrupted([r.state for r in results], None,
@@ -275,9 +275,9 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
         member_state = unpad_state(member_state, sample.n_particles, sample.n_bonds)
     rec = ({key: np.concatenate([r[key][b] for r in ran.records[:completed]]) for key in ran.records[0]}
            if completed else {})
-    status = "unstable" if message is not None else "converged"
+    status = Status.UNSTABLE if message is not None else Status.CONVERGED
     disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records,
-                                         strict=not ran.interrupted and status == "converged")
+                                         strict=not ran.interrupted and status == Status.CONVERGED)
     per_chunk = float(np.median(kernel)) if kernel else float("nan")
     stats = {**{k: v / n_batch for k, v in timing.items()}, "kernel_time": float(np.sum(kernel)) / n_batch,
              "steps": completed * chunk, "steps_per_second": chunk / per_chunk, "reallocations": 0,
@@ -297,4 +297,4 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
                   wall_time=timing["wall_time"] / n_batch, setup_time=timing["setup_time"] / n_batch,
                   compile_time=timing["compile_time"] / n_batch, run_time=timing["run_time"] / n_batch, stats=stats,
                   state=member_state, interrupted=ran.interrupted,
-                  status="interrupted" if ran.interrupted else status)
+                  status=Status.INTERRUPTED if ran.interrupted else status)

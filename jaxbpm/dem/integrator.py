@@ -32,6 +32,7 @@ from jaxbpm.dem.stepper import _precompute, _start, _with_bond_springs
 from jaxbpm.errors import InstabilityError, SimulationInterrupted
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
+from jaxbpm.status import Status
 
 __all__ = ["Outcome", "integrate", "simulate", "progress_printer", "NEAR_MARGIN"]
 
@@ -50,15 +51,15 @@ class Outcome(NamedTuple):
             ``time [steps]``; with breakage ``broken [steps, 2]``, the cumulative tensile and shear counts); empty
             when no chunk completed.
         stats: the run's statistics (see :func:`integrate`); with ``failure`` (the message) when unstable.
-        status: ``"converged"`` (every step ran), ``"unstable"`` (the run blew up, or the candidate list was
-            allocated again and again for one chunk) or ``"interrupted"`` (a ``KeyboardInterrupt``: Ctrl-C, or
-            raised by a callback; a chunk in flight is dropped).
+        status: :class:`~jaxbpm.status.Status` ``CONVERGED`` (every step ran), ``UNSTABLE`` (the run blew up, or the
+            candidate list was allocated again and again for one chunk) or ``INTERRUPTED`` (a ``KeyboardInterrupt``:
+            Ctrl-C, or raised by a callback; a chunk in flight is dropped).
     """
 
     state: DEMState
     records: dict
     stats: dict
-    status: str
+    status: Status
 
 
 def integrate(model: Model, params, load: Loading, *, dt: float, n_steps: int, damping: float = 0.0,
@@ -125,11 +126,11 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, da
     """
     out = integrate(model, params, load, dt=dt, n_steps=n_steps, damping=damping, chunk=chunk, neighbors=neighbors,
                     progress=progress, dt_crit=dt_crit, state=state, on_chunk=on_chunk)
-    if out.status == "unstable":
+    if out.status == Status.UNSTABLE:
         err = InstabilityError(out.stats["failure"])
         err.state, err.records, err.stats = out.state, out.records, out.stats
         raise err
-    if out.status == "interrupted":
+    if out.status == Status.INTERRUPTED:
         raise SimulationInterrupted(out.state, out.records, out.stats)
     return out.state, out.records, out.stats
 
@@ -211,8 +212,8 @@ class _Run:
                 failure = self._advance(crit, on_chunk, report)
         except KeyboardInterrupt:
             _interrupt.clear()
-            return self._outcome("interrupted")
-        return self._outcome("converged" if failure is None else "unstable", failure)
+            return self._outcome(Status.INTERRUPTED)
+        return self._outcome(Status.CONVERGED if failure is None else Status.UNSTABLE, failure)
 
     def _advance(self, crit, on_chunk, report) -> str | None:
         """Run the next chunk (or the rest of it) and act on the checks; returns the failure message, if any."""
@@ -314,12 +315,12 @@ class _Run:
             on_chunk(self._steps(0), self.state, rec)
         report(self._steps(0), self.n_chunks * self.chunk, time.perf_counter() - self.t0)
 
-    def _outcome(self, status: str, failure: str | None = None) -> Outcome:
-        state = self.done if status != "converged" else self.state
+    def _outcome(self, status: Status, failure: str | None = None) -> Outcome:
+        state = self.done if status != Status.CONVERGED else self.state
         out, stats = _collect(self.model, state, self.records, self.chunk, self.reallocs, self.clock)
-        if status == "unstable":
+        if status == Status.UNSTABLE:
             stats.update(unstable=True, steps_planned=self.n_chunks * self.chunk, failure=failure)
-        elif status == "interrupted":
+        elif status == Status.INTERRUPTED:
             stats.update(interrupted=True, steps_planned=self.n_chunks * self.chunk)
         return Outcome(state, out, stats, status)
 

@@ -19,54 +19,55 @@ import numpy as np
 from jaxbpm._compile import compile_clock
 from jaxbpm.dem.curve import curve, modulus, peak_stats, plan_stats
 from jaxbpm.dem.integrator import integrate, Outcome
+from jaxbpm.dem.options import DEM
 from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import restore_state, state_arrays, unpad_state
 from jaxbpm.dem.writers import check_frames, Writers, writers
 from jaxbpm.errors import SimulationInterrupted
-from jaxbpm.result import Result, settle
+from jaxbpm.result import Result, settle, timed_result
+from jaxbpm.status import Status
 
 __all__ = ["solve_scene", "finish"]
 
 
-def solve_scene(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0,
-                chunk=None, progress=False, neighbors=None, max_records=2000, record_to=None, snapshots=None,
-                vtu=None, pad=True, throw=True, overwrite=False, resume=None) -> Result:
-    """Run the DEM on ``scene`` and return its result (the options are documented in :func:`jaxbpm.solve`).
+def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Result:
+    """Run the DEM on ``scene`` and return its result.
 
     Args:
-        sample: the sample.
-        scene: the scene.
-        params: the checked parameters, or ``None`` (the sample's material table).
-        dt, safety, damping, loading_time, transits, chunk, progress, neighbors, max_records, record_to, snapshots,
-            vtu, pad, throw, overwrite, resume: the DEM's options (see :func:`jaxbpm.solve`).
+      sample: the bonded sample.
+      scene: the scene.
+      params: parameters checked by :func:`jaxbpm.physics.model.check_params` (``None``: the sample's own).
+      options: the :class:`~jaxbpm.dem.options.DEM` options (``None``: the defaults).
 
     Returns:
-        The :class:`~jaxbpm.result.Result`, with its status.
+      The :class:`~jaxbpm.result.Result` (``state``: the :class:`~jaxbpm.dem.DEMState` at the end), with its status.
 
     Raises:
-        SceneError: an option that does not fit the scene or the run.
-        InstabilityError: the run blew up and ``throw``.
-        SimulationInterrupted: a ``KeyboardInterrupt`` during the run, carrying the result of the part that was run.
+      SceneError: options that do not fit the scene or the run.
+      InstabilityError: with ``options.throw``, a run that blew up (carrying the result of what ran before).
+      SimulationInterrupted: a ``KeyboardInterrupt`` during the run, carrying the result of the part that was run.
     """
     from jaxbpm.physics.model import default_params
 
+    options = DEM() if options is None else options
     t0 = time.perf_counter()
     with compile_clock() as compiling:  # (the setup's compilations count as compile time)
-        check_frames(snapshots, vtu)
+        check_frames(options.snapshots, options.vtu)
         params = default_params(sample) if params is None else params
-        the_plan = plan(sample, scene, params, dt=dt, safety=safety, damping=damping, loading_time=loading_time,
-                        transits=transits, chunk=chunk, snapshots=snapshots, pad=pad)
-        out = writers(sample, scene, the_plan, record_to=record_to, snapshots=snapshots, vtu=vtu,
-                      overwrite=overwrite, resume=resume)
+        the_plan = plan(sample, scene, params, dt=options.dt, safety=options.safety, damping=options.damping,
+                        loading_time=options.loading_time, transits=options.transits, chunk=options.chunk,
+                        snapshots=options.snapshots, pad=options.pad)
+        out = writers(sample, scene, the_plan, record_to=options.record_to, snapshots=options.snapshots,
+                      vtu=options.vtu, overwrite=options.overwrite, resume=options.resume)
         the_plan = the_plan.starting_from(None if out.saved is None else restore_state(out.saved), out.steps_done)
         clock = _Clock(t0, time.perf_counter(), compiling.seconds, compiling)
-        run = _simulate(sample, the_plan, params, out, progress=progress, neighbors=neighbors)
-        stop = SimulationInterrupted(run.state, run.records, run.stats) if run.status == "interrupted" else None
-        result = finish(sample, scene, the_plan, run, out, clock, max_records)
+        run = _simulate(sample, the_plan, params, out, progress=options.progress, neighbors=options.neighbors)
+        stop = SimulationInterrupted(run.state, run.records, run.stats) if run.status == Status.INTERRUPTED else None
+        result = finish(sample, scene, the_plan, run, out, clock, options.max_records)
     if stop is not None:
         stop.result = result
         raise stop
-    return settle(result, throw)
+    return settle(result, options.throw)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +93,7 @@ def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbo
         if out.recorder is not None:
             out.recorder.finish("interrupted")
         raise
-    if run.status == "interrupted" and out.recorder is not None and out.recorder.steps > the_plan.steps_done:
+    if run.status == Status.INTERRUPTED and out.recorder is not None and out.recorder.steps > the_plan.steps_done:
         out.recorder.checkpoint(state_arrays(run.state))  # what resume= continues from
     if the_plan.size is None:
         return run
@@ -116,10 +117,10 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
         converged one may still be found not finite by :func:`jaxbpm.result.settle`).
     """
     status, stats = run.status, run.stats
-    interrupted = status == "interrupted"
+    interrupted = status == Status.INTERRUPTED
     rec = _whole_records(run, out)
     disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records,
-                                         strict=status == "converged")
+                                         strict=status == Status.CONVERGED)
     stats.update(plan_stats(the_plan, the_plan.dt_crit[0], interrupted))
     # wall = setup (before the first chunk, less the compilations in it) + compile + run (the rest)
     setup = clock.t_sim - clock.t0 - clock.setup_compile + stats["setup_time"]
@@ -136,14 +137,14 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
     if out.recorder is not None:
         wall = time.perf_counter() - clock.t0
         stats.update(wall_time=wall, run_time=wall - setup - compile_time)
-        out.recorder.finish("complete" if status == "converged" else status,
+        out.recorder.finish("complete" if status == Status.CONVERGED else str(status),
                             {k: v for k, v in stats.items() if k not in ("broken_curve", "padded_to")})
-    wall = time.perf_counter() - clock.t0
-    stats.update(wall_time=wall, run_time=wall - setup - compile_time)
-    return Result(method="dem", stiffness=stiffness, youngs_modulus=youngs, gauge_length=the_plan.gauge_length,
-                  area=the_plan.area, displacement=disp[keep], force=force[keep], wall_time=wall, setup_time=setup,
-                  compile_time=compile_time, run_time=wall - setup - compile_time, stats=stats, state=run.state,
-                  interrupted=interrupted, status=status)
+    result = timed_result("dem", clock.t0, stiffness=stiffness, youngs_modulus=youngs,
+                          gauge_length=the_plan.gauge_length, area=the_plan.area, displacement=disp[keep],
+                          force=force[keep], setup_time=setup, compile_time=compile_time, stats=stats,
+                          state=run.state, interrupted=interrupted, status=status)
+    stats.update(wall_time=result.wall_time, run_time=result.run_time)
+    return result
 
 
 def _whole_records(run: Outcome, out: Writers) -> dict:
@@ -163,6 +164,6 @@ def _lateral(scene, sample, state, stats, breakage, status) -> dict:
     from jaxbpm.scenes import lateral_stats
 
     intact = not breakage or stats.get("broken_tensile", 0) + stats.get("broken_shear", 0) == 0
-    if not intact or status != "converged" or state is None:
+    if not intact or status != Status.CONVERGED or state is None:
         return {}
     return lateral_stats(scene, sample, np.asarray(state.positions)[:sample.n_particles] - np.asarray(sample.positions))

@@ -19,6 +19,7 @@ from jaxbpm.dsm.krylov import cg, tangent_operator
 from jaxbpm.dsm.operator import _linearised_contact_jacobians, _packed_operator, internal_forces
 from jaxbpm.dsm.preconditioner import _coarse_for, bond_geometry, build_preconditioner, CoarseSpace
 from jaxbpm.physics.padding import pad_model, pad_rows
+from jaxbpm.result import settle, timed_result
 
 
 class _LinearSetup(NamedTuple):
@@ -110,7 +111,6 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
     """The linear DSM on a bonds-only scene with clamped layers (see :func:`solve_scene`): setup (kept per sample),
     one compiled program (per size class), one run."""
     from jaxbpm.physics.model import default_params
-    from jaxbpm.result import Result, settle
     from jaxbpm.scenes import lateral_stats
 
     params = default_params(sample) if params is None else params
@@ -139,13 +139,10 @@ def _solve_linear(sample, scene, params, *, rotations, linear_tol, maxiter, stif
     stats.update(lateral_stats(scene, sample, u))
     length, area = scene.geometry(sample)
     stiffness = reaction / delta
-    wall = time.perf_counter() - t0
     # what is neither setup nor compilation (the run, moving its outputs to the host) is the run time
-    return settle(Result(method="dsm", stiffness=stiffness, youngs_modulus=stiffness * length / area,
-                         gauge_length=length, area=area, displacement=np.array([0.0, delta]),
-                         force=np.array([0.0, reaction]), wall_time=wall, setup_time=setup_time,
-                         compile_time=compile_time, run_time=wall - setup_time - compile_time, stats=stats, state=u),
-                  throw)
+    return settle(timed_result("dsm", t0, stiffness=stiffness, gauge_length=length, area=area,
+                               displacement=np.array([0.0, delta]), force=np.array([0.0, reaction]),
+                               compile_time=compile_time, setup_time=setup_time, stats=stats, state=u), throw)
 
 
 def _path_work(model, params, u, fractions):

@@ -83,18 +83,3 @@ __all__ = [
     "SceneGeometry", "scene_geometry", "scene_stiffness", "stiffness_function", "solve_scene", "LocalMap", "local_map",
     "VOIGT",
 ]
-
-_MOVED = {"save_local_map", "export_local_map_vtk", "plot_local_map"}
-
-
-def __getattr__(name):
-    # the local map's writers live on the I/O side (jaxbpm.io); the old names work for one more release
-    if name in _MOVED:
-        import warnings
-
-        from jaxbpm import io
-
-        warnings.warn(f"jaxbpm.ste.{name} moved to jaxbpm.io.{name}; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=2)
-        return getattr(io, name)
-    raise AttributeError(f"module 'jaxbpm.ste' has no attribute {name!r}")
