@@ -2,8 +2,8 @@
 
 The perturbed runs of a finite-difference gradient, or a chunk of a run set, differ only in their parameters (bond
 stiffness and strength): the geometry, the loading and the number of steps are shared, so one jitted chunk, mapped
-over the parameters and the states (:func:`jaxbpm.dem.chunk._run_chunk`; the model and the loading unmapped), advances all
-of them. Two ways to map (``solve_batch(vectorize=...)``):
+over the parameters and the states (:func:`jaxbpm.dem.chunk._run_chunk`; the model and the loading unmapped),
+advances all of them. Two ways to map (``solve_batch(vectorize=...)``):
 
 - ``lax.map`` (default): inside the program the members run one after another, each by the single run's code, so
   each result is the one :func:`jaxbpm.solve` gives for it alone to the last bit. It saves the per-run setup (time
@@ -51,43 +51,52 @@ _PER_RUN = ("record_to", "snapshots", "vtu", "resume", "overwrite")
 
 def solve_batch(sample: Sample, scene, params_batch, *, method="dem", vectorize: bool = False,
                 **options) -> list[Result]:
-    """Solve ``scene`` on ``sample`` once per parameter set of ``params_batch``, all in one DEM program; returns one :class:`~jaxbpm.result.Result` per member, in order.
-
-    params_batch: a list of parameter dicts, each one that :func:`jaxbpm.solve` takes as ``params`` (e.g.
-    :func:`jaxbpm.physics.model.default_params` with ``bond_E``, ``bond_nu``, ``bond_tensile_strength`` or
-    ``bond_shear_strength`` overridden), or one dict of arrays whose every entry has a leading batch axis (``bond_E``
-    ``[B, n_materials]``, a scalar contact parameter ``[B]``). Every member is checked as ``solve`` checks ``params``.
+    """Solve ``scene`` on ``sample`` once per parameter set of ``params_batch``, all in one DEM program.
 
     One program serves all members, so they share the number of steps and the time step: ``dt`` (default
-    ``safety`` x the smallest critical time step of the members) and ``loading_time`` (default ``transits`` x the
+    ``safety`` x the smallest critical time step of the members), ``loading_time`` (default ``transits`` x the
     longest elastic-wave transit time of the members: the softest member's) and ``chunk`` (default from the number
-    of steps, as for ``solve``). Each member's result is then the one ``jaxbpm.solve(sample, scene, params=p,
-    dt=dt, loading_time=loading_time, chunk=chunk)`` gives (to the last bit; with ``vectorize=True`` to the DEM's
-    round-off sensitivity, see :mod:`jaxbpm.dem.batched`); those three values are in ``result.stats["batch"]``, with
-    the batch size, the member's index, the mapping and the batch's wall, compile and kernel times. The
-    timings of each result (``wall_time``, ``setup_time``, ``compile_time``, ``run_time``, ``kernel_time``) are its
-    share of the batch's: the batch's divided by B.
-
-    vectorize: False (default): ``lax.map`` over the members inside the program, each exactly as its single run;
-    True: ``jax.vmap``, one vectorised program (for accelerators; on CPU slower, and equal to the single runs only
-    to round-off amplified by the local damping).
-    method: ``"dem"`` or a ``jaxbpm.DEM(...)`` options object (the DSM and STE have no batched form). options: those
-    of ``solve`` for ``"dem"`` -- ``dt``, ``safety``, ``damping``, ``loading_time``, ``transits``, ``chunk``,
-    ``progress``, ``max_records``, ``pad``, ``throw`` (``neighbors`` is accepted and unused); not ``record_to``,
-    ``snapshots``, ``vtu`` or ``resume`` (files are written per run: use ``solve``).
+    of steps, as for ``solve``): one :func:`~jaxbpm.dem.plan.plan` for all. Each member's result is then the one
+    ``jaxbpm.solve(sample, scene, params=p, dt=dt, loading_time=loading_time, chunk=chunk)`` gives (to the last bit;
+    with ``vectorize=True`` to the DEM's round-off sensitivity, see :mod:`jaxbpm.dem.batched`); those three values
+    are in ``result.stats["batch"]``, with the batch size, the member's index, the mapping and the batch's wall,
+    compile and kernel times. The timings of each result (``wall_time``, ``setup_time``, ``compile_time``,
+    ``run_time``, ``kernel_time``) are its share of the batch's: the batch's divided by B.
 
     Scenes: bonds only -- ``contacts=False``, with or without breakage and with clamped layers or plane walls
     (``UniaxialCompression()``, ``UniaxialCompression.to_failure(contacts=False)``,
-    ``ThreePointBending(contacts=False)``). A scene with contacts (``UniaxialCompression.to_failure()``,
-    ``ThreePointBending()``) raises :class:`~jaxbpm.errors.SceneError`: its neighbour list depends on how each
+    ``ThreePointBending(contacts=False)``). A scene with contacts has a neighbour list that depends on how each
     member's particles move; run those one by one with ``solve``.
 
     Failure per member: a member that blows up stops being checked and gets the ``"unstable"`` result ``solve``
-    would give it (the curve up to the chunk before the blow-up); the others run on. With ``throw`` (default True)
-    the first failing member's :class:`~jaxbpm.errors.SolveError` is raised once all have run, carrying that
-    member's ``result`` and every member's in ``results``; ``throw=False`` returns them all and each has its
-    ``status``. A ``KeyboardInterrupt`` raises :class:`~jaxbpm.errors.SimulationInterrupted` whose ``results`` hold
-    every member's result of the chunks completed (``result`` is the first member's).
+    would give it (the curve up to the chunk before the blow-up); the others run on.
+
+    Args:
+      sample: the bonded sample.
+      scene: a bonds-only scene.
+      params_batch: a list of parameter dicts, each one that :func:`jaxbpm.solve` takes as ``params`` (e.g.
+        :func:`jaxbpm.physics.model.default_params` with ``bond_E``, ``bond_nu``, ``bond_tensile_strength`` or
+        ``bond_shear_strength`` overridden), or one dict of arrays whose every entry has a leading batch axis
+        (``bond_E [B, n_materials]``, a scalar contact parameter ``[B]``). Every member is checked as ``solve``
+        checks ``params``.
+      method: ``"dem"`` or a :class:`~jaxbpm.dem.options.DEM` options object (the DSM and STE have no batched
+        form).
+      vectorize: False: ``lax.map`` over the members inside the program, each exactly as its single run; True:
+        ``jax.vmap``, one vectorised program (for accelerators; on CPU slower, and equal to the single runs only to
+        round-off amplified by the local damping).
+      **options: the DEM's options (:class:`~jaxbpm.dem.options.DEM`; ``neighbors`` is accepted and unused), not
+        ``record_to``, ``snapshots``, ``vtu``, ``resume`` or ``overwrite`` (files are written per run: use
+        ``solve``).
+
+    Returns:
+      One :class:`~jaxbpm.result.Result` per member, in order, each with its status.
+
+    Raises:
+      SceneError: another solver, an option that writes files, a scene with contacts, a malformed batch.
+      SolveError: with ``throw`` (the default), the first failing member's error, once all have run, carrying that
+        member's ``result`` and every member's in ``results``.
+      SimulationInterrupted: a ``KeyboardInterrupt``; its ``results`` hold every member's result of the chunks
+        completed (``result`` is the first member's).
     """
     with _interrupt.guard():
         results = _solve_batch(sample, scene, method, params_batch, vectorize, options)

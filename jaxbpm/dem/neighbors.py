@@ -22,9 +22,14 @@ __all__ = ["NeighborSettings"]
 
 @dataclasses.dataclass(frozen=True)
 class NeighborSettings:
-    """Neighbour-list settings: ``skin`` [m] (list radius = 2 r_max + 2 skin, jax-md's cutoff ``2 r_max + skin``
-    plus its threshold ``skin``; rebuilt when a particle has moved more than skin / 2), ``capacity_multiplier``
-    (spare room in the pair buffer), ``box_margin`` (relative padding of the cell-list box around the sample)."""
+    """Settings of the contact candidate lists.
+
+    Attributes:
+      skin: [m] the list radius is 2 r_max + 2 skin (jax-md's cutoff ``2 r_max + skin`` plus its threshold
+        ``skin``); the list is built again when a particle has moved more than skin / 2.
+      capacity_multiplier: spare room in the pair buffer.
+      box_margin: relative padding of jax-md's cell-list box around the sample.
+    """
 
     skin: float
     capacity_multiplier: float = 1.5
@@ -126,14 +131,32 @@ class HostList(NamedTuple):
 
 
 def stale(nbrs: HostList, positions) -> jax.Array:
-    """Whether a particle at ``positions`` has moved more than half the skin from where ``nbrs`` was built."""
+    """Whether a particle has moved more than half the skin from where ``nbrs`` was built.
+
+    Args:
+      nbrs: a host-built list.
+      positions: ``[n, 3]`` the particles' positions.
+
+    Returns:
+      A boolean scalar array.
+    """
     return jnp.max(jnp.sum((positions - nbrs.reference_position) ** 2, axis=1)) > nbrs.threshold
 
 
 def ordered_pairs(x: np.ndarray, radius: float, capacity: int, multiplier: float) -> tuple[np.ndarray, int]:
-    """Pairs of centres ``x [n, 3]`` closer than ``radius`` (a k-d tree) in the ``OrderedSparse`` layout of
-    :class:`HostList`, in ``capacity`` slots; when they do not fit, ``multiplier`` x as many slots (so that a list
-    built again later, with a few more pairs, keeps its size and the compiled chunk). Returns ``(idx, capacity)``."""
+    """The pairs of centres closer than ``radius`` (a k-d tree), in the ``OrderedSparse`` layout of :class:`HostList`.
+
+    Args:
+      x: ``[n, 3]`` centres.
+      radius: the list radius.
+      capacity: slots for the pairs; when they do not fit (or there are none), ``multiplier`` x as many as there
+        are pairs (so that a list built again later, with a few more pairs, keeps its size and the compiled chunk).
+      multiplier: see ``capacity``.
+
+    Returns:
+      ``(idx [2, capacity], capacity)``: each pair once, ``idx[0] < idx[1]``, sorted by ``idx[0]`` then ``idx[1]``;
+      the empty slots hold ``n``.
+    """
     from scipy.spatial import cKDTree
 
     n = x.shape[0]
@@ -172,8 +195,17 @@ class _HostNeighbors:
 
 
 def neighbors_owner(model: Model, settings: NeighborSettings, positions):
-    """The owner of the DEM's candidate list: :class:`_HostNeighbors` on the CPU (from :data:`HOST_LIST_MIN`
-    particles), :class:`_Neighbors` (jax-md's cell list, rebuilt inside the step) on accelerators."""
+    """The owner of a run's candidate list, which builds it (``allocate``) and says whether particles left its box.
+
+    Args:
+      model: the run's model (radii).
+      settings: the list's settings.
+      positions: ``[n, 3]`` the particles' positions at the start.
+
+    Returns:
+      On the CPU (from :data:`HOST_LIST_MIN` particles) an owner of lists built on the host (:class:`HostList`),
+      else of jax-md's cell lists, built again inside the step.
+    """
     if model.n >= HOST_LIST_MIN and jax.default_backend() == "cpu":
         return _HostNeighbors(model, settings, positions)
     return _Neighbors(model, settings, positions)
@@ -217,10 +249,10 @@ def _remap_index(old_pairs, new_pairs, n):
 
 class _Near(NamedTuple):
     """The pairs within reach: the candidates that are not bonded pairs (those have their contact evaluated on the
-    bond list, see :func:`jaxbpm.dem.stepper.step`) whose surfaces are closer than ``margin`` when the list was built. While
-    no particle has moved more than ``margin / 2`` since then, no other such candidate can touch, so each step's
-    contact law runs on these pairs only, without testing and packing the whole candidate list (a second, tighter
-    Verlet list inside the candidate list).
+    bond list, see :func:`jaxbpm.dem.stepper.step`) whose surfaces are closer than ``margin`` when the list was
+    built. While no particle has moved more than ``margin / 2`` since then, no other such candidate can touch, so
+    each step's contact law runs on these pairs only, without testing and packing the whole candidate list (a
+    second, tighter Verlet list inside the candidate list).
 
     ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
     ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``overflow`` (more pairs
@@ -237,17 +269,33 @@ class _Near(NamedTuple):
 
 
 def near_size(count: int, capacity: int) -> int:
-    """Slots for ``count`` pairs within reach: a quarter more (and 64), rounded up to one of 8 to 16 sizes an octave
-    (runs on one sample, or samples of similar size, share the compiled chunk), at most ``capacity``. The contact law
-    runs on every slot: the slots follow the pairs within reach, not the candidate list's size."""
+    """Slots for ``count`` pairs within reach (the contact law runs on every slot).
+
+    Args:
+      count: the pairs within reach.
+      capacity: the candidate list's capacity.
+
+    Returns:
+      A quarter more than ``count`` (and 64), rounded up to one of 8 to 16 sizes an octave (runs on one sample, or
+      samples of similar size, share the compiled chunk), at most ``capacity``.
+    """
     want = int(1.25 * count) + 64
     grain = 1 << max(want.bit_length() - 4, 0)
     return max(min(-(-want // grain) * grain, capacity), 1)
 
 
 def near_count(model: Model, positions, nbrs, margin: float) -> int:
-    """How many candidate pairs of ``nbrs`` that are not bonded pairs are within ``margin`` of touching at
-    ``positions``, counted on the host: what :func:`near_size` sizes the slots for at the start of a run."""
+    """How many candidate pairs that are not bonded pairs are within ``margin`` of touching (on the host).
+
+    Args:
+      model: the run's model (radii, bonds).
+      positions: ``[n, 3]`` positions.
+      nbrs: the candidate list.
+      margin: [m] the reach.
+
+    Returns:
+      The count, which :func:`near_size` sizes the slots for at the start of a run.
+    """
     x, idx = np.asarray(positions), np.asarray(nbrs.idx)
     pairs = idx[:, idx[0] < model.n].T
     if pairs.size and model.bond_keys.shape[0]:
@@ -261,8 +309,16 @@ def near_count(model: Model, positions, nbrs, margin: float) -> int:
 
 
 def pack(mask, size: int):
-    """Indices of the ``True`` entries of ``mask [C]`` in ``size`` slots (``C`` for an empty slot) and how many
-    there are (more than ``size``: they did not fit; ``associative_scan``: XLA's CPU cumsum is slower)."""
+    """The indices of the ``True`` entries of a mask, packed into ``size`` slots.
+
+    Args:
+      mask: ``[C]`` bool.
+      size: the slots.
+
+    Returns:
+      ``(take [size], count)``: the indices in order (``C`` in an empty slot) and how many entries are ``True``
+      (more than ``size``: they did not all fit).
+    """
     capacity = mask.shape[0]
     slot = jax.lax.associative_scan(jnp.add, mask.astype(jnp.int32)) - 1
     take = jnp.full(size, capacity, jnp.int32).at[jnp.where(mask, slot, size)].set(
@@ -271,8 +327,20 @@ def pack(mask, size: int):
 
 
 def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Near:
-    """The candidate pairs that are not bonded pairs within ``margin`` of touching, in ``size`` slots (see
-    :class:`_Near`), with their springs taken from ``spring [C, 3]`` (the candidate list's layout)."""
+    """Find the pairs within reach.
+
+    Args:
+      model: the run's model.
+      positions: ``[n, 3]`` positions.
+      nbrs: the candidate list.
+      spring: ``[C, 3]`` the springs in the candidate list's layout.
+      margin: [m] the reach.
+      size: the slots.
+
+    Returns:
+      The candidate pairs that are not bonded pairs within ``margin`` of touching, with their springs
+      (:class:`_Near`; ``overflow`` set when they did not fit).
+    """
     from jaxbpm.physics.contact import pair_vectors
 
     pairs = nbrs.idx.T
@@ -287,11 +355,27 @@ def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Nea
 
 
 def near_springs(near: _Near, capacity: int):
-    """The springs in the candidate list's layout ``[capacity, 3]`` (every candidate not within reach is apart: no
-    spring)."""
+    """The springs of the pairs within reach in the candidate list's layout.
+
+    Args:
+      near: the pairs within reach.
+      capacity: the candidate list's capacity.
+
+    Returns:
+      ``[capacity, 3]`` (every candidate not within reach is apart: no spring).
+    """
     return jnp.zeros((capacity, 3), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
 
 
 def near_stale(near: _Near, positions, margin):
-    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2``."""
+    """Whether the pairs within reach must be found again.
+
+    Args:
+      near: the pairs within reach.
+      positions: ``[n, 3]`` positions.
+      margin: [m] their reach.
+
+    Returns:
+      A boolean scalar array: a particle moved more than ``margin / 2`` since they were found.
+    """
     return jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1)) > 0.25 * margin * margin

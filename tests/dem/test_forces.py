@@ -8,7 +8,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm.dem import integrator, neighbors
-from jaxbpm.physics.model import build_model
+from jaxbpm.physics.model import build_model, default_params
 
 R = 1e-3
 
@@ -78,7 +78,8 @@ def test_pairs_within_reach_overflow_runs_the_chunk_again(contact_box, monkeypat
     scene = jaxbpm.scenes.UniaxialCompression(strain=0.005, contacts=True)
     roomy = jaxbpm.solve(half, scene, "dem", transits=20)
     within, slots = roomy.stats["contacts_within_reach"], roomy.stats["contact_slots"]
-    assert 100 < within <= slots <= neighbors.near_size(max(within, half.n_bonds // 32), roomy.stats["contact_capacity"])
+    capacity = roomy.stats["contact_capacity"]
+    assert 100 < within <= slots <= neighbors.near_size(max(within, half.n_bonds // 32), capacity)
     assert slots < 1.5 * within + 64
     _with_near(monkeypatch, integrator.NEAR_MARGIN, lambda count, capacity: max(count // 4, 1))
     tight = jaxbpm.solve(half, scene, "dem", transits=20)
