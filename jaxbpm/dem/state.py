@@ -97,7 +97,7 @@ def unpad_state(state: DEMState, n: int, n_bonds: int) -> DEMState:
         n_bonds: the sample's number of bonds.
 
     Returns:
-        The sample's part of ``state`` (contacts, held by a bonds-only padded run as empty arrays, are kept).
+        The sample's part of ``state`` (its other fields, the contacts' and the time, as they are).
     """
     def cut(x, size):
         return None if x is None else jax.device_put(np.asarray(x)[:size])
