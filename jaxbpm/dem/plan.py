@@ -13,12 +13,14 @@ from typing import Any
 
 import numpy as np
 
+from jaxbpm._compile import size_class
 from jaxbpm.dem.integrator import progress_printer
 from jaxbpm.dem.state import DEMState, pad_loading
 from jaxbpm.dem.timestep import critical_time_step
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model
+from jaxbpm.scenes import sample_breaks
 
 __all__ = ["Plan", "plan", "default_chunk", "transit_time"]
 
@@ -121,9 +123,6 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
     Raises:
         SceneError: ``safety`` or ``dt`` out of range.
     """
-    from jaxbpm._compile import size_class
-    from jaxbpm.scenes import sample_breaks
-
     members = list(params) if not isinstance(params, Mapping) else [params]
     breaks = sample_breaks(sample, getattr(scene, "breakage", False))
     # bonds only (no contacts, no walls): the model is padded to the sample's size class, so that the next sample of

@@ -24,7 +24,9 @@ from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import restore_state, state_arrays, unpad_state
 from jaxbpm.dem.writers import check_frames, Writers, writers
 from jaxbpm.errors import SimulationInterrupted
+from jaxbpm.physics.model import default_params
 from jaxbpm.result import Result, settle, timed_result
+from jaxbpm.scenes import lateral_stats
 from jaxbpm.status import Status
 
 __all__ = ["solve_scene", "finish"]
@@ -47,8 +49,6 @@ def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Resul
       InstabilityError: with ``options.throw``, a run that blew up (carrying the result of what ran before).
       SimulationInterrupted: a ``KeyboardInterrupt`` during the run, carrying the result of the part that was run.
     """
-    from jaxbpm.physics.model import default_params
-
     options = DEM() if options is None else options
     t0 = time.perf_counter()
     with compile_clock() as compiling:  # (the setup's compilations count as compile time)
@@ -161,8 +161,6 @@ def _whole_records(run: Outcome, out: Writers) -> dict:
 def _lateral(scene, sample, state, stats, breakage, status) -> dict:
     """The lateral strain of the loaded state of a converged run where no bond broke (a broken sample's would mean
     nothing)."""
-    from jaxbpm.scenes import lateral_stats
-
     intact = not breakage or stats.get("broken_tensile", 0) + stats.get("broken_shear", 0) == 0
     if not intact or status != Status.CONVERGED or state is None:
         return {}
