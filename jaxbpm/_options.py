@@ -75,8 +75,12 @@ def unit_interval(lo_open: bool = True, hi_closed: bool = True) -> Check:
     return check
 
 
-fraction: Check = unit_interval()
-"""A number in ``(0, 1]``."""
+def fraction(name: str, v) -> None:
+    """A number in ``(0, 1]``."""
+    _FRACTION(name, v)
+
+
+_FRACTION = unit_interval()
 
 
 def whole(name: str, v, minimum: int = 1) -> None:

@@ -229,7 +229,7 @@ def _probe(sample, scene, params, tol):
     except (SceneError, SolveError) as exc:  # e.g. particles held by contacts only: no bonds-only answer
         note = f"; the linear pass failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})"
     seconds = time.perf_counter() - t
-    ok = [r is not None and r.status == "converged" and np.isfinite(r.stiffness) and r.stiffness > 0
+    ok = [r is not None and r.status.ok and np.isfinite(r.stiffness) and r.stiffness > 0
           for r in (res_b, res_c)]
     if not all(ok):
         if not note:
@@ -299,18 +299,13 @@ def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
       sample: the bonded sample.
       scene: the scene.
       tol: the relative stiffness error allowed against the DEM, in (0, 1).
-      params: parameters overriding the sample's (``None``: its own).
+      params: parameters overriding the sample's, checked by :func:`~jaxbpm.physics.model.check_params`
+        (``None``: its own).
 
     Returns:
       The :class:`Choice`.
     """
-    if params is not None:
-        params = check_params(params, sample)
-    return _choose(sample, scene, check_tol(tol), params)
-
-
-def _choose(sample, scene, tol, params) -> Choice:
-    """:func:`choose` with ``tol`` and ``params`` checked."""
+    tol = check_tol(tol)
     reason = _dem_only(sample, scene)
     if reason is not None:
         return Choice("dem", {}, "dem", reason, scene, tol)
@@ -405,7 +400,7 @@ def solve_auto(sample, scene, params, options: dict, solve: Callable[..., Result
     if params is not None:  # once per solve: the solvers below take them as they are
         params = check_params(params, sample)
     t0 = time.perf_counter()
-    choice = _choose(sample, scene, tol, params)
+    choice = choose(sample, scene, tol, params=params)
     result, fallback, total, compile_time = _answer(sample, choice, params, options, throw, solve, t0)
     _account(result, choice, fallback, total, compile_time)
     return result
@@ -425,7 +420,7 @@ def _answer(sample, choice: Choice, params, options, throw, solve, t0):
         opts = choice.solver_options.replace(throw=throw, **(progress if choice.method == "dem" else {}))
         if choice.route == "dsm_nonlinear":  # accepted where Newton converges, else the DEM
             first = solve(sample, choice.scene, params, opts.replace(throw=False))
-            if first.status == "converged":
+            if first.status.ok:
                 result = first
             else:
                 fallback = {"status": str(first.status), "failure": first.stats.get("failure"),

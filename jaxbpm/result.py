@@ -116,8 +116,8 @@ class Result:
             f"method            {self.method}",
             f"stiffness K       {self.stiffness:.6g} N/m",
             f"Young's modulus   {self.youngs_modulus:.6g} Pa  (l = {self.gauge_length:.4g} m, A = {self.area:.4g} m^2)",
-            f"wall time         {self.wall_time:.3f} s  (setup {self.setup_time:.3f} s, compile {self.compile_time:.3f} s, "
-            f"run {self.run_time:.3f} s)",
+            f"wall time         {self.wall_time:.3f} s  (setup {self.setup_time:.3f} s, "
+            f"compile {self.compile_time:.3f} s, run {self.run_time:.3f} s)",
         ]
         for k, v in self.stats.items():
             if isinstance(v, (int, float, np.integer, np.floating, str, bool)):

@@ -111,3 +111,11 @@ def test_keywords_build_or_override_an_options_object():
         resolve_options(base, {"tl": 1e-6})
     with pytest.raises(OptionsError, match="unknown method 3"):
         resolve_options(3, {})
+
+
+def test_the_module_walkthrough_runs():
+    import doctest
+
+    from jaxbpm import _options
+
+    assert doctest.testmod(_options).failed == 0

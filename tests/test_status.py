@@ -29,3 +29,11 @@ def test_only_converged_is_ok():
     assert [s for s in Status if s.ok] == [Status.CONVERGED]
     with pytest.raises(ValueError):
         Status("diverged")
+
+
+def test_the_module_walkthrough_runs():
+    import doctest
+
+    from jaxbpm import status
+
+    assert doctest.testmod(status).failed == 0

@@ -7,7 +7,7 @@ import numbers
 
 import numpy as np
 
-from jaxbpm._options import shown, choice, flag, fraction, optional, option, positive, SolverOptions
+from jaxbpm._options import choice, flag, fraction, optional, option, positive, shown, SolverOptions
 from jaxbpm.errors import OptionsError
 
 __all__ = ["STE", "ESTIMATOR_OPTIONS"]
