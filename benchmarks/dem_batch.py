@@ -70,11 +70,11 @@ def main(argv=None) -> int:
             row = {"scene": name, "particles": sample.n_particles, "bonds": sample.n_bonds, "B": b}
             for mode in modes:
                 t = time.perf_counter()
-                warm = jaxbpm.solve_batch(sample, scene, params, transits=args.transits, vectorize=mode == "vmap")
+                warm = jaxbpm.dem.solve_batch(sample, scene, params, transits=args.transits, vectorize=mode == "vmap")
                 row[f"{mode}_warmup_s"] = time.perf_counter() - t
                 row[f"{mode}_compile_s"] = warm[0].stats["batch"]["compile_time"]
                 t = time.perf_counter()
-                out = jaxbpm.solve_batch(sample, scene, params, transits=args.transits, vectorize=mode == "vmap")
+                out = jaxbpm.dem.solve_batch(sample, scene, params, transits=args.transits, vectorize=mode == "vmap")
                 row[f"{mode}_per_run_s"] = (time.perf_counter() - t) / b
                 if mode == "map":
                     batch = out[0].stats["batch"]

@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     from jaxbpm.io import load_sample
 
     if args.contact_list != "auto":
-        from jaxbpm import neighbors
+        from jaxbpm.dem import neighbors
 
         neighbors.HOST_LIST_MIN = 0 if args.contact_list == "host" else 1 << 62
 
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
             load = scene.loading(sample, speed=args.strain_per_step * length / dt)
             steps = max(args.steps, 2 * args.chunk)
             _, _, stats = dem.simulate(model, params, load, dt=dt, n_steps=steps + args.chunk, chunk=args.chunk,
-                                       alpha=0.7)
+                                       damping=0.7)
             sps = stats["steps_per_second"]
             row = {"particles": sample.n_particles, "bonds": sample.n_bonds, "physics": physics,
                    "rotations": model.rotations, "compile_s": stats["compile_time"], "steps": stats["steps"],
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
                 trace = os.path.join(args.profile, f"{sample.n_particles}_{physics.replace('+', '_')}")
                 try:  # (a profiler that cannot start, e.g. without CUPTI on a GPU, costs the profile, not the row)
                     with jax.profiler.trace(trace, create_perfetto_trace=True):
-                        dem.simulate(model, params, load, dt=dt, n_steps=args.chunk, chunk=args.chunk, alpha=0.7)
+                        dem.simulate(model, params, load, dt=dt, n_steps=args.chunk, chunk=args.chunk, damping=0.7)
                     row["profile_top"] = profile_top(trace, steps=args.chunk)
                 except Exception as exc:  # noqa: BLE001
                     row["profile_top"], row["profile_error"] = [], f"{type(exc).__name__}: {exc}"[:500]

@@ -32,7 +32,7 @@ The size class of a sample is ``Result.stats["size_class"]`` where the solver re
 one-off programs every solve needs; a later sample should compile only when its size class is new. Reported per
 method: the lowerings of all samples, of the samples after the first, how many samples compiled at all, the distinct
 size classes, the compilations of the solver's size-dependent program(s) (``ste.scene.solve_program``,
-``dsm.linear.linear_program``, ``dem._run_chunk``), and the samples that compiled although their size class had been seen
+``dsm.linear.linear_program``, ``dem.chunk._run_chunk``), and the samples that compiled although their size class had been seen
 (with what compiled, and where). The goal is met when the solver's size-dependent program compiled at most
 ``--limit`` (3) times; the table also says whether the samples after the first compiled only on new size classes.
 """
@@ -53,7 +53,7 @@ STRAIN = 0.002
 # the compiled programs that depend on the size class, per method (module-level names)
 SOLVER_PROGRAMS = {"ste": ("jaxbpm.ste.scene.solve_program",),
                    "dsm": ("jaxbpm.dsm.linear.linear_program", "jaxbpm.dsm.linear.contacts_program"),
-                   "dem": ("jaxbpm.dem._run_chunk",)}
+                   "dem": ("jaxbpm.dem.chunk._run_chunk",)}
 _HERE = os.path.dirname(os.path.abspath(__file__))
 
 

@@ -107,7 +107,7 @@ def _child_import(spec):
 
 
 def _cache_entries(path):
-    from jaxbpm._cache import _usage
+    from jaxbpm._cache import usage as _usage
 
     entries, size = _usage(path) if path else (0, 0)
     return {"entries": entries, "bytes": size}

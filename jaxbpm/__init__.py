@@ -44,15 +44,15 @@ __all__ = [
 ]
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
-_LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options",
+_LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop",
          "physics", "sample", "result", "status")
 # names loaded on first use: name -> the module that defines it
 _LAZY_NAMES = {
     "Sample": "jaxbpm.sample", "BondMaterials": "jaxbpm.sample", "ParticleMaterial": "jaxbpm.sample",
     "Domain": "jaxbpm.sample", "SampleSummary": "jaxbpm.sample", "solve": "jaxbpm.solving",
-    "Result": "jaxbpm.result", "DEM": "jaxbpm.options", "DSM": "jaxbpm.dsm.options", "STE": "jaxbpm.ste.options",
+    "Result": "jaxbpm.result", "DEM": "jaxbpm.dem.options", "DSM": "jaxbpm.dsm.options", "STE": "jaxbpm.ste.options",
     "Status": "jaxbpm.status", "SolverOptions": "jaxbpm._options",
-    "count_compilations": "jaxbpm._compile", "solve_batch": "jaxbpm.batched",
+    "count_compilations": "jaxbpm._compile", "solve_batch": "jaxbpm.dem.batched",
 }
 
 

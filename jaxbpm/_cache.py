@@ -177,4 +177,3 @@ def usage(path: str | os.PathLike) -> tuple[int, int]:
     return entries, size
 
 
-_usage = usage  # (the old private name, still imported by jaxbpm/cli.py)

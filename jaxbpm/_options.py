@@ -40,8 +40,6 @@ __all__ = ["SolverOptions", "option", "shown", "options_class", "resolve_options
 
 #: solver name -> ``"module:class"`` of its options (imported on first use)
 _REGISTRY = {"dem": "jaxbpm.dem.options:DEM", "dsm": "jaxbpm.dsm.options:DSM", "ste": "jaxbpm.ste.options:STE"}
-#: where a solver's options live while its package is not there yet (the DEM's, until ``jaxbpm/dem/`` exists)
-_FALLBACK = {"dem": "jaxbpm.options:DEM"}
 METHODS = tuple(_REGISTRY)
 
 Check = Callable[[str, Any], None]
@@ -56,7 +54,7 @@ def shown(v) -> str:
     Returns:
       Its text.
     """
-    from jaxbpm.sample import _shown
+    from jaxbpm._text import shown as _shown
 
     return _shown(v)
 
@@ -341,12 +339,6 @@ def options_class(method: str) -> type[SolverOptions]:
 @functools.lru_cache(maxsize=None)
 def _load(method: str) -> type[SolverOptions]:
     module, _, name = _REGISTRY[method].partition(":")
-    try:
-        return getattr(importlib.import_module(module), name)
-    except ModuleNotFoundError as err:
-        if method not in _FALLBACK or not module.startswith(str(err.name)):
-            raise
-    module, _, name = _FALLBACK[method].partition(":")
     return getattr(importlib.import_module(module), name)
 
 

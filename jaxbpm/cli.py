@@ -79,7 +79,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 
 def _print_cache_info(args: argparse.Namespace) -> None:
     """The compilation cache in effect (or, when off, the default one): directory, entries, size."""
-    from jaxbpm._cache import _usage, compilation_cache_dir, default_cache_dir
+    from jaxbpm._cache import compilation_cache_dir, default_cache_dir, usage
 
     directory = compilation_cache_dir()
     if directory is not None:
@@ -87,7 +87,7 @@ def _print_cache_info(args: argparse.Namespace) -> None:
     else:
         directory = args.cache_dir if args.cache_dir is not None else default_cache_dir()
         state = "off (--no-cache)" if args.no_cache else "off (the directory cannot be used)"
-    entries, size = _usage(directory)
+    entries, size = usage(directory)
     print(f"compilation cache    {state}")
     print(f"cache directory      {directory}")
     print(f"cached programs      {entries}")

@@ -23,8 +23,6 @@ from jaxbpm.errors import SampleError
 
 __all__ = ["Walls", "pack", "pack_auto", "jamming_fraction"]
 
-# (the old private name, still imported by jaxbpm.neighbors)
-_jax_md_neighbors = jax_md_neighbors
 
 
 class Walls(NamedTuple):

@@ -24,7 +24,6 @@ from jaxbpm.errors import SampleError
 
 __all__ = ["Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary"]
 
-_shown = shown  # (the old private name of jaxbpm._text.shown, still imported by options.py and records.py)
 
 
 class Domain(NamedTuple):

@@ -138,7 +138,7 @@ def test_damping_gives_the_coefficient_of_restitution():
     empty = jnp.zeros((0, 3))
     load = dem.Loading(clamped=jnp.zeros(2, bool), velocity=jnp.zeros((2, 3)), wall_points0=empty,
                        wall_normals=empty, wall_velocity=empty)
-    owner = dem._Neighbors(model, dem.NeighborSettings(skin=0.5 * R), model.positions0)
+    owner = dem.neighbors._Neighbors(model, dem.NeighborSettings(skin=0.5 * R), model.positions0)
     state = dem.init_state(model, params, load, nbrs=owner.allocate(model.positions0))
     state = dataclasses.replace(state, velocities=jnp.array([[v0, 0, 0], [-v0, 0, 0]]))
     k, _ = _kn(0.0)
@@ -157,7 +157,7 @@ def test_history_is_carried_through_neighbour_rebuilds():
     spring = jnp.arange(12.0).reshape(4, 3)
     cohesion = jnp.array([1e4, -2e4, 3e4, 7.0])
     new = jnp.array([[1, 4], [0, 1], [0, 2], [5, 5]])
-    s, c = dem._remap_history(old, new, n, spring, cohesion)
+    s, c = dem.neighbors._remap_history(old, new, n, spring, cohesion)
     np.testing.assert_array_equal(c, [3e4, 1e4, 0.0, 0.0])  # kept by pair, zero for a pair new to the list
     np.testing.assert_array_equal(s, [[6, 7, 8], [0, 1, 2], [0, 0, 0], [0, 0, 0]])
 

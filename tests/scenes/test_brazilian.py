@@ -8,7 +8,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import SceneError
-from jaxbpm.records import read_records
+from jaxbpm.dem.records import read_records
 from jaxbpm.scenes import BrazilianDisc
 
 # one worker for the whole module under pytest-xdist: the disc and its failure run (module fixtures) are built once

@@ -1,4 +1,4 @@
-"""Batched DEM runs (``jaxbpm.batched.solve_batch``): every member's result is its single run's, with the batch's
+"""Batched DEM runs (``jaxbpm.dem.batched.solve_batch``): every member's result is its single run's, with the batch's
 time step, loading time and chunk; a second batch of the same size compiles nothing; a member that blows up fails
 alone; scenes with contacts are refused."""
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxbpm
-from jaxbpm.batched import solve_batch
+from jaxbpm.dem.batched import solve_batch
 from jaxbpm.errors import InstabilityError, SceneError
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import ThreePointBending, UniaxialCompression

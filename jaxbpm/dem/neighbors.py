@@ -1,6 +1,6 @@
-"""The DEM's contact candidates: jax-md neighbour lists owned on the host (box, origin, re-allocation) or, for large
-samples on the CPU, lists built on the host by a k-d tree (:class:`HostList`); the candidate pairs they give (bonded
-pairs masked where bonds replace contacts) and the per-contact state carried across a rebuild. jax-md is imported
+"""The DEM's contact candidates: jax-md neighbour lists owned on the host (box, origin, re-allocation) or, on the
+CPU, lists built on the host by a k-d tree (:class:`HostList`); the candidate pairs they give (bonded pairs masked
+where bonds replace contacts) and the per-contact state carried across a rebuild. jax-md is imported
 only when a scene has contacts and uses its lists.
 """
 
@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._spatial import HostList, pair_list, stale  # noqa: F401  (HostList, stale: this module's API)
 from jaxbpm.physics.model import Model
 
 __all__ = ["NeighborSettings"]
@@ -22,9 +23,14 @@ __all__ = ["NeighborSettings"]
 
 @dataclasses.dataclass(frozen=True)
 class NeighborSettings:
-    """Neighbour-list settings: ``skin`` [m] (list radius = 2 r_max + 2 skin, jax-md's cutoff ``2 r_max + skin``
-    plus its threshold ``skin``; rebuilt when a particle has moved more than skin / 2), ``capacity_multiplier``
-    (spare room in the pair buffer), ``box_margin`` (relative padding of the cell-list box around the sample)."""
+    """Settings of the contact candidate lists.
+
+    Attributes:
+      skin: [m] the list radius is 2 r_max + 2 skin (jax-md's cutoff ``2 r_max + skin`` plus its threshold
+        ``skin``); the list is built again when a particle has moved more than skin / 2.
+      capacity_multiplier: spare room in the pair buffer.
+      box_margin: relative padding of jax-md's cell-list box around the sample.
+    """
 
     skin: float
     capacity_multiplier: float = 1.5
@@ -41,10 +47,10 @@ def _jax_md_context():
 
 @functools.lru_cache(maxsize=32)
 def _neighbor_fns(box: tuple, cutoff: float, skin: float, capacity_multiplier: float):
-    from jaxbpm.packing import _jax_md_neighbors
+    from jaxbpm._spatial import jax_md_neighbors
 
     # only jax-md's neighbour lists: its package __init__ (rigid bodies, computed at import) costs seconds
-    partition, space = _jax_md_neighbors()
+    partition, space = jax_md_neighbors()
 
     displacement, _ = space.free()
     return partition.neighbor_list(displacement, jnp.asarray(box), r_cutoff=cutoff, dr_threshold=skin,
@@ -99,54 +105,10 @@ class _Neighbors:
 _CELL_LIST_FNS: dict = {}  # cell-list functions by neighbour-list settings (see _Neighbors.allocate)
 
 #: from this many particles on the CPU the DEM's candidate list is built on the host (a k-d tree, between steps)
-#: instead of by jax-md's cell list inside the step: the cell list fills a dense ``[n, 27 x cell capacity]``
-#: candidate array at every (re)build, which at 1M particles took the run past 22 GiB before its first chunk. On the
-#: CPU the host list is as fast or faster at every size and compiles less (UCS to failure with contacts, one core,
-#: wall of the solve: 500 particles 5.6 s against 6.6 s, 2k 8.1 s against 9.0 s, 8k 35.2 s against 39.8 s, the same
-#: rebuilds), so it is the CPU's list from the first particle; accelerators keep jax-md's (no host round trip)
+#: instead of by jax-md's cell list inside the step (which fills a dense ``[n, 27 x cell capacity]`` candidate array
+#: at every build); 0: the host list is the CPU's list from the first particle. Accelerators keep jax-md's (no host
+#: round trip)
 HOST_LIST_MIN = 0
-
-
-class HostList(NamedTuple):
-    """A candidate list built on the host (:class:`_HostNeighbors`), in jax-md's ``OrderedSparse`` layout: ``idx [2,
-    capacity]`` (each pair once, ``idx[0] < idx[1]``, sorted by ``idx[0]`` then ``idx[1]``; padding ``n``), the
-    positions it was built at (``reference_position``) and ``threshold`` (the squared distance a particle may move
-    from there before the list is stale: ``(skin / 2)^2``). The DEM's chunk stops before the step that would take a
-    particle further (:func:`stale`) and the list is built again between chunks; inside a chunk it never changes
-    (``update`` is the identity, as for a list whose buffer never overflows)."""
-
-    idx: jax.Array
-    reference_position: jax.Array
-    threshold: jax.Array
-
-    @property
-    def did_buffer_overflow(self):
-        return jnp.zeros((), bool)
-
-    def update(self, positions):
-        return self
-
-
-def stale(nbrs: HostList, positions) -> jax.Array:
-    """Whether a particle at ``positions`` has moved more than half the skin from where ``nbrs`` was built."""
-    return jnp.max(jnp.sum((positions - nbrs.reference_position) ** 2, axis=1)) > nbrs.threshold
-
-
-def ordered_pairs(x: np.ndarray, radius: float, capacity: int, multiplier: float) -> tuple[np.ndarray, int]:
-    """Pairs of centres ``x [n, 3]`` closer than ``radius`` (a k-d tree) in the ``OrderedSparse`` layout of
-    :class:`HostList`, in ``capacity`` slots; when they do not fit, ``multiplier`` x as many slots (so that a list
-    built again later, with a few more pairs, keeps its size and the compiled chunk). Returns ``(idx, capacity)``."""
-    from scipy.spatial import cKDTree
-
-    n = x.shape[0]
-    half = cKDTree(x).query_pairs(radius, output_type="ndarray")
-    half = half[np.argsort(half[:, 0].astype(np.int64) * n + half[:, 1], kind="stable")]
-    count = half.shape[0]
-    if count > capacity or capacity == 0:  # (never empty: a slot for the first pair)
-        capacity = int(count * multiplier) + 1
-    idx = np.full((2, capacity), n, np.int32)
-    idx[:, :count] = half.T
-    return idx, capacity
 
 
 class _HostNeighbors:
@@ -166,7 +128,7 @@ class _HostNeighbors:
 
     def allocate(self, positions, extra_per_particle: int = 0, reach=None):
         x = np.asarray(positions, dtype=np.float64)
-        idx, self.capacity = ordered_pairs(x, self.radius, self.capacity + extra_per_particle * x.shape[0],
+        idx, self.capacity = pair_list(x, self.radius, self.capacity + extra_per_particle * x.shape[0],
                                            self.settings.capacity_multiplier)
         dtype = jnp.asarray(positions).dtype
         return HostList(jax.device_put(idx), jnp.asarray(positions),
@@ -174,8 +136,17 @@ class _HostNeighbors:
 
 
 def neighbors_owner(model: Model, settings: NeighborSettings, positions):
-    """The owner of the DEM's candidate list: :class:`_HostNeighbors` on the CPU (from :data:`HOST_LIST_MIN`
-    particles), :class:`_Neighbors` (jax-md's cell list, rebuilt inside the step) on accelerators."""
+    """The owner of a run's candidate list, which builds it (``allocate``) and says whether particles left its box.
+
+    Args:
+      model: the run's model (radii).
+      settings: the list's settings.
+      positions: ``[n, 3]`` the particles' positions at the start.
+
+    Returns:
+      On the CPU (from :data:`HOST_LIST_MIN` particles) an owner of lists built on the host (:class:`HostList`),
+      else of jax-md's cell lists, built again inside the step.
+    """
     if model.n >= HOST_LIST_MIN and jax.default_backend() == "cpu":
         return _HostNeighbors(model, settings, positions)
     return _Neighbors(model, settings, positions)
@@ -219,10 +190,10 @@ def _remap_index(old_pairs, new_pairs, n):
 
 class _Near(NamedTuple):
     """The pairs within reach: the candidates that are not bonded pairs (those have their contact evaluated on the
-    bond list, see :func:`jaxbpm.dem.step`) whose surfaces are closer than ``margin`` when the list was built. While
-    no particle has moved more than ``margin / 2`` since then, no other such candidate can touch, so each step's
-    contact law runs on these pairs only, without testing and packing the whole candidate list (a second, tighter
-    Verlet list inside the candidate list).
+    bond list, see :func:`jaxbpm.dem.stepper.step`) whose surfaces are closer than ``margin`` when the list was
+    built. While no particle has moved more than ``margin / 2`` since then, no other such candidate can touch, so
+    each step's contact law runs on these pairs only, without testing and packing the whole candidate list (a
+    second, tighter Verlet list inside the candidate list).
 
     ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
     ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``overflow`` (more pairs
@@ -239,18 +210,33 @@ class _Near(NamedTuple):
 
 
 def near_size(count: int, capacity: int) -> int:
-    """Slots for ``count`` pairs within reach: a quarter more (and 64), rounded up to one of 8 to 16 sizes an octave
-    (runs on one sample, or samples of similar size, share the compiled chunk), at most ``capacity``. The contact law
-    runs on every slot, so slots sized to the candidate list (a third of it) ran it on up to 1.5x the pairs within
-    reach, and on 348k slots where no pair was within reach (bonds replacing contacts on an unbroken sample)."""
+    """Slots for ``count`` pairs within reach (the contact law runs on every slot).
+
+    Args:
+      count: the pairs within reach.
+      capacity: the candidate list's capacity.
+
+    Returns:
+      A quarter more than ``count`` (and 64), rounded up to one of 8 to 16 sizes an octave (runs on one sample, or
+      samples of similar size, share the compiled chunk), at most ``capacity``.
+    """
     want = int(1.25 * count) + 64
     grain = 1 << max(want.bit_length() - 4, 0)
     return max(min(-(-want // grain) * grain, capacity), 1)
 
 
 def near_count(model: Model, positions, nbrs, margin: float) -> int:
-    """How many candidate pairs of ``nbrs`` that are not bonded pairs are within ``margin`` of touching at
-    ``positions``, counted on the host: what :func:`near_size` sizes the slots for at the start of a run."""
+    """How many candidate pairs that are not bonded pairs are within ``margin`` of touching (on the host).
+
+    Args:
+      model: the run's model (radii, bonds).
+      positions: ``[n, 3]`` positions.
+      nbrs: the candidate list.
+      margin: [m] the reach.
+
+    Returns:
+      The count, which :func:`near_size` sizes the slots for at the start of a run.
+    """
     x, idx = np.asarray(positions), np.asarray(nbrs.idx)
     pairs = idx[:, idx[0] < model.n].T
     if pairs.size and model.bond_keys.shape[0]:
@@ -264,8 +250,16 @@ def near_count(model: Model, positions, nbrs, margin: float) -> int:
 
 
 def pack(mask, size: int):
-    """Indices of the ``True`` entries of ``mask [C]`` in ``size`` slots (``C`` for an empty slot) and how many
-    there are (more than ``size``: they did not fit; ``associative_scan``: XLA's CPU cumsum is slower)."""
+    """The indices of the ``True`` entries of a mask, packed into ``size`` slots.
+
+    Args:
+      mask: ``[C]`` bool.
+      size: the slots.
+
+    Returns:
+      ``(take [size], count)``: the indices in order (``C`` in an empty slot) and how many entries are ``True``
+      (more than ``size``: they did not all fit).
+    """
     capacity = mask.shape[0]
     slot = jax.lax.associative_scan(jnp.add, mask.astype(jnp.int32)) - 1
     take = jnp.full(size, capacity, jnp.int32).at[jnp.where(mask, slot, size)].set(
@@ -274,8 +268,20 @@ def pack(mask, size: int):
 
 
 def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Near:
-    """The candidate pairs that are not bonded pairs within ``margin`` of touching, in ``size`` slots (see
-    :class:`_Near`), with their springs taken from ``spring [C, 3]`` (the candidate list's layout)."""
+    """Find the pairs within reach.
+
+    Args:
+      model: the run's model.
+      positions: ``[n, 3]`` positions.
+      nbrs: the candidate list.
+      spring: ``[C, 3]`` the springs in the candidate list's layout.
+      margin: [m] the reach.
+      size: the slots.
+
+    Returns:
+      The candidate pairs that are not bonded pairs within ``margin`` of touching, with their springs
+      (:class:`_Near`; ``overflow`` set when they did not fit).
+    """
     from jaxbpm.physics.contact import pair_vectors
 
     pairs = nbrs.idx.T
@@ -290,11 +296,27 @@ def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Nea
 
 
 def near_springs(near: _Near, capacity: int):
-    """The springs in the candidate list's layout ``[capacity, 3]`` (every candidate not within reach is apart: no
-    spring)."""
+    """The springs of the pairs within reach in the candidate list's layout.
+
+    Args:
+      near: the pairs within reach.
+      capacity: the candidate list's capacity.
+
+    Returns:
+      ``[capacity, 3]`` (every candidate not within reach is apart: no spring).
+    """
     return jnp.zeros((capacity, 3), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
 
 
 def near_stale(near: _Near, positions, margin):
-    """Whether the pairs within reach must be found again: a particle moved more than ``margin / 2``."""
+    """Whether the pairs within reach must be found again.
+
+    Args:
+      near: the pairs within reach.
+      positions: ``[n, 3]`` positions.
+      margin: [m] their reach.
+
+    Returns:
+      A boolean scalar array: a particle moved more than ``margin / 2`` since they were found.
+    """
     return jnp.max(jnp.sum((positions - near.ref) ** 2, axis=1)) > 0.25 * margin * margin

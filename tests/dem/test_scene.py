@@ -1,17 +1,66 @@
-"""Long DEM runs: records appended to HDF5 as they arrive, Ctrl-C without losing what was computed, VTU snapshots
-with broken bonds for ParaView, progress output."""
+"""The DEM scene driver: closed-form lattice modulus, failure as a result (unstable, interrupted), runs interrupted
+and resumed from their record, a second solve of the same size compiling nothing new."""
 
-import meshio
 import numpy as np
 import pytest
 
 import jaxbpm
 from jaxbpm import SampleFileError, SceneError, SimulationInterrupted, dem
-from jaxbpm.physics.model import default_params
-from jaxbpm.records import read_records
+from jaxbpm.dem import chunk
+from jaxbpm.dem.records import read_records
+from jaxbpm.physics.model import build_model, default_params
 from jaxbpm.scenes import UniaxialCompression
 
 R = 1e-3
+
+
+@pytest.mark.parametrize("cells", [(3, 3, 8), (2, 3, 5)])
+def test_simple_cubic_column_modulus(cells):
+    s = jaxbpm.generate.lattice("sc", cells, R, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    res = jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002))
+    kn = 1e9 * np.pi * (0.5 * R) ** 2 / (2 * R)
+    np.testing.assert_allclose(res.youngs_modulus, kn / (2 * R), rtol=1e-2)
+    assert res.stats["steps"] > 0 and res.wall_time > 0 and np.isfinite(res.compile_time)
+    assert res.force[-1] > 0  # compression positive
+
+
+def test_time_step_above_critical_raises():
+    s = jaxbpm.generate.lattice("sc", (2, 2, 4), R)
+    dt = 3.0 * dem.critical_time_step(build_model(s), default_params(s))
+    with pytest.raises(jaxbpm.InstabilityError, match=r"time step dt = .* critical time step estimate") as err:
+        with pytest.warns(UserWarning, match=r"above the critical time step estimate"):
+            jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), safety=1.0, dt=dt, damping=0.0)
+    # the error carries the result of what ran before the blow-up; throw=False returns it
+    assert err.value.result.status == "unstable" and not err.value.result.ok
+    with pytest.warns(UserWarning, match=r"above the critical time step estimate"):
+        res = jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), jaxbpm.DEM(dt=dt, damping=0.0),
+                           throw=False)
+    assert res.status == "unstable" and "unstable" in res.stats["failure"] and res.stats["unstable"]
+    assert res.stats["steps"] < res.stats["steps_planned"]
+
+
+def test_unstable_run_with_contacts_raises_instead_of_reallocating():
+    # a blown-up chunk overflows the neighbour buffer too: the instability must be reported, not re-allocated for
+    s = jaxbpm.generate.box(150, seed=0, mean_radius=R, packing_fraction=0.5,
+                            particle_material={"E": 1e10, "nu": 0.25, "density": 2500.0, "friction": 0.5,
+                                               "restitution": 0.5})
+    scene = jaxbpm.scenes.UniaxialCompression(strain=0.01, contacts=True)
+    crit = dem.critical_time_step(build_model(s, contacts=True), default_params(s))
+    with pytest.raises(jaxbpm.InstabilityError, match=r"time step dt = .* critical time step estimate"):
+        with pytest.warns(UserWarning, match=r"above the critical time step estimate .* \(2\.00x\)"):
+            jaxbpm.solve(s, scene, dt=2.0 * crit, transits=10)
+
+
+def test_second_solve_of_same_size_does_not_recompile():
+    s = jaxbpm.generate.lattice("sc", (2, 2, 4), R)
+    scene = jaxbpm.scenes.UniaxialCompression(strain=0.002)
+    jaxbpm.solve(s, scene)
+    before = chunk._run_chunk._cache_size()
+    stiffer = s.replace(materials={"E": 3e9, "nu": 0.25})  # same shapes, other values
+    res = jaxbpm.solve(stiffer, scene, dt=1e-7, loading_time=2e-4, chunk=100)
+    jaxbpm.solve(stiffer, scene, dt=1e-7, loading_time=2e-4, chunk=100)
+    assert chunk._run_chunk._cache_size() == before + 1  # one new chunk length, then reused
+    assert res.stiffness > 0
 
 
 @pytest.fixture(scope="module")
@@ -22,41 +71,6 @@ def weak():
 
 
 SCENE = UniaxialCompression(strain=0.03, breakage=True)
-
-
-def test_records_snapshots_and_progress(weak, tmp_path, capsys):
-    h5, pvd = tmp_path / "run.h5", tmp_path / "run.pvd"
-    res = jaxbpm.solve(weak, SCENE, "dem", transits=10, record_to=h5, snapshots=4, vtu=pvd, progress=True)
-    assert "DEM step" in capsys.readouterr().err  # progress still printed
-    rec, attrs = read_records(h5)
-    assert attrs["status"] == "complete" and attrs["steps"] == res.stats["steps"] == attrs["steps_planned"]
-    assert len(rec["time"]) == res.stats["steps"]
-    np.testing.assert_allclose(rec["displacement"], res.stats["speed"] * rec["time"])
-    np.testing.assert_array_equal(rec["force"], SCENE.compressive_force(rec["reaction"]))
-    assert np.all(np.isin(res.force, rec["force"]))  # the returned curve is a subset of every step's record
-    np.testing.assert_array_equal(rec["broken"][-1], [res.stats["broken_tensile"], res.stats["broken_shear"]])
-    assert rec["broken"][-1].sum() > 0 and attrs["peak_force"] == res.stats["peak_force"]
-
-    # four frames, the first at rest, the last the final state, bonds with their break mode
-    assert res.stats["vtu_frames"] == 4
-    files = sorted(tmp_path.glob("run_*.vtu"))
-    assert len(files) == 4 and pvd.read_text().count("<DataSet") == 4
-    first, last = meshio.read(files[0]), meshio.read(files[-1])
-    np.testing.assert_array_equal(first.point_data["displacement"], 0.0)
-    assert np.all(first.cell_data["intact"][1] == 1)
-    state = res.state
-    mode = np.asarray(state.broken)
-    np.testing.assert_array_equal(last.cell_data["intact"][1], (mode == 0).astype(np.int32))
-    np.testing.assert_array_equal(last.cell_data["break_mode"][1], mode)
-    np.testing.assert_allclose(last.points, np.asarray(state.positions))
-    np.testing.assert_allclose(last.point_data["velocity"], np.asarray(state.velocities))
-    b = np.asarray(weak.bonds)
-    assert last.point_data["broken_tensile"].sum() == 2 * np.sum(mode == 1)
-    assert last.point_data["broken_shear"].sum() == 2 * np.sum(mode == 2)
-    np.testing.assert_array_equal(last.point_data["broken_bonds"], np.bincount(b[mode > 0].ravel(),
-                                                                                minlength=weak.n_particles))
-    broken_t = last.cell_data["broken_time"][1]
-    assert np.all(np.isnan(broken_t[mode == 0])) and np.all(broken_t[mode > 0] > 0)
 
 
 def test_interrupt_keeps_what_was_computed(weak, tmp_path):
@@ -83,58 +97,6 @@ def test_interrupt_keeps_what_was_computed(weak, tmp_path):
     np.testing.assert_array_equal(rec["time"], err.records["time"])
     np.testing.assert_array_equal(rec["force"], res.force)
     np.testing.assert_allclose(float(err.state.time), rec["time"][-1])
-
-
-def test_interrupted_simulation_resumes_to_the_same_state(weak):
-    model = SCENE.model(weak, breakage=True)
-    params = default_params(weak)
-    load = SCENE.loading(weak, 0.05)
-    dt = 0.5 * dem.critical_time_step(model, params)
-    full, full_rec, _ = dem.simulate(model, params, load, dt=dt, n_steps=300, chunk=50)
-    calls = []
-
-    def cut(done, total, elapsed):
-        calls.append(done)
-        if done == 100:
-            raise KeyboardInterrupt
-
-    with pytest.raises(SimulationInterrupted) as info:
-        dem.simulate(model, params, load, dt=dt, n_steps=300, chunk=50, progress=cut)
-    part = info.value
-    rest, rest_rec, _ = dem.simulate(model, params, load, dt=dt, n_steps=200, chunk=50, state=part.state)
-    np.testing.assert_allclose(rest.positions, full.positions, rtol=0, atol=1e-15)
-    np.testing.assert_array_equal(rest.broken, full.broken)
-    np.testing.assert_allclose(np.concatenate([part.records["reaction"], rest_rec["reaction"]]),
-                               full_rec["reaction"], rtol=1e-12, atol=1e-12)
-
-
-def test_output_options_are_checked(weak, tmp_path):
-    with pytest.raises(SceneError, match="snapshots"):
-        jaxbpm.solve(weak, SCENE, "dem", snapshots=3)
-    with pytest.raises(SceneError, match="snapshots"):
-        jaxbpm.solve(weak, SCENE, "dem", snapshots=0, vtu=tmp_path / "a.pvd")
-    with pytest.raises(SampleFileError, match=".h5"):
-        jaxbpm.solve(weak, SCENE, "dem", record_to=tmp_path / "run.txt")
-    with pytest.raises(SampleFileError, match="no such record file"):
-        read_records(tmp_path / "missing.h5")
-
-
-def test_a_record_never_replaces_another_file(weak, tmp_path):
-    h5 = tmp_path / "sample.h5"
-    jaxbpm.io.save_sample(h5, weak)
-    before = h5.read_bytes()
-    with pytest.raises(SampleFileError, match=r"sample\.h5 exists and is not a record of this run.*overwrite=True"):
-        jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=h5)
-    assert h5.read_bytes() == before and jaxbpm.io.load_sample(h5).n_particles == weak.n_particles
-    # running the same run again replaces its own record; another run does not; overwrite=True does
-    run = tmp_path / "run.h5"
-    first = jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=run)
-    again = jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=run)
-    assert again.stiffness == first.stiffness and read_records(run)[1]["status"] == "complete"
-    with pytest.raises(SampleFileError, match="not a record of this run"):
-        jaxbpm.solve(weak, SCENE, "dem", transits=5, damping=0.5, record_to=run)
-    jaxbpm.solve(weak, SCENE, "dem", transits=5, record_to=h5, overwrite=True)
-    assert read_records(h5)[1]["format"] == "jaxbpm-records"
 
 
 def _interrupted_run(sample, scene, h5, after=3, **options):

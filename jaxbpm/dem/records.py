@@ -90,9 +90,19 @@ def _same_run(path: pathlib.Path, attrs: Mapping[str, Any]) -> bool:
 
 
 class RecordFile:
-    """An HDF5 record file, created with the run's scalar ``attrs``. An existing file at ``path`` is replaced only
-    when it is a record of the same run (the attributes in :data:`SAME_RUN` agree: running it again) or with
-    ``overwrite=True``; any other file is an error, left as it was."""
+    """An HDF5 record file, created with the run's scalar attributes.
+
+    Args:
+      path: the file (``.h5`` or ``.hdf5``). An existing file there is replaced only when it is a record of the same
+        run (the attributes in :data:`SAME_RUN` agree: running it again) or with ``overwrite``; any other file is
+        an error, left as it was.
+      attrs: the run's attributes (scalars are stored, other values left out).
+      steps_planned: the steps the run plans.
+      overwrite: replace any file at ``path``.
+
+    Raises:
+      SampleFileError: a path that is not ``.h5``, a missing directory, or another file in the way.
+    """
 
     def __init__(self, path, attrs: Mapping[str, Any] | None = None, *, steps_planned: int | None = None,
                  overwrite: bool = False):
@@ -116,8 +126,17 @@ class RecordFile:
             f.create_group("records")
 
     def append(self, rows: Mapping[str, Any]) -> int:
-        """Append equally long rows of each named array (the first call fixes the names); returns the steps so
-        far."""
+        """Append rows to the named arrays (the first call fixes the names).
+
+        Args:
+          rows: ``{name: [m, ...]}`` arrays, all ``m`` rows long.
+
+        Returns:
+          The steps written so far.
+
+        Raises:
+          ValueError: arrays of different lengths.
+        """
         import h5py
 
         rows = {k: np.asarray(v) for k, v in rows.items()}
@@ -140,17 +159,27 @@ class RecordFile:
 
     @classmethod
     def resume(cls, path, attrs: Mapping[str, Any]) -> tuple["RecordFile", dict, dict | None]:
-        """Reopen the record of an interrupted run to append to it: ``(record_file, records, checkpoint)`` -- the
-        rows written so far and the state saved at the interruption (:meth:`checkpoint`; ``None`` when the run was
-        interrupted before its first chunk). ``attrs`` are the resumed run's: the attributes in :data:`SAME_RUN`
-        must agree with the file's (the same sample size, scene, time step, speed and damping), else an error names
-        those that differ."""
+        """Reopen the record of an interrupted run to append to it.
+
+        Args:
+          path: the record file.
+          attrs: the resumed run's attributes: those in :data:`SAME_RUN` and :data:`RESUME_SAME` must agree with
+            the file's (the same sample, scene, time step, speed, damping, chunk, ...).
+
+        Returns:
+          ``(record_file, records, checkpoint)``: the file, the rows written so far and the state saved at the
+          interruption (:meth:`checkpoint`; ``None`` when the run was interrupted before its first chunk).
+
+        Raises:
+          SampleFileError: a file of another run (naming the attributes that differ), a complete run, or one that
+            cannot be resumed (no saved state, or a file changed after the interruption).
+        """
         import h5py
 
         records, stored = read_records(path)
         self = cls.__new__(cls)
         self.path, self.steps = pathlib.Path(path), int(stored["steps"])
-        from jaxbpm.sample import _shown
+        from jaxbpm._text import shown as _shown
 
         differ = [f"{k} (file {_shown(stored.get(k))}, this run {_shown(attrs[k])})"
                   for k in _differing(stored, attrs, SAME_RUN + RESUME_SAME)]
@@ -177,8 +206,12 @@ class RecordFile:
         return self, records, checkpoint
 
     def checkpoint(self, arrays: Mapping[str, Any]) -> None:
-        """Save the run's state after the rows written so far (``/checkpoint``, one dataset per named array),
-        replacing an earlier one: :meth:`resume` continues from it."""
+        """Save the run's state after the rows written so far, replacing an earlier one: :meth:`resume` continues from
+        it.
+
+        Args:
+          arrays: ``{name: array}`` (``/checkpoint``, one dataset per name).
+        """
         import h5py
 
         with _hold_interrupts(), h5py.File(self.path, "a") as f:
@@ -191,7 +224,12 @@ class RecordFile:
                 g.create_dataset(k, data=v, fletcher32=v.ndim >= 1 and v.size > 0)
 
     def finish(self, status: str = "complete", attrs: Mapping[str, Any] | None = None) -> None:
-        """Set the final ``status`` (``"complete"`` or ``"interrupted"``) and add scalar results to the attributes."""
+        """Set the final status and add scalar results to the attributes.
+
+        Args:
+          status: ``"complete"``, ``"interrupted"`` (the checkpoint is kept) or ``"unstable"``.
+          attrs: results to store (scalars only).
+        """
         import h5py
 
         with _hold_interrupts(), h5py.File(self.path, "a") as f:
@@ -204,7 +242,17 @@ class RecordFile:
 
 
 def read_records(path) -> tuple[dict, dict]:
-    """``(records, attrs)`` of a record file: the arrays of ``/records`` and the file's attributes."""
+    """Read a record file (also while its run is going on).
+
+    Args:
+      path: the record file.
+
+    Returns:
+      ``(records, attrs)``: the arrays of ``/records`` (the rows written so far) and the file's attributes.
+
+    Raises:
+      SampleFileError: a missing or unreadable file, or not a jaxbpm record file.
+    """
     import h5py
 
     path = pathlib.Path(path)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxbpm
-from jaxbpm import dem
+from jaxbpm.dem import chunk
 from jaxbpm.scenes import UniaxialCompression
 
 R = 1e-3
@@ -56,7 +56,7 @@ def test_bonds_only_dem_does_not_import_jax_md():
             "scene = jaxbpm.scenes.UniaxialCompression(strain=0.002, contacts=True); "
             "c = jaxbpm.solve(s, scene, method='dem', transits=2); "
             "print(c.stiffness > 0, c.stats['contact_list'], any(m.startswith('jax_md') for m in sys.modules)); "
-            "jaxbpm.neighbors.HOST_LIST_MIN = 1 << 62; "
+            "jaxbpm.dem.neighbors.HOST_LIST_MIN = 1 << 62; "
             "c = jaxbpm.solve(s, scene, method='dem', transits=2); "
             "print(c.stiffness > 0, c.stats['contact_list'], 'jax_md.partition' in sys.modules, "
             "any(m in sys.modules for m in ('jax_md', 'jax_md.rigid_body', 'jax_md.energy')))")
@@ -106,9 +106,9 @@ def test_padding_changes_nothing(tmp_path):
 @pytest.fixture(scope="module")
 def first():
     """A solve of a 128-particle lattice (size class 160 particles, 401 bonds); it may have compiled."""
-    size = dem._run_chunk._cache_size()
+    size = chunk._run_chunk._cache_size()
     res = jaxbpm.solve(_lattice((4, 4, 8)), ELASTIC)
-    return res, dem._run_chunk._cache_size() > size
+    return res, chunk._run_chunk._cache_size() > size
 
 
 def test_first_solve_times_add_up(first):
@@ -131,11 +131,11 @@ def test_second_solve_of_the_same_sample_compiles_nothing(first):
 def test_another_sample_of_the_same_size_class_compiles_nothing(first):
     res, _ = first
     other = _lattice((4, 5, 7), E=2e9)  # 140 particles, 337 bonds: another sample of the class
-    size = dem._run_chunk._cache_size()
+    size = chunk._run_chunk._cache_size()
     with compilations() as seen:
         out = jaxbpm.solve(other, ELASTIC)
     assert seen == []
-    assert dem._run_chunk._cache_size() == size and out.compile_time == 0.0
+    assert chunk._run_chunk._cache_size() == size and out.compile_time == 0.0
     assert out.stats["padded_to"] == res.stats["padded_to"]
     assert out.state.positions.shape == (other.n_particles, 3)
     # 2x the bond modulus, same lattice: twice the Young's modulus (to the DEM's own accuracy)
