@@ -171,7 +171,7 @@ class BrazilianDisc(AxialScene):
 
         Raises:
           SceneError: a z-axis cylinder domain with another ``disc_axis`` (and no explicit dimensions), or a
-          dimension that is not positive.
+            dimension that is not positive.
         """
         domain = sample.domain
         cylinder = domain is not None and domain.kind == "cylinder"
