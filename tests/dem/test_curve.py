@@ -1,5 +1,5 @@
 """What a DEM run's records give, on records made by hand: the stiffness of a straight curve, the peak and the
-broken bonds there, a curve cut short, the modulus, the statistics of a plan."""
+broken bonds there, a curve cut short, the statistics of a plan."""
 
 import types
 
@@ -8,7 +8,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import SceneError
-from jaxbpm.dem.curve import curve, modulus, peak_stats, plan_stats
+from jaxbpm.dem.curve import curve, peak_stats, plan_stats
 from jaxbpm.scenes import UniaxialCompression
 
 R = 1e-3
@@ -61,12 +61,7 @@ def test_the_peak_and_the_broken_bonds_there():
     assert not peak_stats(SCENE, s, rising, d, f, k, breakage=True)["past_peak"]
 
 
-def test_modulus_and_plan_stats():
-    s = jaxbpm.generate.lattice("sc", (2, 2, 4), R)
-    length, area = SCENE.geometry(s)
-    assert modulus(SCENE, s, 2e6, length, area) == 2e6 * length / area
-    plain = types.SimpleNamespace()  # a scene without its own rule: E = K l / A
-    assert modulus(plain, s, 2e6, 3.0, 2.0) == 3e6
+def test_plan_stats():
     model = types.SimpleNamespace(rotations=True, contacts=False, contact_law="hertz", failure_rule="potyondy")
     the_plan = types.SimpleNamespace(model=model, size=None, dt=1e-7, n_steps=100, speed=0.5, damping=0.7,
                                      breakage=False)
