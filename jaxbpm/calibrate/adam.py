@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
 

@@ -25,7 +25,7 @@ from typing import Mapping
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Parameter, ParameterSpace, Problem, Target, forward_model
 from jaxbpm.calibrate.result import CalibrationResult, History
 
@@ -54,7 +54,7 @@ def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None
     :class:`CalibrationError` when a Poisson ratio target lies outside what the sample reaches (the message gives
     the range) or the solves run out.
     """
-    from jaxbpm.calibrate import default_parameters
+    from jaxbpm.calibrate.dispatch import default_parameters
 
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)

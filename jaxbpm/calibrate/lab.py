@@ -274,7 +274,7 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of the bonds:
     the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1 sigma_c, so
     Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
-    from jaxbpm.calibrate import _common
+    import jaxbpm.calibrate._common as _common
     from jaxbpm.calibrate.objective import Parameter, ParameterSpace, Problem, Target, base_params, forward_model
     from jaxbpm.calibrate.result import History
 

@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.adam import adam
 from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.objective import CalibrationError, Forward, ParameterSpace, Problem, forward_model

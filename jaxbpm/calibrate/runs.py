@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 
 __all__ = ["RunSet", "run_set", "latin_hypercube", "RUNSET_FORMAT"]

@@ -75,7 +75,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
     Returns a :class:`~jaxbpm.calibrate.CalibrationResult`; ``info["targets"]`` holds the targets and
     ``info["scheme"]`` the scheme; :func:`strength_table` gives its history table.
     """
-    from jaxbpm.calibrate import calibrate
+    from jaxbpm.calibrate.dispatch import calibrate
 
     if scheme not in STRENGTH_SCHEMES:
         raise CalibrationError(f"unknown strength calibration scheme {scheme!r}; choose one of {STRENGTH_SCHEMES}")

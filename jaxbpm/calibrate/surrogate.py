@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
 from jaxbpm.calibrate.runs import RunSet, latin_hypercube, run_missing, run_set
