@@ -341,7 +341,7 @@ def test_multifidelity_stops_early_and_escalates(one):
     # tolerance wider than the gap: the DSM check accepts the cheap answer (one DSM solve)
     early = cal.multifidelity(one, SCENE, {"youngs_modulus": target}, space, levels=(low, "dsm"), tol=2 * diff)
     assert [lv["action"] for lv in early.levels] == ["calibrated", "accepted"]
-    assert early.levels[1]["evaluations"] == 1 and early.model == "dsm"
+    assert early.levels[1]["evaluations"] == 1 and early.solver == "dsm"
     assert abs(early.errors["youngs_modulus"]) <= 2 * diff
     # tolerance narrower than the gap: DSM is calibrated from the cheap answer
     esc = cal.multifidelity(one, SCENE, {"youngs_modulus": target}, space, levels=(low, "dsm"), tol=diff / 4)
@@ -355,7 +355,7 @@ def test_auto_is_the_default_and_checks(one):
     target = 0.8 * _modulus(one, None)
     res = cal.calibrate(one, SCENE, {"youngs_modulus": target}, tol=0.01, check="dsm")
     assert res.method == "multi-fidelity" and res.converged
-    assert res.levels[0]["model"] == ("ste" if "ste" in SOLVE.METHODS else "dsm")
+    assert res.levels[0]["solver"] == ("ste" if "ste" in SOLVE.METHODS else "dsm")
     assert res.info["check"]["max_error"] < 0.01
 
 
@@ -400,8 +400,8 @@ def test_clear_errors(one, dsm_forward):
     p = default_params(one)
     with pytest.raises(CalibrationError, match="unknown calibration method"):
         cal.calibrate(one, SCENE, {"youngs_modulus": 1e8}, method="newton")
-    with pytest.raises(CalibrationError, match="unknown model"):
-        cal.calibrate(one, SCENE, {"youngs_modulus": 1e8}, method="adam", model="fem")
+    with pytest.raises(CalibrationError, match="unknown solver"):
+        cal.calibrate(one, SCENE, {"youngs_modulus": 1e8}, method="adam", solver="fem")
     with pytest.raises(CalibrationError, match="must be > 0"):
         Target("youngs_modulus", -1.0)
     with pytest.raises(CalibrationError, match="finite"):
@@ -458,7 +458,7 @@ def test_run_set_shows_a_progress_bar_only_when_asked(capsys):
     from jaxbpm.calibrate.runs import run_set
 
     s = jaxbpm.generate.lattice("sc", (3, 3, 4), 1e-3, materials={"E": 1e9, "nu": 0.25})
-    problem = cal.Problem(cal.forward_model(s, UniaxialCompression(strain=0.002), model="ste"),
+    problem = cal.Problem(cal.forward_model(s, UniaxialCompression(strain=0.002), solver="ste"),
                           [cal.Target("stiffness", 1.0)],
                           cal.ParameterSpace([cal.Parameter("bond_E", index=0)], cal.base_params(s)))
     quiet = run_set(problem, 6, chunk=4)

@@ -32,7 +32,7 @@ def _run(scheme, model_kw=None, **kw):
     model_kw = model_kw or {}
     log = []
     ucs, f = _targets(**model_kw)
-    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme, model=_stand_in(log=log, **model_kw),
+    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme, solver=_stand_in(log=log, **model_kw),
                                  **kw)
     return res, log
 
@@ -98,7 +98,7 @@ def test_cross_coupling_costs_the_simplified_scheme_accuracy():
     # a note warns when the answer lies outside the ratio Qu et al. 2020 allows for the simplified scheme
     ucs, f = 2e6, 3e6
     res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme="simplified",
-                                 model=_stand_in(a=0.3, b=0.0, c=0.3, d=0.0), tol=1e-6, max_iterations=3)
+                                 solver=_stand_in(a=0.3, b=0.0, c=0.3, d=0.0), tol=1e-6, max_iterations=3)
     assert res.values["bond_tensile_strength"] / res.values["bond_shear_strength"] > 0.8
     assert any("0.8" in n for n in res.notes)
 
@@ -111,14 +111,14 @@ def test_history_table_and_errors():
     assert [r["iteration"] for r in rows] == list(range(len(rows)))
     assert all(a["models"] < b["models"] for a, b in zip(rows, rows[1:]))
     with pytest.raises(CalibrationError, match="scheme"):
-        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, scheme="fast", model=_stand_in())
+        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, scheme="fast", solver=_stand_in())
     with pytest.raises(CalibrationError, match="ucs"):
-        cal.calibrate_strength(None, None, ucs=-1.0, flexural=1e6, model=_stand_in())
+        cal.calibrate_strength(None, None, ucs=-1.0, flexural=1e6, solver=_stand_in())
     with pytest.raises(CalibrationError, match="scenes"):
         cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6,
-                               model=Forward(name="x", evaluate=lambda p: {}, scenes=("main",)))
+                               solver=Forward(name="x", evaluate=lambda p: {}, scenes=("main",)))
     with pytest.raises(CalibrationError, match="initial"):
-        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, model=_stand_in(), initial={"bond_E": 1.0})
+        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, solver=_stand_in(), initial={"bond_E": 1.0})
     with pytest.raises(CalibrationError, match="calibrate_strength"):
         cal.strength_table(cal.adam(_identity_problem(), max_iterations=1))
 
@@ -143,7 +143,7 @@ def test_one_dem_iteration_reads_strengths_from_the_failure_runs():
     res = cal.calibrate_strength(cyl, beam, ucs=1e6, flexural=1.5e6, tol=1e-6, max_iterations=1,
                                  solve_options={"transits": 15})
     row = cal.strength_table(res)[0]
-    assert res.evaluations == 2 and row["models"] == 1 and res.model == "dem"
+    assert res.evaluations == 2 and row["models"] == 1 and res.solver == "dem"
     assert row["sigma_c"] == 1.5e6 and row["tau_c"] == 1e6  # Eq. 14
     assert 0 < row["ucs"] < 1e6 and 0 < row["flexural"] < 1.5e6  # bonds at the macroscopic strengths: weaker
     # the same numbers as a direct solve

@@ -1,12 +1,15 @@
-"""Helpers shared by the calibrators: ties between parameters and targets, results, progress output."""
+"""Helpers shared by the calibrators: ties between parameters and targets, results, progress output, renamed
+keywords. It imports no calibrator and not the problem (``problem`` arguments are
+:class:`~jaxbpm.calibrate.objective.Problem` s), so that every module of the package can use it."""
 
 from __future__ import annotations
 
+import warnings
 from typing import Callable, Mapping
 
 import numpy as np
 
-from jaxbpm.calibrate.objective import CalibrationError, Problem
+from jaxbpm.calibrate.space import CalibrationError
 from jaxbpm.calibrate.result import CalibrationResult, History
 
 # parameter key -> observables measured in the same units (Qu et al. 2020, Eq. 14: the macroscopic value is a first
@@ -15,7 +18,7 @@ _SAME_UNITS = {"bond_E": ("youngs_modulus",), "bond_nu": ("poisson_ratio",),
                "bond_tensile_strength": ("strength",), "bond_shear_strength": ("strength",)}
 
 
-def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | None:
+def resolve_tie(problem, tie: Mapping[str, str] | None) -> list[int] | None:
     """Index of the target each parameter is tied to (Qu et al. 2020, 3.5-3.6), or None when there is no tie.
 
     ``tie`` maps parameter names to target names; ``None`` ties the only parameter to the only target when the
@@ -45,7 +48,7 @@ def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | 
     return out
 
 
-def same_units(problem: Problem, ties: list[int]) -> bool:
+def same_units(problem, ties: list[int]) -> bool:
     return all(problem.targets[k].observable in _SAME_UNITS.get(p.key, ())
                for p, k in zip(problem.space.parameters, ties))
 
@@ -74,7 +77,7 @@ def progress_fn(progress):
     raise CalibrationError(f"progress must be True, False or a callable, got {progress!r}")
 
 
-def record(history: History, problem: Problem, progress, *, kind, values, errors, time, level=None) -> dict:
+def record(history: History, problem, progress, *, kind, values, errors, time, level=None) -> dict:
     row = history.append(kind=kind, level=level or problem.forward.name, values=values,
                          loss=float(problem.loss_of(np.asarray(errors))), errors=problem.per_target(errors),
                          evaluations=problem.evaluations, time=time)
@@ -83,7 +86,7 @@ def record(history: History, problem: Problem, progress, *, kind, values, errors
     return row
 
 
-def make_result(problem: Problem, history: History, values, errors, *, method: str, tol: float, wall_time: float,
+def make_result(problem, history: History, values, errors, *, method: str, tol: float, wall_time: float,
                 evaluations: int, notes=(), info=None, band=None, converged=None,
                 iterations: int | None = None) -> CalibrationResult:
     values = np.asarray(values, dtype=np.float64)
@@ -92,7 +95,7 @@ def make_result(problem: Problem, history: History, values, errors, *, method: s
         converged = bool(np.all(problem.max_errors(errors) <= tol))
     return CalibrationResult(values=problem.space.describe(values), params=params,
                              errors=problem.signed_errors(errors), converged=bool(converged), method=method,
-                             model=problem.forward.name, evaluations=int(evaluations),
+                             solver=problem.forward.name, evaluations=int(evaluations),
                              iterations=len(history) if iterations is None else int(iterations),
                              wall_time=float(wall_time), tol=float(tol), history=history, notes=list(notes),
                              band=band, info=dict(info or {}))
@@ -108,3 +111,21 @@ def check_count(name, value, minimum=1) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         raise CalibrationError(f"{name} must be a whole number >= {minimum}, got {value!r}")
     return int(value)
+
+
+def renamed_keyword(value, old_value, *, new: str, old: str):
+    """The value of the keyword ``new``, or of its deprecated name ``old`` where that was given.
+
+    Args:
+      value: the value given as ``new`` (or its default).
+      old_value: the value given as ``old``; ``None`` when it was not given.
+      new, old: the keyword's name and its deprecated name.
+
+    Returns:
+      ``old_value`` where it was given (with a :class:`DeprecationWarning` naming ``new``), else ``value``.
+    """
+    if old_value is None:
+        return value
+    warnings.warn(f"{old}= is deprecated and will be removed in the next release; use {new}= (the same value)",
+                  DeprecationWarning, stacklevel=3)
+    return old_value

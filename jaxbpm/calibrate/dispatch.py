@@ -22,17 +22,25 @@ METHODS = ("auto", "adam", "surrogate", "closed-form")
 
 
 def default_parameters(sample) -> list[Parameter]:
-    """One free parameter: a common bond modulus keeping the sample's modulus ratios between components."""
+    """One free parameter: a common bond modulus keeping the sample's modulus ratios between components.
+
+    Args:
+      sample: a :class:`~jaxbpm.Sample`.
+
+    Returns:
+      ``[Parameter("bond_E", index=None, ratio=...)]``: every bond material's modulus scaled by one factor (no
+      ``ratio`` when the sample has one bond material).
+    """
     E = np.asarray(sample.materials.E, dtype=np.float64).reshape(-1)
     if E.size == 1:
         return [Parameter("bond_E", index=None)]
     return [Parameter("bond_E", index=None, ratio=tuple(E / E[0]))]
 
 
-def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm",
+def calibrate(sample, scene, targets, *, method: str = "auto", solver: str | Forward = "dsm",
               parameters: Sequence[Parameter] | None = None, scaling: str = "log", tol: float = 0.05,
               shortcut: bool = True, levels: Sequence | None = None, check: str | None = None,
-              solve_options: Mapping[str, dict] | None = None, progress=None, executor=None,
+              solve_options: Mapping[str, dict] | None = None, progress=None, executor=None, model=None,
               **options) -> CalibrationResult:
     """Calibrate the bond parameters of ``sample`` so that ``scene`` reproduces ``targets``.
 
@@ -43,46 +51,42 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
       scene: a scene (e.g. :class:`~jaxbpm.scenes.UniaxialCompression`) or ``{key: scene}`` for targets measured on
         several tests (``Target(..., scene=key)``).
       targets: :class:`Target` s, or ``{observable: value}`` (e.g. ``{"youngs_modulus": 1.2e8}``).
-      method: one of :data:`METHODS`.
-      model: the solver for ``"adam"``, ``"surrogate"`` and ``"closed-form"`` (``"dsm"``, ``"ste"``, ``"dem"``).
+      method: the calibrator, one of :data:`METHODS`.
+      solver: the solver that ``"adam"``, ``"surrogate"`` and ``"closed-form"`` run (``"dsm"``, ``"ste"``,
+        ``"dem"``), or a :class:`Forward`. ``method="auto"`` runs the solvers of ``levels``.
       parameters: free :class:`Parameter` s; default :func:`default_parameters` (one common bond modulus).
       scaling: ``"log"`` or ``"target"`` (Qu et al. 2020, Eq. 10-11: each parameter over the target it is tied to).
       tol: relative tolerance on every target (default 5 %, Qu et al. 2020).
       shortcut: use the closed form wherever it applies (the result's ``method`` and ``notes`` say so).
       levels: multi-fidelity levels (``method="auto"``; default :func:`default_levels`).
-      check: a model (e.g. ``"dem"``) solved once at the answer; its errors go to ``result.info["check"]``.
-      solve_options: ``{model: options for jaxbpm.solve}``.
+      check: a solver (e.g. ``"dem"``) run once at the answer; its errors go to ``result.info["check"]``.
+      solve_options: ``{solver: options for jaxbpm.solve}``.
       progress: True to print each iteration (stderr), or a callable ``(row, parameter_names, target_names)``.
       executor: a :class:`concurrent.futures.Executor` (e.g. Dask's ``Client(...).get_executor()``) for the runs of
-        a model that is not batched (DEM): the perturbed runs of a finite-difference gradient and a surrogate's run
-        set become parallel tasks (:mod:`jaxbpm.parallel`). Batched models (STE, DSM elastic) ignore it.
+        a solver that is not batched (DEM): the perturbed runs of a finite-difference gradient and a surrogate's run
+        set become parallel tasks (:mod:`jaxbpm.parallel`). Batched solvers (STE, DSM elastic) ignore it.
+      model: deprecated name of ``solver`` (a :class:`DeprecationWarning`); removed in the next release.
       **options: passed to the calibrator (:func:`adam`, :func:`surrogate`, :func:`closed_form`; for ``"auto"``
         they are Adam's options).
-    """
-    from jaxbpm.sample import Sample
 
+    Returns:
+      A :class:`CalibrationResult`: the answer, its errors, the calibrator and solver used, the cost and the
+      history.
+
+    Raises:
+      CalibrationError: an unknown method, sample, parameter or option; a calibrator that finds no answer (see
+        each calibrator).
+    """
+    solver = _common.renamed_keyword(solver, model, new="solver", old="model")
     if method not in METHODS:
         raise CalibrationError(f"unknown calibration method {method!r}; choose one of {METHODS}")
     from jaxbpm.parallel import check_executor
 
     check_executor(executor)
-    several = isinstance(sample, Mapping)
-    for s in (sample.values() if several else [sample]):
-        if not isinstance(s, Sample):
-            raise CalibrationError(f"sample must be a jaxbpm.Sample or {{scene key: Sample}}, got {type(s).__name__}")
-    if several and not sample:
-        raise CalibrationError("no sample given")
-    first = next(iter(sample.values())) if several else sample
+    first = _first_sample(sample)
     targets = as_targets(targets)
     tol = _common.check_tol(tol)
-    parameters = default_parameters(first) if parameters is None else list(parameters)
-    if not all(isinstance(p, Parameter) for p in parameters):
-        raise CalibrationError("parameters must be a list of Parameter")
-    keys = sorted({p.key for p in parameters})
-    base = base_params(first, keys, scene)
-    if several:  # each sample keeps its own table; only the free entries are shared
-        base = {k: base[k] for k in keys}
-    space = ParameterSpace(parameters, base, scaling=scaling)
+    space = _space(sample, first, scene, parameters, scaling)
     solve_options = dict(solve_options or {})
     t0 = time.perf_counter()
     if method == "auto":
@@ -92,32 +96,67 @@ def calibrate(sample, scene, targets, *, method: str = "auto", model: str = "dsm
     else:
         if levels is not None:
             raise CalibrationError("levels apply to method='auto' only")
-        fwd = model if isinstance(model, Forward) else forward_model(sample, scene, model,
-                                                                        **solve_options.get(model, {}))
+        fwd = solver if isinstance(solver, Forward) else forward_model(sample, scene, solver,
+                                                                          **solve_options.get(solver, {}))
         space = _target_scales(space, targets, options.get("tie"))
         problem = Problem(fwd, targets, space, executor=executor)
-        if method == "closed-form":
-            result = closed_form(problem, tol=tol, progress=progress, **options)
-        elif method == "surrogate":
-            result = surrogate(problem, tol=tol, progress=progress, **options)
-        else:
-            ok, why = problem.closed_form_applies()
-            if shortcut and ok and sum(t.size for t in problem.targets) >= space.n:
-                result = closed_form(problem, tol=tol, progress=progress)
-                result.notes.insert(0, "closed-form shortcut used instead of Adam (shortcut=False forces Adam)")
-            else:
-                result = adam(problem, tol=tol, progress=progress, **options)
+        result = _run_calibrator(problem, method, tol=tol, shortcut=shortcut, progress=progress, options=options)
     if check is not None:
-        fwd = forward_model(sample, scene, check, **solve_options.get(check, {}))
-        problem = Problem(fwd, targets, space)
-        tc = time.perf_counter()
-        values = np.asarray([result.values[n] for n in space.names])
-        e = np.asarray(problem.errors_of(problem.outputs(values[None, :])[0]))
-        result.info["check"] = {"model": check, "errors": problem.signed_errors(e),
-                                "max_error": float(problem.max_errors(e).max()), "evaluations": problem.evaluations,
-                                "wall_time": time.perf_counter() - tc}
+        result.info["check"] = _check_answer(result, sample, scene, targets, space, check,
+                                             solve_options.get(check, {}))
     result.wall_time = time.perf_counter() - t0
     return result
+
+
+def _first_sample(sample):
+    """The sample (or the first of ``{scene key: Sample}``) whose table gives the base parameters."""
+    from jaxbpm.sample import Sample
+
+    several = isinstance(sample, Mapping)
+    for s in (sample.values() if several else [sample]):
+        if not isinstance(s, Sample):
+            raise CalibrationError(f"sample must be a jaxbpm.Sample or {{scene key: Sample}}, got {type(s).__name__}")
+    if several and not sample:
+        raise CalibrationError("no sample given")
+    return next(iter(sample.values())) if several else sample
+
+
+def _space(sample, first, scene, parameters, scaling) -> ParameterSpace:
+    """The parameter space of ``parameters`` (default: :func:`default_parameters`) around the first sample's
+    table; with several samples only the free entries are shared, each sample keeping the rest of its table."""
+    parameters = default_parameters(first) if parameters is None else list(parameters)
+    if not all(isinstance(p, Parameter) for p in parameters):
+        raise CalibrationError("parameters must be a list of Parameter")
+    keys = sorted({p.key for p in parameters})
+    base = base_params(first, keys, scene)
+    if isinstance(sample, Mapping):
+        base = {k: base[k] for k in keys}
+    return ParameterSpace(parameters, base, scaling=scaling)
+
+
+def _run_calibrator(problem: Problem, method: str, *, tol, shortcut, progress, options) -> CalibrationResult:
+    """Run the calibrator ``method`` (not ``"auto"``) on ``problem``; Adam gives way to the closed form where it
+    applies and ``shortcut`` allows it."""
+    if method == "closed-form":
+        return closed_form(problem, tol=tol, progress=progress, **options)
+    if method == "surrogate":
+        return surrogate(problem, tol=tol, progress=progress, **options)
+    ok, _ = problem.closed_form_applies()
+    if shortcut and ok and sum(t.size for t in problem.targets) >= problem.space.n:
+        result = closed_form(problem, tol=tol, progress=progress)
+        result.notes.insert(0, "closed-form shortcut used instead of Adam (shortcut=False forces Adam)")
+        return result
+    return adam(problem, tol=tol, progress=progress, **options)
+
+
+def _check_answer(result, sample, scene, targets, space, check: str, solve_options) -> dict:
+    """The errors of ``result``'s answer on the solver ``check`` (one solve): ``result.info["check"]``."""
+    problem = Problem(forward_model(sample, scene, check, **solve_options), targets, space)
+    tc = time.perf_counter()
+    values = np.asarray([result.values[n] for n in space.names])
+    e = np.asarray(problem.errors_of(problem.outputs(values[None, :])[0]))
+    return {"solver": check, "errors": problem.signed_errors(e), "max_error": float(problem.max_errors(e).max()),
+            "evaluations": problem.evaluations, "wall_time": time.perf_counter() - tc}
 
 
 def _target_scales(space: ParameterSpace, targets, tie) -> ParameterSpace:

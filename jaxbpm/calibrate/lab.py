@@ -29,6 +29,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError
 
 __all__ = ["lab", "LabResult", "LAB_TARGETS"]
@@ -137,10 +138,10 @@ class LabResult:
 
 
 def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Mapping[str, Any] | None = None,
-        elastic_model: str = "dsm", check: str | None = "dem", elastic_tol: float = 0.02, tol: float = 0.05,
+        elastic_solver: str = "dsm", check: str | None = "dem", elastic_tol: float = 0.02, tol: float = 0.05,
         max_iterations: int = 6, fd_step: float = 0.2,
         solve_options: Mapping | None = None, executor=None, progress=None,
-        failure_rule: str | None = None) -> LabResult:
+        failure_rule: str | None = None, elastic_model: str | None = None) -> LabResult:
     """Calibrate bond parameters to laboratory targets in stages (see the module docstring).
 
     Args:
@@ -150,7 +151,7 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       scenes: override the tests' scenes (``"elastic"``, ``"ucs"``, ``"bts"``, ``"flexural"``); defaults
         ``UniaxialCompression(strain=1e-3)``, ``UniaxialCompression.to_failure(strain=0.02)``,
         ``BrazilianDisc()``, ``ThreePointBending(strain=0.1)``.
-      elastic_model: the elastic stage's solver; check: the model that checks its answer (``None``: none).
+      elastic_solver: the elastic stage's solver; check: the solver that checks its answer (``None``: none).
       elastic_tol, tol: relative tolerances of the elastic and the strength targets.
       max_iterations, fd_step: the strength stage's Gauss-Newton iterations after the two estimates, and its
         finite-difference step (a fraction of each bond strength).
@@ -160,11 +161,22 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       failure_rule: the bond failure rule of the strength scenes: ``"separate"`` (PFC's parallel bond, MUSEN),
         ``"summed"`` (LAMMPS ``bpm/rotational``) or ``"max"`` (Yade), so that the strengths found hold in the code
         they are for (:data:`jaxbpm.physics.bond.FAILURE_RULES`); ``None``: the scenes' own (default ``"separate"``).
+      elastic_model: deprecated name of ``elastic_solver`` (a :class:`DeprecationWarning`); removed in the next
+        release.
+
+    Returns:
+      A :class:`LabResult`: the parameters, what each target reached, each stage's result, the targets not reached
+      and why, and the parameters in other codes' conventions.
+
+    Raises:
+      CalibrationError: unknown or invalid targets, a missing specimen, strength scenes with different failure
+        rules, or a stage that fails for a reason other than an unreachable target.
     """
     from jaxbpm.calibrate.elastic import calibrate_elastic
     from jaxbpm.sample import Sample
     from jaxbpm.scenes import BrazilianDisc, ThreePointBending, UniaxialCompression
 
+    elastic_solver = _common.renamed_keyword(elastic_solver, elastic_model, new="elastic_solver", old="elastic_model")
     t0 = time.perf_counter()
     targets = dict(targets)
     unknown = sorted(set(targets) - set(LAB_TARGETS))
@@ -205,12 +217,12 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
     if {"E", "nu"} & set(targets):
         try:
             res = calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets.get("E"), nu=targets.get("nu"),
-                                    model=elastic_model, tol=elastic_tol, check=check, progress=progress)
+                                    solver=elastic_solver, tol=elastic_tol, check=check, progress=progress)
         except CalibrationError as err:
             if "nu" not in targets or "out of this sample's reach" not in str(err):
                 raise
             unreached["nu"] = str(err)
-            res = (calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets["E"], model=elastic_model,
+            res = (calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets["E"], solver=elastic_solver,
                                      tol=elastic_tol, check=check, progress=progress) if "E" in targets else None)
         if res is not None:
             stages["elastic"] = res
@@ -274,7 +286,6 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of the bonds:
     the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1 sigma_c, so
     Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
-    import jaxbpm.calibrate._common as _common
     from jaxbpm.calibrate.objective import Parameter, ParameterSpace, Problem, Target, base_params, forward_model
     from jaxbpm.calibrate.result import History
 

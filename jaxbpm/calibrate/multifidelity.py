@@ -1,6 +1,6 @@
-"""Multi-fidelity calibration: cheap models first, dearer ones only while they change the answer.
+"""Multi-fidelity calibration: cheap solvers first, dearer ones only while they change the answer.
 
-Levels run from the cheapest to the most faithful model, by default STE -> DSM (``jaxbpm.solve`` methods ``"ste"``
+Levels run from the cheapest to the most faithful solver, by default STE -> DSM (``jaxbpm.solve`` methods ``"ste"``
 and ``"dsm"``; DEM can be appended as a last level, or asked for as a final check only). The first level is
 calibrated; every later level first evaluates the current answer (one solve): if every target is within ``tol``
 there, the answer is accepted at that level without calibrating it (early stop); else the level is calibrated
@@ -52,7 +52,7 @@ def _forward(level, sample, scenes, solve_options) -> Forward:
         return level
     if isinstance(level, str):
         return forward_model(sample, scenes, level, **(solve_options or {}).get(level, {}))
-    raise CalibrationError(f"a level must be a model name or a Forward, got {level!r}")
+    raise CalibrationError(f"a level must be a solver name or a Forward, got {level!r}")
 
 
 def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Sequence | None = None,
@@ -69,7 +69,7 @@ def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Seq
     tol = _common.check_tol(tol)
     levels = list(default_levels() if levels is None else levels)
     if not levels:
-        raise CalibrationError("levels must name at least one model")
+        raise CalibrationError("levels must name at least one solver")
     progress = _common.progress_fn(progress)
     values = space.clip(space.initial)
     history = History(space.names, [])
@@ -89,7 +89,7 @@ def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Seq
             if np.all(problem.max_errors(e) <= tol):
                 final = _common.make_result(problem, History(space.names, problem.target_names), values, e,
                                             method="multi-fidelity", tol=tol, wall_time=0.0, evaluations=0)
-                report.append({"model": fwd.name, "action": "accepted", "evaluations": problem.evaluations,
+                report.append({"solver": fwd.name, "action": "accepted", "evaluations": problem.evaluations,
                                "wall_time": time.perf_counter() - t0, "max_error": float(problem.max_errors(e).max()),
                                "errors": problem.signed_errors(e)})
                 total += problem.evaluations
@@ -99,15 +99,15 @@ def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Seq
         values = np.asarray([res.values[n] for n in space.names])
         notes += [f"{fwd.name}: {n}" for n in res.notes]
         final = res
-        report.append({"model": fwd.name, "action": "calibrated" if i == 0 else "escalated",
+        report.append({"solver": fwd.name, "action": "calibrated" if i == 0 else "escalated",
                        "method": res.method, "evaluations": problem.evaluations, "wall_time": time.perf_counter() - t0,
                        "max_error": res.max_error, "errors": res.errors})
         total += problem.evaluations
     result = CalibrationResult(values=space.describe(values), params=final.params, errors=final.errors,
                                converged=bool(final.max_error <= tol), method="multi-fidelity",
-                               model=report[-1]["model"], evaluations=total,
+                               solver=report[-1]["solver"], evaluations=total,
                                iterations=sum(r["kind"] != "prediction" for r in history.rows),
                                wall_time=time.perf_counter() - t_start, tol=tol,
                                history=history, notes=notes, levels=report,
-                               info={"levels": [lv["model"] for lv in report]})
+                               info={"levels": [lv["solver"] for lv in report]})
     return result

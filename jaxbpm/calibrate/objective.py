@@ -1,15 +1,15 @@
-"""What a calibration aims at and what it changes: targets, the parameter space, the forward model, the objective.
+"""What a calibration aims at and what it changes: targets, the parameter space, the forward, the objective.
 
 * :class:`Target`: one measured quantity of a scene (stiffness, Young's modulus, Poisson ratio, the points of a
   stress-strain curve, or any observable a custom model returns), its weight and how its error is normalised.
 * :class:`Parameter` / :class:`ParameterSpace`: the free entries of the parameter pytree
   (``{"bond_E": [n_materials], "bond_nu": [n_materials]}``) with bounds, mapped to an optimisation variable ``z`` in
   log form (``z = log(p / p_ref)``) or target-scaled form (``z = p / scale``, Qu et al. 2020 Eq. 10-11).
-* :class:`Forward`: the model behind the objective: any solver of :func:`jaxbpm.solve` (``"ste"``, ``"dsm"``,
+* :class:`Forward` (a *forward*: parameters -> observables): any solver of :func:`jaxbpm.solve` (``"ste"``, ``"dsm"``,
   ``"dem"``) on one or several scenes, or a plain function. Where the solver module offers a pure
   ``stiffness_function(sample, scene)`` (``params -> K``), elastic targets use it: batches of parameter sets go
   through ``jax.vmap`` and gradients through ``jax.grad``.
-* :class:`Problem`: targets + parameters + model. Weights are normalised to sum 1 and the objective is
+* :class:`Problem`: targets + parameters + a forward. Weights are normalised to sum 1 and the objective is
   ``L = sum_k w_k mean((y_k - t_k)^2 / s_k^2)`` (Qu et al. 2020, Eq. 3), ``s_k`` the target's scale (``|t|`` for a
   scalar,
   ``max |t|`` for a vector unless given). It counts every solve (one parameter set on one scene).
@@ -34,7 +34,7 @@ __all__ = ["CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward
 
 @dataclasses.dataclass
 class Forward:
-    """A model the calibrators can run.
+    """A forward: the map from a parameter pytree to the observables of its scenes, which the calibrators run.
 
     evaluate: one parameter pytree -> ``{scene: {observable: value}}`` (any solver; NumPy values).
     pure: optional JAX function with the same signature, traceable (``jit``/``grad``/``vmap``); it may report fewer
@@ -64,8 +64,8 @@ class Forward:
         settings = worker_settings()
         if self.recipe[0] == "function":
             return [(DEFAULT_SCENE, Task(_function_task, (self.recipe[1], values), settings))]
-        _, samples, scenes, model, options = self.recipe
-        return [(key, Task(_solve_task, (samples[key], sc, model, values, options, key), settings))
+        _, samples, scenes, solver, options = self.recipe
+        return [(key, Task(_solve_task, (samples[key], sc, solver, values, options, key), settings))
                 for key, sc in scenes.items()]
 
     @classmethod
@@ -160,24 +160,42 @@ def _linear_scene(scene) -> bool:
     return not (getattr(scene, "contacts", False) or getattr(scene, "uses_walls", False))
 
 
-_FORWARDS: dict = {}  # recent forward models: repeated calibrations of one sample share their compiled functions
+_FORWARDS: dict = {}  # recent forwards: repeated calibrations of one sample share their compiled functions
 _FORWARDS_MAX = 8
 
 
-def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forward:
-    """The :class:`Forward` of ``jaxbpm.solve(sample, scene, method=model, params=..., **solve_options)``.
+def forward_model(sample, scenes, solver: str = "dsm", *, model: str | None = None, **solve_options) -> Forward:
+    """The :class:`Forward` of ``jaxbpm.solve(sample, scene, method=solver, params=..., **solve_options)``.
 
     sample: a :class:`~jaxbpm.Sample`, or ``{key: sample}`` with one sample per scene key (e.g. a cylinder for
     ``"ucs"`` and a beam for ``"tpb"``). scenes: a scene or a mapping ``{key: scene}``. Each solve gets the sample's
     own parameters (``bond_E``, ``bond_nu``) overridden by the entries of the parameter pytree it is given. When
-    ``jaxbpm.<model>`` has a ``stiffness_function`` and every scene is linear (bonds only, clamped layers), elastic
+    ``jaxbpm.<solver>`` has a ``stiffness_function`` and every scene is linear (bonds only, clamped layers), elastic
     targets use that pure function (batched and differentiable). ``solve_options`` go to ``jaxbpm.solve`` only.
+    Forwards are cached: the same samples, scenes, solver and options give the same object (and its compiled
+    functions).
+
+    Args:
+      sample: a :class:`~jaxbpm.Sample`, or ``{key: sample}`` with one sample per scene key.
+      scenes: a scene or ``{key: scene}``.
+      solver: the solver, one of ``jaxbpm.solving.METHODS`` (``"dsm"``, ``"ste"``, ``"dem"``).
+      model: deprecated name of ``solver`` (a :class:`DeprecationWarning`); removed in the next release.
+      **solve_options: options of ``jaxbpm.solve``.
+
+    Returns:
+      A :class:`Forward` named after the solver.
+
+    Raises:
+      CalibrationError: an unknown solver, no scene, an object that is not a scene or a sample, or samples that do
+        not match the scene keys.
     """
     from jaxbpm import solving as solve_mod
+    from jaxbpm.calibrate._common import renamed_keyword
     from jaxbpm.sample import Sample
 
-    if not isinstance(model, str) or model not in solve_mod.METHODS:
-        raise CalibrationError(f"unknown model {model!r}; choose one of {solve_mod.METHODS}")
+    solver = renamed_keyword(solver, model, new="solver", old="model")
+    if not isinstance(solver, str) or solver not in solve_mod.METHODS:
+        raise CalibrationError(f"unknown solver {solver!r}; choose one of {solve_mod.METHODS}")
     scene_map = dict(scenes) if isinstance(scenes, Mapping) else {DEFAULT_SCENE: scenes}
     if not scene_map:
         raise CalibrationError("no scene given")
@@ -195,14 +213,14 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
             raise CalibrationError(f"sample{'' if len(sample_map) == 1 else f' {key!r}'} must be a jaxbpm.Sample, "
                                    f"got {type(s).__name__}")
     try:
-        cache_key = (tuple((k, id(s)) for k, s in sample_map.items()), model,
+        cache_key = (tuple((k, id(s)) for k, s in sample_map.items()), solver,
                      tuple((k, repr(sc)) for k, sc in scene_map.items()), repr(sorted(solve_options.items())))
     except TypeError:
         cache_key = None
     hit = _FORWARDS.get(cache_key)
     if hit is not None and all(ref() is sample_map[k] for k, ref in hit[0].items()):
         return hit[1]
-    fwd = _forward_model(sample_map, scene_map, model, solve_options)
+    fwd = _forward_model(sample_map, scene_map, solver, solve_options)
     if cache_key is not None:
         import weakref
 
@@ -215,7 +233,7 @@ def forward_model(sample, scenes, model: str = "dsm", **solve_options) -> Forwar
     return fwd
 
 
-def _forward_model(sample_map, scene_map, model, solve_options) -> Forward:
+def _forward_model(sample_map, scene_map, solver, solve_options) -> Forward:
     from jaxbpm.physics.model import default_params
 
     own = {k: default_params(s) for k, s in sample_map.items()}
@@ -223,14 +241,14 @@ def _forward_model(sample_map, scene_map, model, solve_options) -> Forward:
     options = {"throw": False, **solve_options}  # the calibrator reads the status itself
 
     def evaluate(params):
-        return {key: _solve_one(sample_map[key], sc, model, {**own[key], **params}, options, key, params)
+        return {key: _solve_one(sample_map[key], sc, solver, {**own[key], **params}, options, key, params)
                 for key, sc in scene_map.items()}
 
     linear = all(_linear_scene(sc) for sc in scene_map.values())
     factory = None
-    if linear and model != "dem":
+    if linear and solver != "dem":
         try:
-            factory = getattr(importlib.import_module(f"jaxbpm.{model}"), "stiffness_function", None)
+            factory = getattr(importlib.import_module(f"jaxbpm.{solver}"), "stiffness_function", None)
         except ImportError:
             factory = None
     fns = {}
@@ -246,25 +264,25 @@ def _forward_model(sample_map, scene_map, model, solve_options) -> Forward:
             out[key] = {"stiffness": k, "youngs_modulus": k * l_over_a}
         return out
 
-    return Forward(name=model, evaluate=evaluate, pure=pure if fns else None, scenes=tuple(scene_map),
+    return Forward(name=solver, evaluate=evaluate, pure=pure if fns else None, scenes=tuple(scene_map),
                    pure_observables=ELASTIC_OBSERVABLES if fns else None,
                    homogeneous=linear and all(s.n_bonds > 0 for s in sample_map.values()),
-                   recipe=("solve", sample_map, scene_map, model, options))
+                   recipe=("solve", sample_map, scene_map, solver, options))
 
 
-def _solve_one(sample, scene, model, params, options, key, shown):
+def _solve_one(sample, scene, solver, params, options, key, shown):
     """The observations of one solve (a module-level function: a worker process runs it as a task)."""
     from jaxbpm.solving import solve
 
-    return _observations(_checked(solve(sample, scene, method=model, params=params, **options), key, shown))
+    return _observations(_checked(solve(sample, scene, method=solver, params=params, **options), key, shown))
 
 
-def _solve_task(sample, scene, model, params, options, key):
+def _solve_task(sample, scene, solver, params, options, key):
     """:func:`_solve_one` for a task: the parameter set arrives as NumPy arrays and is completed with the sample's
     own entries."""
     from jaxbpm.physics.model import default_params
 
-    return _solve_one(sample, scene, model, {**default_params(sample), **params}, options, key, params)
+    return _solve_one(sample, scene, solver, {**default_params(sample), **params}, options, key, params)
 
 
 def _function_task(fn, params):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,7 @@ __all__ = ["History", "CalibrationResult", "plot_history", "load_history"]
 @dataclasses.dataclass
 class History:
     """One row per evaluated point: ``iteration`` (1-based), ``kind`` (``"initial"``, ``"estimate-1"``,
-    ``"estimate-2"``, ``"adam"``, ``"closed-form"``, ``"check"``, ...), ``level`` (the model), parameter
+    ``"estimate-2"``, ``"adam"``, ``"closed-form"``, ``"check"``, ...), ``level`` (the solver), parameter
     ``values``, ``loss``, each target's relative ``errors`` (signed for a scalar target, the largest magnitude for a
     vector target), cumulative ``evaluations`` and the ``time`` [s]
     the iteration took."""
@@ -100,9 +101,9 @@ class CalibrationResult:
     values: ``{parameter name: calibrated value}``; params: the full parameter pytree to pass to
     :func:`jaxbpm.solve`. errors: ``{target name: signed relative error}`` at the answer (``(y - t) / s``; predicted
     by the surrogate for ``method="surrogate"``); converged: every target within ``tol``. method: the calibrator
-    that produced the answer (``"closed-form"``, ``"adam"``, ``"surrogate"``, ``"multi-fidelity"``); model: the
-    solver it calibrated against. evaluations: solves (one parameter set on one scene); iterations: evaluated
-    points (rows of ``history``). levels: per-model cost of a multi-fidelity run. band: ``{name: (lo, hi)}``
+    that produced the answer (``"closed-form"``, ``"adam"``, ``"surrogate"``, ``"multi-fidelity"``); solver: the
+    solver it calibrated against (``"dsm"``, ``"ste"``, ``"dem"`` or a :class:`Forward`'s name). evaluations: solves (one parameter set on one scene); iterations: evaluated
+    points (rows of ``history``). levels: per-solver cost of a multi-fidelity run. band: ``{name: (lo, hi)}``
     (surrogate). notes: what was done and why (e.g. the closed-form shortcut). info: calibrator details.
     """
 
@@ -111,7 +112,7 @@ class CalibrationResult:
     errors: dict[str, Any]
     converged: bool
     method: str
-    model: str
+    solver: str
     evaluations: int
     iterations: int
     wall_time: float
@@ -123,13 +124,20 @@ class CalibrationResult:
     info: dict = dataclasses.field(default_factory=dict)
 
     @property
+    def model(self) -> str:
+        """Deprecated name of :attr:`solver` (a :class:`DeprecationWarning`); removed in the next release."""
+        warnings.warn("CalibrationResult.model is deprecated and will be removed in the next release; use "
+                      "CalibrationResult.solver", DeprecationWarning, stacklevel=2)
+        return self.solver
+
+    @property
     def max_error(self) -> float:
         return float(max(np.max(np.abs(np.asarray(e))) for e in self.errors.values()))
 
     def save(self, path):
         """Write the history (and a summary of this result) to an HDF5 file atomically."""
         extra = {"values": self.values, "errors": self.errors, "converged": self.converged, "method": self.method,
-                 "model": self.model, "evaluations": self.evaluations, "iterations": self.iterations,
+                 "model": self.solver, "evaluations": self.evaluations, "iterations": self.iterations,
                  "wall_time": self.wall_time, "tol": self.tol, "notes": self.notes, "levels": self.levels,
                  "band": self.band}
         return self.history.save(path, extra=extra)
@@ -148,11 +156,11 @@ class CalibrationResult:
             e = np.asarray(e)
             txt = f"{100 * float(e):+.3f} %" if e.ndim == 0 else f"max {100 * float(np.max(np.abs(e))):.3f} %"
             lines.append(f"{name:<16}{txt:>14}")
-        lines.append(f"method {self.method} on {self.model}: {'converged' if self.converged else 'NOT converged'} "
+        lines.append(f"method {self.method} on {self.solver}: {'converged' if self.converged else 'NOT converged'} "
                      f"(tol {100 * self.tol:g} %), {self.iterations} iterations, {self.evaluations} evaluations, "
                      f"{self.wall_time:.2f} s")
         for lv in self.levels:
-            lines.append(f"  level {lv['model']:<8} {lv['action']:<11} {lv['evaluations']:>3} evaluations "
+            lines.append(f"  level {lv['solver']:<8} {lv['action']:<11} {lv['evaluations']:>3} evaluations "
                          f"{lv['wall_time']:8.2f} s  max error {100 * lv['max_error']:.3f} %")
         for note in self.notes:
             lines.append(f"note: {note}")
@@ -160,7 +168,7 @@ class CalibrationResult:
 
     def __repr__(self) -> str:
         vals = ", ".join(f"{k}={v:.6g}" for k, v in self.values.items())
-        return (f"CalibrationResult({vals}; method={self.method!r}, model={self.model!r}, "
+        return (f"CalibrationResult({vals}; method={self.method!r}, solver={self.solver!r}, "
                 f"max_error={self.max_error:.3g}, evaluations={self.evaluations}, iterations={self.iterations})")
 
 

@@ -13,6 +13,7 @@ import dataclasses
 import json
 import pathlib
 import time
+import warnings
 
 import numpy as np
 
@@ -37,8 +38,10 @@ def latin_hypercube(n: int, lower, upper, *, seed=0, optimize: bool = True) -> n
 @dataclasses.dataclass
 class RunSet:
     """Solved parameter sets: inputs ``X [N, n]`` (named ``parameter_names``, sampled in ``[lower, upper]``) and
-    outputs ``Y [N, m]``, the model values of the named outputs (``output_names``, each ``output_sizes`` long;
-    a target re-uses an output of the same name and size)."""
+    outputs ``Y [N, m]``, the solver's values of the named outputs (``output_names``, each ``output_sizes`` long;
+    a target re-uses an output of the same name and size). solver: the name of the forward that solved them
+    (``"dsm"``, ``"ste"``, ``"dem"`` or a :class:`~jaxbpm.calibrate.Forward`'s name; stored as the file's
+    ``model`` attribute)."""
 
     parameter_names: list[str]
     X: np.ndarray
@@ -47,9 +50,16 @@ class RunSet:
     output_names: list[str]
     output_sizes: list[int]
     Y: np.ndarray
-    model: str = ""
+    solver: str = ""
     info: dict = dataclasses.field(default_factory=dict)
     done: np.ndarray | None = None  # [N] bool: the runs solved so far (None: all); rows of the others are NaN
+
+    @property
+    def model(self) -> str:
+        """Deprecated name of :attr:`solver` (a :class:`DeprecationWarning`); removed in the next release."""
+        warnings.warn("RunSet.model is deprecated and will be removed in the next release; use RunSet.solver",
+                      DeprecationWarning, stacklevel=2)
+        return self.solver
 
     @property
     def n_runs(self) -> int:
@@ -82,7 +92,7 @@ class RunSet:
                 f.attrs["parameter_names"] = json.dumps(self.parameter_names)
                 f.attrs["output_names"] = json.dumps(self.output_names)
                 f.attrs["output_sizes"] = json.dumps([int(s) for s in self.output_sizes])
-                f.attrs["model"] = self.model
+                f.attrs["model"] = self.solver
                 f.attrs["info"] = json.dumps(self.info, default=float)
                 for name in ("X", "lower", "upper", "Y"):
                     f.create_dataset(name, data=np.asarray(getattr(self, name), dtype=np.float64))
@@ -106,7 +116,7 @@ class RunSet:
                            lower=np.asarray(f["lower"]), upper=np.asarray(f["upper"]),
                            output_names=json.loads(f.attrs["output_names"]),
                            output_sizes=json.loads(f.attrs["output_sizes"]), Y=np.asarray(f["Y"]),
-                           model=str(f.attrs["model"]), info=json.loads(f.attrs["info"]),
+                           solver=str(f.attrs["model"]), info=json.loads(f.attrs["info"]),
                            done=np.asarray(f["done"], dtype=bool) if "done" in f else None)
         except OSError as exc:
             raise CalibrationError(f"{path}: not a readable run set file ({exc})") from exc
@@ -141,7 +151,7 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     X = latin_hypercube(n_runs, lower, upper, seed=seed)
     sizes = [t.size for t in problem.targets]
     runs = RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
-                  output_sizes=sizes, Y=np.full((n_runs, int(np.sum(sizes))), np.nan), model=problem.forward.name,
+                  output_sizes=sizes, Y=np.full((n_runs, int(np.sum(sizes))), np.nan), solver=problem.forward.name,
                   info={"seed": seed, "chunk": chunk}, done=np.zeros(n_runs, bool))
     if path is not None and pathlib.Path(path).exists():
         runs = _resumable(path, runs)
@@ -157,13 +167,13 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
 
 
 def _resumable(path, planned: RunSet) -> RunSet:
-    """The run set stored at ``path`` if it is ``planned`` (same inputs, ranges, outputs and model), with its solved
+    """The run set stored at ``path`` if it is ``planned`` (same inputs, ranges, outputs and solver), with its solved
     runs; else an error naming what differs."""
     stored = RunSet.load(path, partial=True)
     same = {"parameter names": stored.parameter_names == planned.parameter_names,
             "output names": stored.output_names == planned.output_names,
             "output sizes": list(stored.output_sizes) == list(planned.output_sizes),
-            "model": stored.model == planned.model,
+            "solver": stored.solver == planned.solver,
             "ranges": np.array_equal(stored.lower, planned.lower) and np.array_equal(stored.upper, planned.upper),
             "parameter sets (n_runs or seed)": stored.X.shape == planned.X.shape and np.array_equal(stored.X,
                                                                                                     planned.X)}

@@ -256,14 +256,14 @@ def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, pat
     n = len(X)
     runs = RunSet(parameter_names=space.names, X=X, lower=np.asarray(lower, dtype=np.float64),
                   upper=np.asarray(upper, dtype=np.float64), output_names=problem.target_names, output_sizes=sizes,
-                  Y=np.full((n, int(np.sum(sizes))), np.nan), model=problem.forward.name,
+                  Y=np.full((n, int(np.sum(sizes))), np.nan), solver=problem.forward.name,
                   info={"seed": seed, "chunk": chunk, **info}, done=np.zeros(n, bool))
     stored_rows = from_file = 0
     if path is not None and pathlib.Path(path).exists():
         stored = RunSet.load(path, partial=True)
         k = min(stored.n_runs, n)
         same = (stored.parameter_names == runs.parameter_names and stored.output_names == runs.output_names
-                and list(stored.output_sizes) == sizes and stored.model == runs.model
+                and list(stored.output_sizes) == sizes and stored.solver == runs.solver
                 and np.array_equal(stored.X[:k], X[:k]))
         if not same:
             raise CalibrationError(f"{path} holds another run set (its parameters, outputs, model or parameter sets "
@@ -451,7 +451,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
                 X_full = np.repeat(fixed[None, :], sub_runs.n_runs, axis=0)
                 X_full[:, active] = sub_runs.X
                 runs = RunSet(space.names, X_full, runs.lower, runs.upper, sub_runs.output_names,
-                              sub_runs.output_sizes, sub_runs.Y, runs.model,
+                              sub_runs.output_sizes, sub_runs.Y, runs.solver,
                               {**sub_runs.info, "resampled_from": runs.n_runs})
                 err = _errors(problem, runs, normalize)
                 forests, r2, imp_active = fit_forests(runs.X[:, active], err, n_trees=n_trees,
