@@ -47,5 +47,5 @@ __all__ = [
     "RunSet", "run_set", "multifidelity", "default_levels", "calibrate_level", "CalibrationResult", "History",
     "plot_history", "load_history", "base_params", "calibrate_strength", "strength_table", "STRENGTH_KEYS",
     "STRENGTH_SCHEMES", "format_strength_table", "calibrate_elastic", "lab", "LabResult",
-    "LAB_TARGETS",
+    "LAB_TARGETS", "as_targets",
 ]
