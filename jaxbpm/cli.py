@@ -115,13 +115,24 @@ def _cmd_export_vtk(args: argparse.Namespace) -> int:
 
 def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: bool = True,
              calibrate: bool = True, target_factor: float = 1.25) -> dict[str, Any]:
-    """The demo: generate a random box sample of ``n`` particles (at the generator's automatic packing fraction;
-    the time the generation took is printed), save it to ``out_dir/demo_sample.h5``, then compress it uniaxially
-    (0.2 % strain, clamped layers) with the three methods -- the explicit DEM (the reference), the direct stiffness
-    method (at its default tolerance and with ``stiffness_tol=1e-3``) and the stiffness tensor estimate -- and
-    report each one's stiffness, difference to the DEM and cost; then calibrate the bond modulus to a target Young's
-    modulus (``target_factor`` x the DEM's) with the multi-fidelity path, checked by one DEM run. Writes
+    """The demo: generate a random box sample, solve it three ways, calibrate its bond modulus.
+
+    Generates a random box sample of ``n`` particles (at the generator's automatic packing fraction; the time the
+    generation took is printed), saves it to ``out_dir/demo_sample.h5``, then compresses it uniaxially (0.2 % strain,
+    clamped layers) with the three methods -- the explicit DEM (the reference), the direct stiffness method (at its
+    default tolerance and with ``stiffness_tol=1e-3``) and the stiffness tensor estimate -- and reports each one's
+    stiffness, difference to the DEM and cost; then calibrates the bond modulus to a target Young's modulus
+    (``target_factor`` x the DEM's) with the multi-fidelity path, checked by one DEM run. Writes
     ``demo_results.json`` and the speed-against-accuracy chart ``demo_speed_accuracy.png``.
+
+    Args:
+      out_dir: the folder the files go to (made if missing).
+      n: particles of the sample.
+      seed: the generator's seed.
+      quiet: no progress bars.
+      solve: solve the sample (else only generate and save it).
+      calibrate: calibrate the bond modulus after the solves.
+      target_factor: the target Young's modulus over the DEM's.
 
     Returns:
       ``{"out_dir": Path, "sample_path": Path, "sample": Sample, "results": {label: Result},
@@ -254,7 +265,12 @@ def _positive_float(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``jaxbpm`` argument parser (one sub-parser per command)."""
+    """The ``jaxbpm`` argument parser.
+
+    Returns:
+      An :class:`argparse.ArgumentParser` with one sub-parser per command (each command's options loaded on first
+      use).
+    """
     from jaxbpm._version import __version__
 
     parser = argparse.ArgumentParser(
@@ -452,10 +468,17 @@ def _is_number(token: str) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``jaxbpm`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+    """Run the ``jaxbpm`` command.
 
     Sample and file errors print ``error: <message>`` on stderr and return 2; argparse exits (``--help``,
     ``--version``, usage errors) raise :class:`SystemExit` as usual.
+
+    Args:
+      argv: the arguments (default ``sys.argv[1:]``).
+
+    Returns:
+      The exit code: 0 on success, 1 where a command reports a failure (e.g. a calibration that did not converge),
+      2 on an error, 130 when interrupted.
     """
     parser = build_parser()
     args = parser.parse_args(_negative_values(sys.argv[1:] if argv is None else list(argv)))

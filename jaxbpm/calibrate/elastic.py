@@ -13,8 +13,8 @@ or walls break the homogeneity, the same update is a fixed-point iteration that 
 weakly on the scale. Each solve measures both (``Result.poisson_ratio``: the DSM's static solution, the DEM's
 loaded state, the STE's tensor).
 
-A bonds-only BPM spans a limited range of macroscopic Poisson ratios (about 0.03-0.19 on random packings for bond
-ratios in (-0.5, 0.5)): a target outside it is reported with the range the sample reaches, not chased.
+A bonds-only BPM spans a limited range of macroscopic Poisson ratios (``benchmarks/poisson.py`` maps it against the
+bond Poisson ratio): a target outside it is reported with the range the sample reaches, not chased.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from jaxbpm.calibrate.result import CalibrationResult, History
 __all__ = ["calibrate_elastic"]
 
 _NU_BOUNDS = (-0.9, 0.499)  # bond Poisson ratios the iteration may use (the material range is (-1, 0.5))
-_FIRST_SLOPE = 0.1  # d nu / d nu_bond to size the first step (measured 0.08-0.2 on random packings)
+_FIRST_SLOPE = 0.1  # a typical d nu / d nu_bond of random packings, to size the first step
 
 
 def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None = None, solver: str = "dsm",

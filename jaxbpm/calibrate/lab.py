@@ -8,8 +8,9 @@ tensile strength and flexural strength.
    bond modulus and Poisson ratio then hold for every specimen.
 2. **Strength** (``ucs``, ``bts``, ``flexural``): the bond tensile strength ``sigma_c`` and shear strength
    ``tau_c`` by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (a
-   finite-difference Jacobian, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the UCS (compression fails the bonds in shear),
-   ``sigma_c`` to the BTS where given, else to the flexural strength (both fail in tension). A strength target
+   finite-difference Jacobian, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the UCS
+   (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
+   fail in tension). A strength target
    without its tied parameter's partner leaves the other at its current value. The failure runs of one iteration go
    to ``executor`` when given (:mod:`jaxbpm.parallel`).
 3. **Translation**: the answer as the parameters of LAMMPS, PFC, Yade and MUSEN (:mod:`jaxbpm.interop.conventions`)
@@ -66,11 +67,23 @@ class LabResult:
         return not self.unreached and all(abs(e) <= self.tol_of(k) for k, (_, e) in self.achieved.items())
 
     def tol_of(self, key) -> float:
+        """The tolerance a target was calibrated to.
+
+        Args:
+          key: a lab target (``"E"``, ``"nu"``, ``"ucs"``, ``"bts"``, ``"flexural"``).
+
+        Returns:
+          The tolerance of its stage (0 where the stage did not run).
+        """
         stage = self.stages.get("elastic" if key in ("E", "nu") else "strength")
         return float(stage.tol) if stage is not None else 0.0
 
     def table(self) -> str:
-        """Targets, what the answer gives and its error, as text."""
+        """Targets, what the answer gives and its error, then the bond parameters, as text.
+
+        Returns:
+          The table, one line per row.
+        """
         lines = [f"{'target':<10} {'wanted':>12} {'achieved':>12} {'error':>8}"]
         for key in LAB_TARGETS:
             if key not in self.targets:
@@ -85,9 +98,17 @@ class LabResult:
         return "\n".join(lines)
 
     def report(self, path) -> pathlib.Path:
-        """Write a one-page report: ``path`` (Markdown: targets, parameters, other codes' parameters, solves) and a
-        chart beside it (``<stem>.png``: each stage's error history, the stress-strain curves at the answer).
-        Both atomically; returns the Markdown path."""
+        """Write a one-page report and its chart, both atomically.
+
+        ``path`` gets the Markdown (targets, parameters, other codes' parameters, solves); ``<stem>.png`` beside it the
+        chart (each stage's error history, the stress-strain curves at the answer).
+
+        Args:
+          path: the Markdown file.
+
+        Returns:
+          The Markdown path.
+        """
         from jaxbpm.io import atomic_write
 
         path = pathlib.Path(path)

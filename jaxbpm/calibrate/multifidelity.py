@@ -26,7 +26,11 @@ __all__ = ["default_levels", "calibrate_level", "multifidelity"]
 
 
 def default_levels() -> tuple[str, ...]:
-    """``("ste", "dsm")`` when the STE solver is available, else ``("dsm",)``."""
+    """The default multi-fidelity levels.
+
+    Returns:
+      ``("ste", "dsm")`` when the STE solver is available, else ``("dsm",)``.
+    """
     from jaxbpm import solving as solve_mod
 
     return ("ste", "dsm") if "ste" in solve_mod.METHODS else ("dsm",)
@@ -34,7 +38,19 @@ def default_levels() -> tuple[str, ...]:
 
 def calibrate_level(problem: Problem, *, tol: float, shortcut: bool = True, progress=None,
                     adam_options: dict | None = None) -> CalibrationResult:
-    """Calibrate one model: the closed form where it applies (and the targets determine the moduli), else Adam."""
+    """Calibrate one level: the closed form where it applies (and the targets determine the moduli), else Adam.
+
+    Args:
+      problem: the targets, parameters and the level's forward.
+      tol: relative tolerance on every target.
+      shortcut: use the closed form where it applies.
+      progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+      adam_options: options of :func:`~jaxbpm.calibrate.adam.adam` (default gradient: autodiff on a differentiable
+        forward, else forward differences).
+
+    Returns:
+      The level's :class:`CalibrationResult`.
+    """
     ok, why = problem.closed_form_applies()
     m = sum(t.size for t in problem.targets)
     if shortcut and ok and m >= problem.space.n:
@@ -58,12 +74,29 @@ def _forward(level, sample, scenes, solve_options) -> Forward:
 def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Sequence | None = None,
                   tol: float = 0.05, shortcut: bool = True, solve_options: dict | None = None,
                   adam_options: dict | None = None, progress=None) -> CalibrationResult:
-    """Calibrate through ``levels`` (model names or :class:`Forward`; default :func:`default_levels`).
+    """Calibrate through ``levels``, from the cheapest solver to the most faithful (see the module docstring).
 
-    solve_options: ``{model name: options for jaxbpm.solve}``. Returns the answer of the last level reached, with
-    ``levels`` = per level: ``model``, ``action`` (``"calibrated"``, ``"accepted"``: the previous answer was within
-    ``tol`` there, or ``"escalated"``: it was not and the level was calibrated), ``evaluations``, ``wall_time``,
-    ``max_error`` and ``errors``.
+    Args:
+      sample: a :class:`~jaxbpm.Sample`, or ``{scene key: Sample}``.
+      scenes: a scene or ``{key: scene}``.
+      targets: :class:`Target` s or ``{observable: value}``.
+      space: the free parameters.
+      levels: solver names or :class:`Forward` s; default :func:`default_levels`.
+      tol: relative tolerance on every target.
+      shortcut: use the closed form where it applies.
+      solve_options: ``{solver name: options for jaxbpm.solve}``.
+      adam_options: options of :func:`~jaxbpm.calibrate.adam.adam` where a level needs it.
+      progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+
+    Returns:
+      The answer of the last level reached (``method="multi-fidelity"``), its ``levels`` one entry per level:
+      ``solver``, ``action`` (``"calibrated"``, ``"accepted"``: the previous answer was within ``tol`` there, or
+      ``"escalated"``: it was not and the level was calibrated), ``evaluations``, ``wall_time``, ``max_error`` and
+      ``errors``.
+
+    Raises:
+      CalibrationError: no level, a level that is neither a solver name nor a :class:`Forward`, or a level's
+        calibration that fails.
     """
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)

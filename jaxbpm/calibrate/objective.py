@@ -53,9 +53,15 @@ class Forward:
     _compiled: dict = dataclasses.field(default_factory=dict, repr=False, compare=False)
 
     def tasks(self, params) -> list[tuple[str, Any]]:
-        """The runs of one parameter set as independent :class:`jaxbpm.parallel.Task` s, each with the scene it
-        answers (one task per scene). Empty when this model cannot be sent to another process (built by hand from
-        closures)."""
+        """The runs of one parameter set as independent :class:`jaxbpm.parallel.Task` s, one per scene.
+
+        Args:
+          params: the parameter pytree (its free entries; the sample's own complete it in the worker).
+
+        Returns:
+          ``[(scene key, Task)]``; empty when this forward cannot be sent to another process (built by hand from
+          closures).
+        """
         from jaxbpm.parallel import Task, worker_settings
 
         if self.recipe is None:
@@ -71,8 +77,21 @@ class Forward:
     @classmethod
     def from_function(cls, fn: Callable[[dict], Mapping[str, Any]], *, name: str = "function", pure: bool = True,
                       homogeneous: bool = False) -> "Forward":
-        """Wrap ``fn(params) -> {observable: value}`` (one scene). ``pure=True``: ``fn`` is a JAX function (traced,
-        ``vmap``-ped and differentiated); else it is called with NumPy values, one parameter set at a time."""
+        """Wrap a function of the parameters as a forward of one scene.
+
+        Args:
+          fn: ``fn(params) -> {observable: value}``.
+          name: the forward's name (in results and histories).
+          pure: ``fn`` is a JAX function (traced, ``vmap``-ped and differentiated); else it is called with NumPy values,
+            one parameter set at a time.
+          homogeneous: its elastic observables are homogeneous of degree one in ``bond_E`` (the closed form applies).
+
+        Returns:
+          A :class:`Forward`.
+
+        Raises:
+          CalibrationError: ``fn`` is not callable.
+        """
         if not callable(fn):
             raise CalibrationError(f"a model function must be callable, got {fn!r}")
 
@@ -120,12 +139,22 @@ def _observations(result) -> dict:
 
 
 def base_params(sample, keys=(), scene=None) -> dict:
-    """The parameter pytree of ``sample`` (``bond_E``, ``bond_nu``) plus the entries ``keys`` asks for:
+    """The parameter pytree of ``sample`` (``bond_E``, ``bond_nu``) plus the entries ``keys`` asks for.
 
-    - ``"bond_tensile_strength"``, ``"bond_shear_strength"``: from the sample's bond material table;
-    - ``"contact_E"``, ``"contact_nu"``, ``"friction"``, ``"restitution"``: from its particle material (scalars);
-    - ``"cohesion_initial"``, ``"cohesion_from_stress"``, ``"cohesion_max"``: from the cohesive law of ``scene``
-      (a scene, or a mapping of scenes: the first with ``contact_law="cohesive"``).
+    Args:
+      sample: a :class:`~jaxbpm.Sample`.
+      keys: extra entries: ``"bond_tensile_strength"``, ``"bond_shear_strength"`` (from the sample's bond material
+        table); ``"contact_E"``, ``"contact_nu"``, ``"friction"``, ``"restitution"`` (from its particle material,
+        scalars); ``"cohesion_initial"``, ``"cohesion_from_stress"``, ``"cohesion_max"`` (from the cohesive law of
+        ``scene``).
+      scene: a scene, or a mapping of scenes (the first with ``contact_law="cohesive"`` gives the cohesive entries).
+
+    Returns:
+      ``{entry: jax array}``.
+
+    Raises:
+      CalibrationError: an unknown entry, a strength the material table lacks, or a cohesive entry without a cohesive
+        scene.
     """
     from jaxbpm.physics.model import default_params
 
@@ -342,7 +371,11 @@ class Problem:
         return self.use_pure
 
     def closed_form_applies(self) -> tuple[bool, str]:
-        """Whether the closed form applies (bonds-only elasticity, K homogeneous in the bond moduli) and why not."""
+        """Whether the closed form applies (bonds-only elasticity, K homogeneous in the bond moduli).
+
+        Returns:
+          ``(applies, why)``: why it applies, or why not.
+        """
         if not self.forward.homogeneous:
             return False, f"the {self.forward.name} model is not linear in the bond moduli (contacts or walls)"
         if not all(t.elastic for t in self.targets):
@@ -401,17 +434,27 @@ class Problem:
     # -------------------------------------------------------------- evaluation
     def outputs(self, values_batch, *, chunk: int | None = None, progress: bool = False,
                 on_row: Callable[[int, np.ndarray], None] | None = None) -> np.ndarray:
-        """Model values of all target elements ``[B, m]`` for parameter values ``[B, n]`` (vmap when pure).
+        """The forward's values of all target elements for a batch of parameter sets (``vmap`` when pure).
 
-        chunk: for a pure model, solve at most this many sets in one ``vmap`` (bounds the memory of large batches:
-        each vmapped solve holds its own operator and workspace); the last chunk is padded so that every chunk
-        shares one compilation. ``None``: all at once. progress: a bar of the sets solved (:mod:`jaxbpm.progress`)
-        where they are solved in parts (chunks, or one at a time). on_row: called ``(index, row)`` as each set of a
-        model that is not batched finishes (in completion order), e.g. to store it.
+        A forward that is not batched (DEM, a plain function with ``pure=False``) solves the sets one after another, or,
+        with an ``executor`` (:class:`Problem`), as separate tasks, one per set and scene (see :mod:`jaxbpm.parallel`).
 
-        A model that is not batched (DEM, a plain function with ``pure=False``) solves the sets one after another,
-        or, with an ``executor`` (:class:`Problem`), as separate tasks, one per set and scene (see
-        :mod:`jaxbpm.parallel`)."""
+        Args:
+          values_batch: parameter values ``[B, n]``.
+          chunk: for a pure forward, solve at most this many sets in one ``vmap`` (bounds the memory of large batches:
+            each vmapped solve holds its own operator and workspace); the last chunk is padded so that every chunk
+            shares one compilation. ``None``: all at once.
+          progress: a bar of the sets solved (:mod:`jaxbpm.progress`) where they are solved in parts (chunks, or one at
+            a time).
+          on_row: called ``(index, row)`` as each set of a forward that is not batched finishes (in completion order),
+            e.g. to store it.
+
+        Returns:
+          ``[B, m]``.
+
+        Raises:
+          CalibrationError: a bad ``chunk``, a target the forward does not report, a solve that did not converge.
+        """
         vb = np.atleast_2d(np.asarray(values_batch, dtype=np.float64))
         if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
             raise CalibrationError(f"chunk must be a whole number >= 1, got {chunk!r}")
@@ -503,7 +546,14 @@ class Problem:
         return np.stack(rows)
 
     def jacobian(self, values) -> tuple[np.ndarray, np.ndarray]:
-        """Outputs ``[m]`` and their Jacobian ``[m, n]`` by forward-mode autodiff (pure models only)."""
+        """Outputs and their Jacobian by forward-mode autodiff (pure forwards only).
+
+        Args:
+          values: parameter values ``[n]``.
+
+        Returns:
+          ``(outputs [m], jacobian [m, n])``.
+        """
         t0 = time.perf_counter()
         y, j = self._compiled("jacobian")(jnp.asarray(values, dtype=jnp.float64), self.space.base)
         self.evaluations += self.n_scenes
@@ -511,7 +561,17 @@ class Problem:
         return np.asarray(y), np.asarray(j)
 
     def value_and_grad(self, z) -> tuple[float, np.ndarray, np.ndarray]:
-        """Loss, its gradient with respect to ``z`` (reverse-mode autodiff) and the outputs (pure models only)."""
+        """Loss, its gradient with respect to ``z`` (reverse-mode autodiff) and the outputs (pure forwards only).
+
+        Args:
+          z: the point ``[n]`` in the optimisation variable.
+
+        Returns:
+          ``(loss, gradient [n], outputs [m])``.
+
+        Raises:
+          CalibrationError: the forward has no pure function for these targets.
+        """
         if not self.use_pure:
             raise CalibrationError(f"autodiff gradients need a pure model; the {self.forward.name} model with "
                                    f"targets {self.target_names} has none (use gradient='fd-forward')")
@@ -526,30 +586,74 @@ class Problem:
 
     # -------------------------------------------------------------- objective
     def errors_of(self, y):
-        """Relative errors ``[m]`` of all target elements for outputs ``y [m]``."""
+        """Relative errors of all target elements.
+
+        Args:
+          y: outputs ``[m]`` (NumPy or JAX).
+
+        Returns:
+          ``[m]``: ``(y - t) / s`` per element.
+        """
         xp = jnp if isinstance(y, jax.Array) else np
         return xp.concatenate([t.relative_error(y[s]) for t, s in zip(self.targets, self.slices)])
 
     def target_losses(self, e):
-        """Each target's weighted term ``w_k mean(e_k^2)``."""
+        """Each target's weighted term of the objective.
+
+        Args:
+          e: relative errors ``[m]``.
+
+        Returns:
+          ``[k]``: ``w_k mean(e_k^2)`` per target.
+        """
         xp = jnp if isinstance(e, jax.Array) else np
         return xp.stack([w * xp.mean(xp.square(e[s])) for w, s in zip(self.weights, self.slices)])
 
     def loss_of(self, e):
+        """The objective (Qu et al. 2020, Eq. 3).
+
+        Args:
+          e: relative errors ``[m]``.
+
+        Returns:
+          ``L = sum_k w_k mean(e_k^2)``.
+        """
         xp = jnp if isinstance(e, jax.Array) else np
         return xp.sum(self.target_losses(e))
 
     def max_errors(self, e) -> np.ndarray:
-        """Each target's largest relative error magnitude."""
+        """Each target's largest relative error magnitude.
+
+        Args:
+          e: relative errors ``[m]``.
+
+        Returns:
+          ``[k]``.
+        """
         e = np.asarray(e)
         return np.array([np.max(np.abs(e[s])) for s in self.slices])
 
     def signed_errors(self, e) -> dict[str, Any]:
+        """The errors by target name.
+
+        Args:
+          e: relative errors ``[m]``.
+
+        Returns:
+          ``{target name: error}``: a float for a scalar target, an array for a vector target.
+        """
         e = np.asarray(e)
         return {t.name: (float(e[s][0]) if t.size == 1 else e[s].copy()) for t, s in zip(self.targets, self.slices)}
 
     def per_target(self, e) -> np.ndarray:
-        """One error per target: signed for a scalar target, the largest magnitude for a vector target."""
+        """One error per target: signed for a scalar target, the largest magnitude for a vector target.
+
+        Args:
+          e: relative errors ``[m]``.
+
+        Returns:
+          ``[k]``.
+        """
         e = np.asarray(e)
         return np.array([float(e[s][0]) if t.size == 1 else float(np.max(np.abs(e[s])))
                          for t, s in zip(self.targets, self.slices)])

@@ -26,7 +26,17 @@ RUNSET_FORMAT = "jaxbpm-runset"
 
 
 def latin_hypercube(n: int, lower, upper, *, seed=0, optimize: bool = True) -> np.ndarray:
-    """``n`` points ``[n, d]`` of a (centred-discrepancy optimised) Latin hypercube within ``[lower, upper]``."""
+    """A (centred-discrepancy optimised) Latin hypercube.
+
+    Args:
+      n: points.
+      lower, upper: the box ``[d]``.
+      seed: the sampler's seed.
+      optimize: optimise the centred discrepancy (``"random-cd"``, two dimensions or more).
+
+    Returns:
+      ``[n, d]`` points within ``[lower, upper]``.
+    """
     from scipy.stats import qmc
 
     lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
@@ -70,6 +80,18 @@ class RunSet:
         return self.done is None or bool(np.all(self.done))
 
     def output(self, name: str, size: int) -> np.ndarray:
+        """The columns of one named output.
+
+        Args:
+          name: the output (a target's name).
+          size: its number of values.
+
+        Returns:
+          ``[N, size]``.
+
+        Raises:
+          CalibrationError: the run set has no such output, or one of another size.
+        """
         if name not in self.output_names:
             raise CalibrationError(f"the run set has no output {name!r} (outputs: {self.output_names}); a second "
                                    "target must be of a quantity the runs recorded")
@@ -81,7 +103,14 @@ class RunSet:
         return self.Y[:, a:a + size]
 
     def save(self, path):
-        """Write the run set to an HDF5 file atomically."""
+        """Write the run set to an HDF5 file atomically.
+
+        Args:
+          path: the file.
+
+        Returns:
+          The path written.
+        """
         import h5py
 
         from jaxbpm.io import atomic_write
@@ -104,8 +133,19 @@ class RunSet:
 
     @classmethod
     def load(cls, path, *, partial: bool = False) -> "RunSet":
-        """Read a run set file. partial: also accept one whose runs are not all solved (an interrupted run set;
-        ``done`` says which are); else such a file is an error that says how to finish it."""
+        """Read a run set file.
+
+        Args:
+          path: the HDF5 file.
+          partial: also accept one whose runs are not all solved (an interrupted run set; ``done`` says which are).
+
+        Returns:
+          The :class:`RunSet`.
+
+        Raises:
+          CalibrationError: not a run set file, or an interrupted one without ``partial`` (the message says how to
+            finish it).
+        """
         import h5py
 
         try:
@@ -129,16 +169,28 @@ class RunSet:
 
 def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None,
             chunk: int | None = None, progress: bool = False, path=None) -> RunSet:
-    """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` (within its bounds, or ``lower``/``upper``)
-    in batches of ``chunk`` (``None``: one batch; see :meth:`Problem.outputs`) and record the outputs its targets
-    need. progress: a bar of the runs solved (where they are solved in parts).
+    """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` and record the outputs its targets need.
 
-    The runs of a model that is not batched (DEM) go one after another, or to the problem's ``executor`` (e.g. a
-    Dask cluster, :mod:`jaxbpm.parallel`). path: an HDF5 file that holds the run set; each finished run is stored
-    as it arrives (the file is replaced atomically), so that a run set interrupted (Ctrl-C, a killed process, a
-    failed run) resumes when called again with the same arguments: runs already in the file are not repeated. A
-    file that holds a different run set (other parameters, ranges, seed or outputs) is an error, never
-    overwritten.
+    The runs of a forward that is not batched (DEM) go one after another, or to the problem's ``executor`` (e.g. a
+    Dask cluster, :mod:`jaxbpm.parallel`). With ``path``, each finished run is stored as it arrives (the file is
+    replaced atomically), so that a run set interrupted (Ctrl-C, a killed process, a failed run) resumes when called
+    again with the same arguments: runs already in the file are not repeated.
+
+    Args:
+      problem: the targets, parameters and forward.
+      n_runs: parameter sets (at least 2).
+      seed: the Latin hypercube's seed.
+      lower, upper: the ranges ``[n]`` (default: the parameters' bounds).
+      chunk: solve in batches of this many (``None``: one batch; see :meth:`Problem.outputs`).
+      progress: a bar of the runs solved (where they are solved in parts).
+      path: an HDF5 file that holds the run set.
+
+    Returns:
+      The :class:`RunSet`.
+
+    Raises:
+      CalibrationError: bad ranges or ``n_runs``, or a file at ``path`` that holds a different run set (other
+        parameters, ranges, seed or outputs; never overwritten).
     """
     n_runs = _common.check_count("n_runs", n_runs, 2)
     space = problem.space
@@ -188,8 +240,18 @@ def _resumable(path, planned: RunSet) -> RunSet:
 
 
 def run_missing(problem, runs: RunSet, X, todo, path, chunk, progress) -> None:
-    """Run the rows ``todo`` of ``X`` into ``runs.Y``, each stored in ``path`` (when given) as it arrives, so that an
-    interrupted run set resumes without repeating them; ``runs.done`` is cleared at the end."""
+    """Run the rows ``todo`` of ``X`` into ``runs.Y``; ``runs.done`` is cleared at the end.
+
+    Args:
+      problem: the :class:`~jaxbpm.calibrate.objective.Problem` that solves them.
+      runs: the run set filled.
+      X: its parameter sets ``[N, n]``.
+      todo: the indices of the rows to solve.
+      path: an HDF5 file each row is stored in as it arrives (so that an interrupted run set resumes without
+        repeating them), or None.
+      chunk: solve in batches of this many.
+      progress: a bar of the runs solved.
+    """
     def store(k, row):
         runs.Y[todo[k]], runs.done[todo[k]] = row, True
         runs.save(path)

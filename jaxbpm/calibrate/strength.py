@@ -140,9 +140,19 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
 
 
 def strength_table(result: CalibrationResult) -> list[dict]:
-    """The history of a strength calibration as in Qu et al.'s Tables 4 and 5: per evaluated point the iteration
-    (from 0), its kind, ``sigma_c``, ``tau_c``, the flexural strength and the UCS, their errors, and the cost so far:
-    ``models`` (parameter sets, Qu et al.'s count: one UCS and one bending run each) and ``runs`` (solves)."""
+    """The history of a strength calibration as in Qu et al.'s Tables 4 and 5.
+
+    Args:
+      result: the result of :func:`calibrate_strength`.
+
+    Returns:
+      One row per evaluated point: the iteration (from 0), its kind, ``sigma_c``, ``tau_c``, the flexural strength
+      and the UCS, their errors, and the cost so far: ``models`` (parameter sets, Qu et al.'s count: one UCS and one
+      bending run each) and ``runs`` (solves).
+
+    Raises:
+      CalibrationError: ``result`` is not the result of :func:`calibrate_strength`.
+    """
     if not isinstance(result, CalibrationResult) or "targets" not in result.info:
         raise CalibrationError("strength_table needs the result of calibrate_strength")
     h = result.history
@@ -162,7 +172,14 @@ def strength_table(result: CalibrationResult) -> list[dict]:
 
 
 def format_strength_table(rows: list[dict]) -> str:
-    """:func:`strength_table` rows as text."""
+    """:func:`strength_table` rows as text.
+
+    Args:
+      rows: the rows of :func:`strength_table`.
+
+    Returns:
+      The table, a header and one line per row.
+    """
     head = (f"{'it':>3} {'kind':<11} {'sigma_c [Pa]':>13} {'tau_c [Pa]':>13} {'flexural [Pa]':>14} {'UCS [Pa]':>13} "
             f"{'err f':>8} {'err UCS':>8} {'models':>6} {'runs':>5}")
     lines = [head]

@@ -40,15 +40,23 @@ def _errors(problem: Problem, runs: RunSet, normalize: bool) -> np.ndarray:
 
 
 def fit_forests(X, err, *, n_trees=500, max_features=1 / 3, seed=0, n_jobs=None, regressor=None):
-    """Fit the surrogate of ``err [N, m]`` on ``X [N, n]``; returns ``(models, oob_r2 [m], importance [m, n])``.
+    """Fit the surrogate of the errors ``err`` on the parameter sets ``X``.
 
-    regressor ``None``: one random forest per column of ``err`` (``n_trees`` trees, ``max_features``, out-of-bag
-    scores, ``random_state = seed + column``). Else a scikit-learn regressor, cloned and fitted once on all columns:
-    natively where it supports several outputs, else wrapped in :class:`sklearn.multioutput.MultiOutputRegressor`;
-    its ``random_state`` (when ``None``) becomes ``seed`` and ``n_jobs`` is passed on where it has that parameter.
-    ``oob_r2`` comes from the model's out-of-bag prediction (e.g. a forest with ``oob_score=True``) and
-    ``importance`` from its ``feature_importances_`` (one model for all columns: the same row for each); both are
-    NaN where the model reports none.
+    Args:
+      X: parameter sets ``[N, n]``.
+      err: errors ``[N, m]`` (target minus run, per element).
+      n_trees, max_features: the forests' trees and the fraction of the inputs per split.
+      seed: ``random_state`` of the first forest (``seed + column`` for each column), or of ``regressor`` where its
+        own is ``None``.
+      n_jobs: parallel jobs, passed on where the model takes them.
+      regressor: ``None``: one random forest per column of ``err`` (out-of-bag scores). Else a scikit-learn regressor,
+        cloned and fitted once on all columns: natively where it supports several outputs, else wrapped in
+        :class:`sklearn.multioutput.MultiOutputRegressor`.
+
+    Returns:
+      ``(models, oob_r2 [m], importance [m, n])``: ``oob_r2`` from the model's out-of-bag prediction (e.g. a forest
+      with ``oob_score=True``), ``importance`` from its ``feature_importances_`` (one model for all columns: the same
+      row for each); both NaN where the model reports none.
     """
     if regressor is not None:
         return _fit_regressor(regressor, X, err, seed=seed, n_jobs=n_jobs)
