@@ -37,7 +37,8 @@ _FIRST_SLOPE = 0.1  # a typical d nu / d nu_bond of random packings, to size the
 
 def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None = None, solver: str = "dsm",
                       tol: float = 0.01, max_solves: int = 6, check: str | None = None,
-                      solve_options: Mapping | None = None, progress=None, model: str | None = None) -> CalibrationResult:
+                      solve_options: Mapping | None = None, progress=None,
+                      model: str | None = None) -> CalibrationResult:
     """Calibrate the bond modulus and the bond Poisson ratio so that ``scene`` gives Young's modulus ``E`` [Pa]
     and Poisson's ratio ``nu`` (either may be left out).
 

@@ -146,8 +146,9 @@ class CalibrationResult:
     by the surrogate for ``method="surrogate"``); converged: every target within ``tol``. method: the calibrator
     that produced the answer (``"closed-form"``, ``"adam"``, ``"surrogate"``, ``"multi-fidelity"``); solver: the
     solver it calibrated against (``"dsm"``, ``"ste"``, ``"dem"`` or a :class:`Forward`'s name). evaluations:
-    solves (one parameter set on one scene); iterations: evaluated points (rows of ``history``). levels: per-solver cost of a multi-fidelity run. band: ``{name: (lo, hi)}``
-    (surrogate). notes: what was done and why (e.g. the closed-form shortcut). info: calibrator details.
+    solves (one parameter set on one scene); iterations: evaluated points (rows of ``history``). levels: per-solver
+    cost of a multi-fidelity run. band: ``{name: (lo, hi)}`` (surrogate). notes: what was done and why (e.g. the
+    closed-form shortcut). info: calibrator details.
     """
 
     values: dict[str, float]
