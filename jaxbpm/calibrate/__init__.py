@@ -1,6 +1,8 @@
 """Calibration: find bond parameters that reproduce measured targets.
 
-``jaxbpm.calibrate.calibrate(sample, scene, targets)`` picks the cheapest route that is accurate enough:
+``jaxbpm.calibrate.calibrate(sample, scene, targets, method=..., solver=...)`` runs a calibrator (``method``) on a
+solver (``solver``: ``"dsm"``, ``"ste"``, ``"dem"``, or a :class:`Forward`) and picks the cheapest route that is
+accurate enough (:mod:`~jaxbpm.calibrate.dispatch`):
 
 * ``method="auto"`` (default): multi-fidelity (:mod:`~jaxbpm.calibrate.multifidelity`): STE, then DSM only when STE's
   answer is not already within ``tol`` there; each level in closed form where it applies (bonds-only elasticity:
@@ -21,8 +23,9 @@ Strengths: :func:`calibrate_strength` calibrates the bond tensile and shear stre
 flexural strength (Qu et al.'s original and simplified schemes, :mod:`~jaxbpm.calibrate.strength`); it is
 ``calibrate`` with ``Target("strength", ..., scene="ucs"/"tpb")`` on DEM failure runs.
 
-Lower-level pieces (:class:`Target`, :class:`Parameter`, :class:`ParameterSpace`, :class:`Forward`,
-:class:`Problem` and the calibrator functions) compose the same way for custom models.
+Lower-level pieces (:class:`Target`, :class:`Parameter`, :class:`ParameterSpace`, :class:`Forward` -- a forward,
+parameters to observables --, :class:`Problem` and the calibrator functions) compose the same way for custom
+forwards (:meth:`Forward.from_function`). This package's ``__init__`` only re-exports them.
 """
 
 from __future__ import annotations
