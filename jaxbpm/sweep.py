@@ -42,8 +42,8 @@ def batch_size(batch) -> int:
     if not sizes:
         raise ValueError("sweep: the batch has no arrays")
     if -1 in sizes or len(sizes) != 1:
-        raise ValueError(f"sweep: every leaf of the batch needs the same leading (batch) axis; got sizes {sorted(sizes)}"
-                         " (-1: a scalar leaf)")
+        raise ValueError("sweep: every leaf of the batch needs the same leading (batch) axis; got sizes "
+                         f"{sorted(sizes)} (-1: a scalar leaf)")
     return sizes.pop()
 
 
