@@ -10,9 +10,8 @@ tensile strength and flexural strength.
    ``tau_c`` by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (a
    finite-difference Jacobian, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the UCS
    (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
-   fail in tension). A strength target
-   without its tied parameter's partner leaves the other at its current value. The failure runs of one iteration go
-   to ``executor`` when given (:mod:`jaxbpm.parallel`).
+   fail in tension). A strength target without its tied parameter's partner leaves the other at its current value.
+   The failure runs of one iteration go to ``executor`` when given (:mod:`jaxbpm.parallel`).
 3. **Translation**: the answer as the parameters of LAMMPS, PFC, Yade and MUSEN (:mod:`jaxbpm.interop.conventions`)
    for the specimen's mean particle pair.
 
