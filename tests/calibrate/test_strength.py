@@ -28,11 +28,11 @@ def _targets(**kw):
     return out["ucs"]["strength"], out["tpb"]["strength"]
 
 
-def _run(scheme, model_kw=None, **kw):
-    model_kw = model_kw or {}
+def _run(scheme, forward_kw=None, **kw):
+    forward_kw = forward_kw or {}
     log = []
-    ucs, f = _targets(**model_kw)
-    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme, solver=_stand_in(log=log, **model_kw),
+    ucs, f = _targets(**forward_kw)
+    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme, solver=_stand_in(log=log, **forward_kw),
                                  **kw)
     return res, log
 
@@ -51,7 +51,7 @@ def test_estimates_follow_eq14_and_eq15():
     np.testing.assert_allclose(rows[0]["ucs_error"], m_ucs / ucs - 1, rtol=1e-12)
     assert [r["models"] for r in rows] == [1, 2] and [r["runs"] for r in rows] == [2, 4] and len(log) == 2
     # without cross-coupling the strengths are proportional: the second estimate is the answer
-    exact, log = _run("simplified", model_kw={"b": 0.0, "d": 0.0}, tol=1e-9, max_iterations=5)
+    exact, log = _run("simplified", forward_kw={"b": 0.0, "d": 0.0}, tol=1e-9, max_iterations=5)
     assert exact.converged and exact.iterations == 2 and exact.info["parameter_sets"] == 2
     np.testing.assert_allclose([exact.values["bond_tensile_strength"], exact.values["bond_shear_strength"]], TRUE,
                                rtol=1e-9)
@@ -83,8 +83,8 @@ def test_cross_coupling_costs_the_simplified_scheme_accuracy():
     strength to tau_c (outside the range Qu et al. allows it for) it is off, the original scheme's gradient is not."""
     strong = {"b": 0.05, "d": 0.5}
     kw = dict(tol=0.01, max_iterations=8, learning_rate=0.05, fd_step=0.05)
-    full, flog = _run("original", model_kw=strong, **kw)
-    simp, slog = _run("simplified", model_kw=strong, **kw)
+    full, flog = _run("original", forward_kw=strong, **kw)
+    simp, slog = _run("simplified", forward_kw=strong, **kw)
     # one set per point, plus one perturbed set where Adam's step was too short for a secant
     fallback = simp.iterations - 2 - simp.info["secant_gradients"]
     assert 0 <= fallback <= 2 and simp.info["parameter_sets"] == len(slog) == simp.iterations + fallback
@@ -153,3 +153,12 @@ def test_one_dem_iteration_reads_strengths_from_the_failure_runs():
     p = {**default_params(beam), "bond_tensile_strength": np.array([1.5e6]), "bond_shear_strength": np.array([1e6])}
     direct = jaxbpm.solve(beam, ThreePointBending(strain=0.1), "dem", params=p, transits=15)
     np.testing.assert_allclose(row["flexural"], direct.stats["strength"], rtol=1e-9)
+
+
+def test_model_keyword_still_works_with_a_deprecation_warning():
+    """``model=`` is the old name of ``solver=``: it warns, naming ``solver=``, and gives the same answer."""
+    ucs, f = _targets()
+    new = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, solver=_stand_in(), max_iterations=4)
+    with pytest.warns(DeprecationWarning, match="solver="):
+        old = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, model=_stand_in(), max_iterations=4)
+    assert old.values == new.values and old.errors == new.errors and old.solver == new.solver == "stand-in"
