@@ -81,5 +81,6 @@ def test_lab_errors_and_the_command(specimens, tmp_path):
 
 
 def test_elastic_model_is_the_old_name_of_elastic_solver():
-    with pytest.warns(DeprecationWarning, match="elastic_solver="), pytest.raises(CalibrationError, match="lab targets"):
-        lab({}, {"young": 1e9}, elastic_model="dsm")
+    with pytest.warns(DeprecationWarning, match="elastic_solver="):
+        with pytest.raises(CalibrationError, match="lab targets"):
+            lab({}, {"young": 1e9}, elastic_model="dsm")

@@ -32,8 +32,8 @@ def _run(scheme, forward_kw=None, **kw):
     forward_kw = forward_kw or {}
     log = []
     ucs, f = _targets(**forward_kw)
-    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme, solver=_stand_in(log=log, **forward_kw),
-                                 **kw)
+    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme,
+                                 solver=_stand_in(log=log, **forward_kw), **kw)
     return res, log
 
 
