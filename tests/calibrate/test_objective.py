@@ -1,12 +1,12 @@
-"""The objective's pieces: the parameter pytree of a sample and a scene, and the problem's checks."""
+"""Forwards built from solvers and the parameter pytree of a sample and a scene."""
 
 import pytest
 
 import jaxbpm
 from jaxbpm import calibrate as cal
-from jaxbpm.calibrate import CalibrationError, Parameter, ParameterSpace, Problem, Target
-from jaxbpm.physics.model import default_params
+from jaxbpm.calibrate import CalibrationError
 from jaxbpm.scenes import UniaxialCompression
+from tests.calibrate._cases import SCENE
 
 # one xdist worker for the calibration tests: those that calibrate `one` and `two` share their compiled solves
 pytestmark = pytest.mark.xdist_group("calibrate-module")
@@ -25,9 +25,14 @@ def test_base_params_reads_particle_and_cohesive_entries():
         cal.base_params(s, ["bond_colour"])
 
 
-def test_problem_errors(one, dsm_forward):
-    space = ParameterSpace([Parameter("bond_E")], default_params(one))
-    with pytest.raises(CalibrationError, match="does not report 'strength'"):
-        Problem(dsm_forward, [Target("strength", 1e6)], space).outputs([[1e9]])
-    with pytest.raises(CalibrationError, match="scene 'x'"):
-        Problem(dsm_forward, [Target("stiffness", 1.0, scene="x")], space)
+def test_forward_model_is_cached_and_checks_its_arguments(one):
+    fwd = cal.forward_model(one, SCENE, "dsm")
+    assert fwd is cal.forward_model(one, SCENE, "dsm") and fwd.name == "dsm" and fwd.scenes == ("main",)
+    assert fwd.homogeneous and fwd.pure is not None  # bonds only: linear in the bond moduli, a pure stiffness
+    assert cal.forward_model(one, SCENE, "ste") is not fwd
+    with pytest.raises(CalibrationError, match="unknown solver 'fem'"):
+        cal.forward_model(one, SCENE, "fem")
+    with pytest.raises(CalibrationError, match="no scene given"):
+        cal.forward_model(one, {}, "dsm")
+    with pytest.raises(CalibrationError, match="one sample per scene"):
+        cal.forward_model({"a": one}, {"b": SCENE}, "dsm")
