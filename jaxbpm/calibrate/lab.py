@@ -192,32 +192,12 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       CalibrationError: unknown or invalid targets, a missing specimen, strength scenes with different failure
         rules, or a stage that fails for a reason other than an unreachable target.
     """
-    from jaxbpm.calibrate.elastic import calibrate_elastic
-    from jaxbpm.sample import Sample
     from jaxbpm.scenes import BrazilianDisc, ThreePointBending, UniaxialCompression
 
     elastic_solver = _common.renamed_keyword(elastic_solver, elastic_model, new="elastic_solver", old="elastic_model")
     t0 = time.perf_counter()
-    targets = dict(targets)
-    unknown = sorted(set(targets) - set(LAB_TARGETS))
-    if unknown or not targets:
-        raise CalibrationError(f"lab targets must be some of {LAB_TARGETS}, got {sorted(targets)}")
-    for key, value in targets.items():
-        ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and np.isfinite(value)
-        if not ok or (key != "nu" and value <= 0) or (key == "nu" and not -1 < value < 0.5):
-            raise CalibrationError(f"target {key!r} must be {'in (-1, 0.5)' if key == 'nu' else 'a number > 0'} "
-                                   f"[{'-' if key == 'nu' else 'Pa'}], got {value!r}")
-    samples = dict(samples)
-    if "elastic" not in samples and "ucs" in samples:
-        samples["elastic"] = samples["ucs"]
-    need = ({"elastic"} if {"E", "nu"} & set(targets) else set()) | {k for k in _SCENE_OF if k in targets}
-    missing = sorted(need - set(samples))
-    if missing:
-        raise CalibrationError(f"no specimen for {missing}: pass samples={{{', '.join(repr(m) for m in missing)}: "
-                               "Sample, ...}} (the elastic targets default to the 'ucs' specimen)")
-    for key in need:
-        if not isinstance(samples[key], Sample):
-            raise CalibrationError(f"samples[{key!r}] must be a jaxbpm.Sample, got {type(samples[key]).__name__}")
+    targets = _checked_targets(targets)
+    samples, need = _specimens(samples, targets)
     scene_of = {"elastic": UniaxialCompression(strain=1e-3), "ucs": UniaxialCompression.to_failure(strain=0.02),
                 "bts": BrazilianDisc(), "flexural": ThreePointBending(strain=0.1), **dict(scenes or {})}
     if failure_rule is not None:
@@ -233,51 +213,103 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
     stages, unreached, achieved, solves = {}, {}, {}, {}
     params = _current(samples[sorted(need)[0]])
 
-    # 1. elastic
     if {"E", "nu"} & set(targets):
-        try:
-            res = calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets.get("E"), nu=targets.get("nu"),
-                                    solver=elastic_solver, tol=elastic_tol, check=check, progress=progress)
-        except CalibrationError as err:
-            if "nu" not in targets or "out of this sample's reach" not in str(err):
-                raise
-            unreached["nu"] = str(err)
-            res = (calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets["E"], solver=elastic_solver,
-                                     tol=elastic_tol, check=check, progress=progress) if "E" in targets else None)
-        if res is not None:
-            stages["elastic"] = res
-            params.update(bond_E=res.values["bond_E"], bond_nu=res.values.get("bond_nu", params["bond_nu"]))
-            solves["elastic"] = res.evaluations
-            errors = res.info["check"]["errors"] if "check" in res.info else res.errors
-            for key, name in (("E", "youngs_modulus"), ("nu", "poisson_ratio")):
-                if key in targets and name in errors:
-                    achieved[key] = (targets[key] * (1 + errors[name]), float(errors[name]))
-    # every specimen takes the elastic answer
-    samples = {k: _with(s, params) for k, s in samples.items()}
-
-    # 2. strengths
+        _elastic_stage(samples["elastic"], scene_of["elastic"], targets, params, stages, unreached, achieved, solves,
+                       solver=elastic_solver, tol=elastic_tol, check=check, progress=progress)
+    samples = {k: _with(s, params) for k, s in samples.items()}  # every specimen takes the elastic answer
     curves = {}
     wanted = [k for k in ("ucs", "bts", "flexural") if k in targets]
     if wanted:
-        res = _strength_stage(samples, scene_of, targets, wanted, params, tol=tol, max_iterations=max_iterations,
-                              fd_step=fd_step, solve_options=dict(solve_options or {"transits": 30}),
-                              executor=executor, progress=progress)
-        stages["strength"] = res
-        solves["strength (DEM failure runs)"] = res.evaluations
-        params.update(bond_tensile_strength=res.values.get("bond_tensile_strength", params["bond_tensile_strength"]),
-                      bond_shear_strength=res.values.get("bond_shear_strength", params["bond_shear_strength"]))
-        if not res.converged:
-            for k in wanted:
-                if abs(res.errors[f"{_SCENE_OF[k]}.strength"]) > tol:
-                    unreached[k] = (f"not within {tol:.0%} after {res.iterations} iterations (best "
-                                    f"{res.errors[f'{_SCENE_OF[k]}.strength']:+.1%}); raise max_iterations")
-        curves = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved, targets)
-        solves["answer runs (DEM)"] = len(wanted)
+        curves = _strengths(samples, scene_of, targets, wanted, params, stages, unreached, achieved, solves, tol=tol,
+                            max_iterations=max_iterations, fd_step=fd_step, solve_options=solve_options,
+                            executor=executor, progress=progress)
     conventions = _translations(samples[sorted(need)[0]], params)
     return LabResult(targets=targets, params={k: float(v) for k, v in params.items()}, achieved=achieved,
                      stages=stages, unreached=unreached, conventions=conventions, curves=curves,
                      wall_time=time.perf_counter() - t0, solves=solves,
                      failure_rule=rules[0] if rules else "separate")
+
+
+def _checked_targets(targets) -> dict:
+    """The lab targets as a dict, each checked (a number > 0 [Pa], or a Poisson ratio in (-1, 0.5))."""
+    targets = dict(targets)
+    unknown = sorted(set(targets) - set(LAB_TARGETS))
+    if unknown or not targets:
+        raise CalibrationError(f"lab targets must be some of {LAB_TARGETS}, got {sorted(targets)}")
+    for key, value in targets.items():
+        ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and np.isfinite(value)
+        if not ok or (key != "nu" and value <= 0) or (key == "nu" and not -1 < value < 0.5):
+            raise CalibrationError(f"target {key!r} must be {'in (-1, 0.5)' if key == 'nu' else 'a number > 0'} "
+                                   f"[{'-' if key == 'nu' else 'Pa'}], got {value!r}")
+    return targets
+
+
+def _specimens(samples, targets):
+    """``(samples, need)``: the specimens by test (the elastic one defaults to the UCS cylinder) and the tests the
+    targets need, each checked to be a :class:`~jaxbpm.Sample`."""
+    from jaxbpm.sample import Sample
+
+    samples = dict(samples)
+    if "elastic" not in samples and "ucs" in samples:
+        samples["elastic"] = samples["ucs"]
+    need = ({"elastic"} if {"E", "nu"} & set(targets) else set()) | {k for k in _SCENE_OF if k in targets}
+    missing = sorted(need - set(samples))
+    if missing:
+        raise CalibrationError(f"no specimen for {missing}: pass samples={{{', '.join(repr(m) for m in missing)}: "
+                               "Sample, ...}} (the elastic targets default to the 'ucs' specimen)")
+    for key in need:
+        if not isinstance(samples[key], Sample):
+            raise CalibrationError(f"samples[{key!r}] must be a jaxbpm.Sample, got {type(samples[key]).__name__}")
+    return samples, need
+
+
+def _elastic_stage(sample, scene, targets, params, stages, unreached, achieved, solves, *, solver, tol, check,
+                   progress) -> None:
+    """Stage 1: E and nu by :func:`~jaxbpm.calibrate.elastic.calibrate_elastic` (E alone where nu is out of the
+    sample's reach); its answer goes into ``params`` and its record into ``stages``, ``unreached``, ``achieved`` and
+    ``solves``."""
+    from jaxbpm.calibrate.elastic import calibrate_elastic
+
+    try:
+        res = calibrate_elastic(sample, scene, E=targets.get("E"), nu=targets.get("nu"), solver=solver, tol=tol,
+                                check=check, progress=progress)
+    except CalibrationError as err:
+        if "nu" not in targets or "out of this sample's reach" not in str(err):
+            raise
+        unreached["nu"] = str(err)
+        res = (calibrate_elastic(sample, scene, E=targets["E"], solver=solver, tol=tol, check=check,
+                                 progress=progress) if "E" in targets else None)
+    if res is None:
+        return
+    stages["elastic"] = res
+    params.update(bond_E=res.values["bond_E"], bond_nu=res.values.get("bond_nu", params["bond_nu"]))
+    solves["elastic"] = res.evaluations
+    errors = res.info["check"]["errors"] if "check" in res.info else res.errors
+    for key, name in (("E", "youngs_modulus"), ("nu", "poisson_ratio")):
+        if key in targets and name in errors:
+            achieved[key] = (targets[key] * (1 + errors[name]), float(errors[name]))
+
+
+def _strengths(samples, scene_of, targets, wanted, params, stages, unreached, achieved, solves, *, tol,
+               max_iterations, fd_step, solve_options, executor, progress) -> dict:
+    """Stage 2: the bond strengths by DEM failure runs (:func:`_strength_stage`), then one failure run per test at
+    the answer; the answer goes into ``params`` and its record into ``stages``, ``unreached``, ``achieved`` and
+    ``solves``. Returns the stress-strain curves of the runs at the answer."""
+    res = _strength_stage(samples, scene_of, targets, wanted, params, tol=tol, max_iterations=max_iterations,
+                          fd_step=fd_step, solve_options=dict(solve_options or {"transits": 30}),
+                          executor=executor, progress=progress)
+    stages["strength"] = res
+    solves["strength (DEM failure runs)"] = res.evaluations
+    params.update(bond_tensile_strength=res.values.get("bond_tensile_strength", params["bond_tensile_strength"]),
+                  bond_shear_strength=res.values.get("bond_shear_strength", params["bond_shear_strength"]))
+    if not res.converged:
+        for k in wanted:
+            if abs(res.errors[f"{_SCENE_OF[k]}.strength"]) > tol:
+                unreached[k] = (f"not within {tol:.0%} after {res.iterations} iterations (best "
+                                f"{res.errors[f'{_SCENE_OF[k]}.strength']:+.1%}); raise max_iterations")
+    curves = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved, targets)
+    solves["answer runs (DEM)"] = len(wanted)
+    return curves
 
 
 def _current(sample) -> dict:
