@@ -281,6 +281,29 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"jaxbpm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_CommandParser)
 
+    _add_generate(sub)
+    _add_info(sub)
+    _add_export_vtk(sub)
+    _add_demo(sub)
+
+    # commands defined in packages that import JAX: their options are added when the command is used (or its
+    # help shown), so that `jaxbpm --help` and the other commands' parsing stay free of JAX
+    lazy = {name: sub.add_parser(name, help=text) for name, text in _LAZY_COMMANDS.items()}
+    for name, parser_ in lazy.items():
+        parser_.populate = functools.partial(_populate, lazy, _LAZY_LOADERS[name])
+    # the cache options are global, accepted before the command and after it (SUPPRESS: an option absent after the
+    # command does not overwrite the value given before it)
+    _add_cache_options(parser, argparse.SUPPRESS)
+    for name, command_parser in sub.choices.items():
+        if name not in lazy:
+            _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
+    parser.set_defaults(no_cache=False, cache_dir=None)
+    return parser
+
+
+
+def _add_generate(sub) -> None:
+    """The ``generate`` command: a bonded sample saved to an HDF5 file."""
     d = _GENERATE_DEFAULTS
     p = sub.add_parser(
         "generate", help="generate a bonded sample and save it to an HDF5 file",
@@ -311,6 +334,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress output while generating")
     p.set_defaults(func=_cmd_generate)
 
+
+
+def _add_info(sub) -> None:
+    """The ``info`` command: a summary of a sample file or of the compilation cache."""
     p = sub.add_parser("info", help="print a summary of a sample file (or of the compilation cache)",
                        description="Print a summary of a sample file: counts, coordination, clusters, packing "
                                    "fraction, radii, extent and mass. With --cache, also (or, without a sample "
@@ -321,6 +348,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "cached programs and its size")
     p.set_defaults(func=_cmd_info, usage_error=p.error)
 
+
+
+def _add_export_vtk(sub) -> None:
+    """The ``export-vtk`` command: a sample file as VTK for ParaView."""
     p = sub.add_parser("export-vtk", help="export a sample file to VTK for ParaView",
                        description="Export a sample file to VTK: particles as points/vertices (radius, mass, "
                                    "coordination) and bonds as lines (bond_radius, material, length). The suffix "
@@ -329,6 +360,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", type=pathlib.Path, help="VTK file to write (.vtu or .vtk)")
     p.set_defaults(func=_cmd_export_vtk)
 
+
+
+def _add_demo(sub) -> None:
+    """The ``demo`` command: :func:`run_demo`."""
     p = sub.add_parser("demo", help="run the demo (a sample: STE, DSM and DEM stiffness, a calibration, a chart)",
                        description="Run the demo: generate a random box sample, save it to OUT/demo_sample.h5, "
                                    "compute its stiffness by STE, DSM (two tolerances) and DEM, compare stiffness "
@@ -346,21 +381,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-calibrate", action="store_true", dest="no_calibrate",
                    help="skip the calibration step")
     p.set_defaults(func=_cmd_demo)
-
-    # commands defined in packages that import JAX: their options are added when the command is used (or its
-    # help shown), so that `jaxbpm --help` and the other commands' parsing stay free of JAX
-    lazy = {name: sub.add_parser(name, help=text) for name, text in _LAZY_COMMANDS.items()}
-    for name, parser_ in lazy.items():
-        parser_.populate = functools.partial(_populate, lazy, _LAZY_LOADERS[name])
-    # the cache options are global, accepted before the command and after it (SUPPRESS: an option absent after the
-    # command does not overwrite the value given before it)
-    _add_cache_options(parser, argparse.SUPPRESS)
-    for name, command_parser in sub.choices.items():
-        if name not in lazy:
-            _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
-    parser.set_defaults(no_cache=False, cache_dir=None)
-    return parser
-
 
 # commands whose options come from another module (it imports JAX): name -> one-line help, name -> loader
 _LAZY_COMMANDS = {
