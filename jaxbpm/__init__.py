@@ -9,7 +9,7 @@ submodules load on first use, so ``jaxbpm --help`` answers at once.
 
 from jaxbpm import errors
 from jaxbpm._cache import compilation_cache_dir, default_cache_dir, enable_compilation_cache
-from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotFiniteError, SampleError,
+from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotFiniteError, OptionsError, SampleError,
                            SampleFileError, SceneError, SimulationInterrupted, SolveError)
 
 from jaxbpm._version import __version__
@@ -21,18 +21,19 @@ __all__ = [
     "NotFiniteError",
     "SimulationInterrupted",
     "enable_compilation_cache", "compilation_cache_dir", "default_cache_dir",
-    "DEM", "DSM", "STE", "count_compilations",
+    "DEM", "DSM", "STE", "SolverOptions", "Status", "OptionsError", "count_compilations",
 ]
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
 _LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop", "records", "options",
-         "physics", "sample", "result",
+         "physics", "sample", "result", "status",
          "formats", "conventions")  # (the last two: old names of jaxbpm.interop's modules, deprecated)
 # names loaded on first use: name -> the module that defines it
 _LAZY_NAMES = {
     "Sample": "jaxbpm.sample", "BondMaterials": "jaxbpm.sample", "ParticleMaterial": "jaxbpm.sample",
     "Domain": "jaxbpm.sample", "SampleSummary": "jaxbpm.sample", "solve": "jaxbpm.solving",
-    "Result": "jaxbpm.result", "DEM": "jaxbpm.options", "DSM": "jaxbpm.options", "STE": "jaxbpm.options",
+    "Result": "jaxbpm.result", "DEM": "jaxbpm.options", "DSM": "jaxbpm.dsm.options", "STE": "jaxbpm.ste.options",
+    "Status": "jaxbpm.status", "SolverOptions": "jaxbpm._options",
     "count_compilations": "jaxbpm._compile", "solve_batch": "jaxbpm.batched",
 }
 

@@ -1,38 +1,29 @@
-"""``jaxbpm.solve(sample, scene, method="auto", tol=0.01)``: the cheapest method expected to meet ``tol``.
+"""``jaxbpm.solve(sample, scene, method="auto", tol=0.01)``: the cheapest solver expected to meet ``tol``.
 
-The rule (:func:`choose`) reads what the project measured (``docs/methods.md``, "Which method when"; the benchmarks
-``stability.py``, ``methods.py``, ``pareto.py``) as an upper envelope of each method's relative stiffness error
-against the DEM, and takes the first method, cheapest first, whose envelope is within ``tol``:
+The rule (:func:`choose`) holds an upper envelope of each route's relative stiffness error against the DEM (the
+constants below; ``docs/methods.md``, "Which method when", shows the benchmarks they bound) and takes the first
+route, cheapest first, whose envelope is within ``tol``:
 
     STE  <  linear DSM, bonds only  <  the same, geometrically corrected  <  linear DSM, contacts linearised
          <  nonlinear DSM  <  DEM
 
-* **DEM** for anything past elasticity or not measured: a scene that breaks bonds (``sample_breaks``), cohesive
-  contacts, a scene other than :class:`~jaxbpm.scenes.UniaxialCompression` (bending, the Brazilian disc: the
-  static methods were not validated there, or the scene declares ``methods=("dem",)``), and a ``tol`` below every
-  static method's envelope. The DEM is the reference: its own error is taken as 0.
-* **STE** (bonds only): +3 % to +24 % on random packings (``docs/methods.md``: +4 % dense box at bond coordination
-  6, +6 % to +17 % porous cylinders and loose boxes, +24 % porous coordination 6; it grows with the sample size), so
-  only for ``tol >= 0.25``. With contacts never (above 5 % once contacts carry 6.5 % of the stiffness).
-* **Linear DSM, bonds only**: the bonds' geometric nonlinearity over the strain, ``g = 0.6 strain + 0.001``
-  (measured +0.15 % at 0.2 % strain, +1.12 % at 2 %, 400 particles; +0.06 to +0.18 % at 0.2 % on 2k-100k with or
-  without ``stiffness_tol=1e-2``), plus, on a scene with contacts, the contacts' share ``s`` of the stiffness
-  (the bonds-only solve ignores them: its error is ``-s``), taken 25 % larger (the share comes from the linearised
-  contacts, which are soft: :data:`SHARE_UNCERTAINTY`).
-* **Linear DSM, bonds only, geometrically corrected** (``geometric_correction=True``): the exact bond law's work
-  along the linear displacement field gives K to second order (:func:`jaxbpm.dsm.linear.geometric_stiffness`):
-  ``strain^2 + 0.15 %`` (measured 0.008 / 0.034 / 0.14 % from the nonlinear DSM at 0.2 / 2 / 5 % strain), up to
-  5 % strain; a few force evaluations after the linear solve, several times cheaper than the nonlinear DSM.
-* **Linear DSM with linearised contacts** (``nonlinear=False``): an envelope ``h(s)`` of the measured errors
-  against ``s``: -0.4 % at 9 %, -1.4 % at 23 %, -2.9 % at 45 %, -4.8 % at 47 % (1 % strain), -2.7 % at 69 %, then
-  +4 % at 82 % (16 % worst on Jarolin & Dosta's Case 2 at 77-93 %), +29 % at 90 %, +78 % at 93 %
-  (:data:`LINEARISED_ENVELOPE`). Up to 70 % the linearisation is soft and the bonds' geometric nonlinearity stiff,
-  so ``max(g, h)`` bounds the sum; beyond, ``g + h``.
-* **Nonlinear DSM** (Hertz contacts sliding at the Coulomb limit; walls): 0.1 % on bonds only (it solves the
-  geometric nonlinearity), 0.3 % with contacts carrying up to 71 %, 1 % up to 90 % where Newton converges (+0.12 %
-  to +0.36 % measured at 82-86 %; the 6 % worst of Jarolin & Dosta's Case 2 in ``methods.py`` was Newton capped and
-  unconverged), 6 % above (:data:`NONLINEAR_ENVELOPE`). It runs with ``throw=False``: a solve that stops above its
-  tolerance is replaced by the DEM (``stats["method_choice"]["fallback"]``).
+* **DEM** for anything past elasticity or not covered: a scene that breaks bonds (``sample_breaks``), cohesive
+  contacts, a scene other than :class:`~jaxbpm.scenes.UniaxialCompression` (or one whose ``methods`` are the DEM's
+  alone), and a ``tol`` below every static route's envelope. The DEM is the reference: its own error is taken as 0.
+* **STE** (bonds only, no walls): :data:`STE_BONDS_ERROR`; never with contacts.
+* **Linear DSM, bonds only**: the bonds' geometric nonlinearity, ``g = GEOMETRIC_SLOPE x strain +
+  GEOMETRIC_FLOOR`` (:func:`geometric_error`); on a scene with contacts plus their share ``s`` of the stiffness
+  (the bonds-only solve leaves them out: its error is ``-s``), taken :data:`SHARE_UNCERTAINTY` larger (the share
+  comes from the linearised contacts, which are soft).
+* **Linear DSM, bonds only, geometrically corrected** (``geometric_correction=True``: the exact bond law's work
+  along the linear displacement field, second order, :func:`jaxbpm.dsm.linear.geometric_stiffness`):
+  ``CORRECTED_SLOPE x strain^2 + CORRECTED_FLOOR`` (:func:`corrected_error`) up to :data:`CORRECTED_MAX_STRAIN`.
+* **Linear DSM with linearised contacts** (``nonlinear=False``): ``h(s)``, :data:`LINEARISED_ENVELOPE` against the
+  share. Up to a 70 % share the linearisation makes it soft and the bonds' geometric nonlinearity stiff, so
+  ``max(g, h)`` bounds the sum; beyond, ``g + h``.
+* **Nonlinear DSM** (Hertz contacts sliding at the Coulomb limit; walls): :data:`NONLINEAR_BONDS_ERROR` on bonds
+  only, :data:`NONLINEAR_ENVELOPE` against the share with contacts. It runs with ``throw=False``: a solve that stops
+  above its tolerance is replaced by the DEM (``stats["method_choice"]["fallback"]``).
 
 The contact share ``s = 1 - K_bonds / K_contacts`` comes from one cheap linear pass: the linear DSM on the bonds
 alone and with the contacts linearised (two linear solves, the second of two passes). Where the choice is one of
@@ -50,10 +41,17 @@ import dataclasses
 import math
 import numbers
 import time
+from typing import Callable
 
 import numpy as np
 
+from jaxbpm import dsm
+from jaxbpm._options import resolve_options, SolverOptions
+from jaxbpm.dsm.options import DSM
 from jaxbpm.errors import SceneError, SolveError
+from jaxbpm.physics.model import check_params
+from jaxbpm.result import Result, settle
+from jaxbpm.sample import Sample
 
 __all__ = ["choose", "solve_auto", "DEFAULT_TOL", "ROUTES", "OPTIONS"]
 
@@ -62,39 +60,41 @@ OPTIONS = ("tol", "throw", "progress")
 #: the routes, cheapest first
 ROUTES = ("ste", "dsm_bonds", "dsm_bonds_corrected", "dsm_linearised", "dsm_nonlinear", "dem")
 
-#: STE on bonds-only random packings: +3 % to +24 % against the DEM / DSM (docs/methods.md)
+#: the STE's error envelope on bonds-only random packings
 STE_BONDS_ERROR = 0.25
 #: the linear bonds-only DSM's geometric nonlinearity: error ~ GEOMETRIC_SLOPE x strain + GEOMETRIC_FLOOR
 GEOMETRIC_SLOPE, GEOMETRIC_FLOOR = 0.6, 0.001
-#: (contact share, |error|) of the linear DSM with linearised contacts, beyond the bonds' own ``g``: an upper
-#: envelope of stability.py (0.4 / 1.4 / 2.9 / 2.7 % at 9 / 23 / 45 / 69 %, +4 / +29 / +78 % at 82 / 90 / 93 %),
-#: pareto.py (4.8 % at 47 %, 1 % strain) and methods.py (Case 2, 77-93 %: 5.2 % mean, 16 % worst)
+#: (contact share, |error|) of the linear DSM with linearised contacts, beyond the bonds' own ``g``; linear between
+#: the points
 LINEARISED_ENVELOPE = ((0.0, 0.005), (0.1, 0.01), (0.25, 0.02), (0.45, 0.05), (0.7, 0.07), (0.77, 0.17),
                        (0.82, 0.2), (0.9, 0.35), (0.93, 0.8), (1.0, math.inf))
-#: (contact share, |error|) of the nonlinear DSM when Newton converges: -0.1 to +0.3 % up to 71 % (stability.py,
-#: pareto.py); +0.12 % at 82 % (the stability box, E_b = 1e8 Pa) and +0.24 % / +0.36 % on Case 2 (2:1 at 100 %, 1:4
-#: at 40 %; 83 % / 86 %) at 400 particles with the default newton_maxiter (auto_method.py and a check of this
-#: module's); Case 2's 6 % worst (methods.py) was Newton capped at 6 iterations, stopped above its tolerance. No
-#: converged data above 90 %. A nonlinear solve that does not converge falls back to the DEM.
+#: (contact share, |error|) of the nonlinear DSM when Newton converges (one that does not falls back to the DEM)
 NONLINEAR_ENVELOPE = ((0.0, 0.003), (0.71, 0.003), (0.77, 0.01), (0.9, 0.01), (0.93, 0.06), (1.0, 0.06))
-#: the nonlinear DSM on bonds only (geometric nonlinearity solved): 0.04-0.06 % against the DEM
+#: the nonlinear DSM on bonds only (geometric nonlinearity solved)
 NONLINEAR_BONDS_ERROR = 0.001
-#: the linear bonds-only DSM with its geometric correction (``geometric_correction=True``: the exact bond law's work
-#: along the linear field, second order): error ~ CORRECTED_SLOPE x strain^2 + CORRECTED_FLOOR; measured against
-#: the nonlinear DSM 0.008 / 0.034 / 0.14 % at 0.2 / 2 / 5 % strain (400-particle box; 0.015-0.039 % on the other
-#: samples of auto_method.py at 0.5-2 %), which is 0.05 % from the DEM; not measured beyond CORRECTED_MAX_STRAIN
+#: the linear bonds-only DSM with its geometric correction: error ~ CORRECTED_SLOPE x strain^2 + CORRECTED_FLOOR, up
+#: to CORRECTED_MAX_STRAIN (beyond: not used)
 CORRECTED_SLOPE, CORRECTED_FLOOR, CORRECTED_MAX_STRAIN = 1.0, 0.0015, 0.05
 #: the contacts' share from the linear pass is low by up to this fraction of itself (the linearised contacts are
-#: soft: 4-10 % of the share in stability.py and pareto.py; 14 % on auto_method.py's 1200-particle porous cylinder,
-#: share 4.7 %, where the corrected bonds-only K came out 5.4 % low)
+#: soft)
 SHARE_UNCERTAINTY = 0.25
-#: stiffness_tol of the linear DSM routes when tol >= LOOSE_TOL: K within 0.2 % of the converged answer (48-216x
-#: the DEM's speed against 21-63x, docs/methods.md); below, the default (K within ~1e-7)
+#: stiffness_tol of the linear DSM routes when tol >= LOOSE_TOL (K within 0.2 % of the converged answer); below,
+#: the DSM's default
 LOOSE_TOL, LOOSE_STIFFNESS_TOL = 0.01, 1e-2
 
 
 def check_tol(tol) -> float:
-    """``tol`` as a float in (0, 1), else :class:`SceneError` naming it."""
+    """``tol`` as a float.
+
+    Args:
+      tol: the relative stiffness error allowed against the DEM.
+
+    Returns:
+      ``float(tol)``.
+
+    Raises:
+      SceneError: ``tol`` is not a number in (0, 1).
+    """
     if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not (0 < float(tol) < 1):
         raise SceneError(f"method='auto' takes tol, the relative stiffness error allowed against the DEM, in (0, 1) "
                          f"(e.g. 0.01 for 1 %), got {tol!r}")
@@ -114,22 +114,43 @@ def _envelope(table, s) -> float:
 
 
 def geometric_error(strain) -> float:
-    """Envelope of the linear DSM's error from the bonds' geometric nonlinearity at ``strain``."""
+    """Envelope of the linear DSM's relative error from the bonds' geometric nonlinearity.
+
+    Args:
+      strain: the scene's strain.
+
+    Returns:
+      ``GEOMETRIC_SLOPE x strain + GEOMETRIC_FLOOR``.
+    """
     return GEOMETRIC_SLOPE * float(strain) + GEOMETRIC_FLOOR
 
 
 def corrected_error(strain) -> float:
-    """Envelope of the linear bonds-only DSM's error after its geometric correction at ``strain`` (``inf`` beyond
-    the strains measured)."""
+    """Envelope of the linear bonds-only DSM's relative error after its geometric correction.
+
+    Args:
+      strain: the scene's strain.
+
+    Returns:
+      ``CORRECTED_SLOPE x strain^2 + CORRECTED_FLOOR``; ``inf`` beyond :data:`CORRECTED_MAX_STRAIN`.
+    """
     strain = abs(float(strain))
     return CORRECTED_SLOPE * strain**2 + CORRECTED_FLOOR if strain <= CORRECTED_MAX_STRAIN else math.inf
 
 
 def expected_errors(scene, share, geometric=None) -> dict:
-    """The envelope of each route's relative error against the DEM on ``scene`` with contact share ``share``
-    (``None``: no contacts; ``nan``: unknown, taken as contact-dominated). ``geometric``: the linear bonds-only
-    solve's measured geometric error (its K over the corrected one, less 1; ``None``: not measured, the envelope
-    :func:`geometric_error` stands in)."""
+    """The envelope of each route's relative error against the DEM.
+
+    Args:
+      scene: the scene (its strain and walls).
+      share: the contacts' share of the stiffness (``None``: no contacts; ``nan``: unknown, taken as
+        contact-dominated).
+      geometric: the linear bonds-only solve's geometric error from its own field (its K over the corrected one,
+        less 1); ``None``: the envelope :func:`geometric_error` stands in.
+
+    Returns:
+      ``{route: error}`` for every route of :data:`ROUTES` (``inf``: the route does not model the scene).
+    """
     g = geometric_error(scene.strain) if geometric is None else abs(float(geometric))
     gc = corrected_error(scene.strain)
     walls = bool(getattr(scene, "uses_walls", False))
@@ -153,8 +174,8 @@ def expected_errors(scene, share, geometric=None) -> dict:
 
 def _linearised_error(g, s) -> float:
     """Envelope of the linear DSM with linearised contacts: up to a 70 % share the linearisation makes it soft
-    (every measured error there is negative) while the bonds' geometric nonlinearity makes it stiff (``g``, positive),
-    so the larger of the two bounds their sum; beyond, where it turns stiff too (+4 % to +78 %), they add."""
+    while the bonds' geometric nonlinearity makes it stiff (``g``, positive), so the larger of the two bounds their
+    sum; beyond, where it turns stiff too, they add."""
     h = _envelope(LINEARISED_ENVELOPE, s)
     return max(g, h) if s <= 0.7 else g + h
 
@@ -181,7 +202,7 @@ def _dem_only(sample, scene) -> str | None:
     allowed = getattr(scene, "methods", None)
     if allowed is not None and not ({"dsm", "ste"} & set(allowed)):
         return f"{type(scene).__name__} is modelled by the DEM only (methods={tuple(allowed)})"
-    if not isinstance(scene, UniaxialCompression):
+    if not isinstance(scene, UniaxialCompression):  # scene.methods: once every scene declares its solvers
         return (f"the static methods were validated on uniaxial compression only, not on {type(scene).__name__}: "
                 "the DEM")
     if sample_breaks(sample, getattr(scene, "breakage", None)):
@@ -197,20 +218,18 @@ def _linear_options(tol) -> dict:
 
 def _probe(sample, scene, params, tol):
     """The cheap linear pass: ``(share, bonds_result, linearised_result, seconds, note)``."""
-    from jaxbpm.solving import _solve
-
     layers = scene if not scene.uses_walls else dataclasses.replace(scene, boundary="layers")
     t = time.perf_counter()
     res_b = res_c = None
     note = ""
+    linear = DSM(nonlinear=False, throw=False, **_linear_options(tol))
     try:
-        res_b = _solve(sample, dataclasses.replace(layers, contacts=False), "dsm", params,
-                       {"nonlinear": False, "throw": False, **_linear_options(tol)})
-        res_c = _solve(sample, layers, "dsm", params, {"nonlinear": False, "throw": False, **_linear_options(tol)})
+        res_b = dsm.solve_scene(sample, dataclasses.replace(layers, contacts=False), params, linear)
+        res_c = dsm.solve_scene(sample, layers, params, linear)
     except (SceneError, SolveError) as exc:  # e.g. particles held by contacts only: no bonds-only answer
         note = f"; the linear pass failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})"
     seconds = time.perf_counter() - t
-    ok = [r is not None and r.status == "converged" and np.isfinite(r.stiffness) and r.stiffness > 0
+    ok = [r is not None and r.status.ok and np.isfinite(r.stiffness) and r.stiffness > 0
           for r in (res_b, res_c)]
     if not all(ok):
         if not note:
@@ -221,9 +240,21 @@ def _probe(sample, scene, params, tol):
 
 @dataclasses.dataclass
 class Choice:
-    """What :func:`choose` decided: ``method`` and ``options`` for :func:`jaxbpm.solve` on ``scene`` (the bonds-only
-    route solves the scene without contacts), the ``route`` name, the reason, the contact share and the probe's
-    results (reused when the route is one of them)."""
+    """What :func:`choose` decided.
+
+    Attributes:
+      method: the solver (``"ste"``, ``"dsm"``, ``"dem"``).
+      options: the solver's options that differ from its defaults (a dict; ``solver_options`` is the object).
+      route: the route's name (one of :data:`ROUTES`).
+      why: the reason, in words.
+      scene: the scene to solve (the bonds-only routes solve it without contacts).
+      tol: the tolerance the choice meets.
+      contact_share: the contacts' share of the stiffness from the linear pass (``None``: no contacts).
+      expected: each route's error envelope.
+      probe_time: the linear pass's seconds.
+      probe: the linear pass's results by route (reused when the route is one of them).
+      geometric_error: the bonds' geometric error from the probe's field, where measured.
+    """
 
     method: str
     options: dict
@@ -236,6 +267,11 @@ class Choice:
     probe_time: float = 0.0
     probe: dict = dataclasses.field(default_factory=dict)
     geometric_error: float | None = None
+
+    @property
+    def solver_options(self) -> SolverOptions:
+        """The options object of the chosen solver (``options`` checked)."""
+        return resolve_options(self.method, self.options)
 
     def record(self) -> dict:
         """The ``stats["method_choice"]`` entry."""
@@ -255,8 +291,20 @@ _DESCRIBE = {"ste": "the STE", "dsm_bonds": "the linear DSM on the bonds alone",
 
 
 def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
-    """The cheapest route whose measured error envelope is within ``tol`` (see the module docstring); on a scene
-    with Hertz contacts this runs the linear pass that measures the contacts' share of the stiffness."""
+    """The cheapest route whose error envelope is within ``tol`` (see the module docstring).
+
+    On a scene with Hertz contacts this runs the linear pass that measures the contacts' share of the stiffness.
+
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      tol: the relative stiffness error allowed against the DEM, in (0, 1).
+      params: parameters overriding the sample's, checked by :func:`~jaxbpm.physics.model.check_params`
+        (``None``: its own).
+
+    Returns:
+      The :class:`Choice`.
+    """
     tol = check_tol(tol)
     reason = _dem_only(sample, scene)
     if reason is not None:
@@ -325,12 +373,20 @@ def _probe_compile_time(choice) -> float:
     return sum(r.compile_time for r in probes.values())
 
 
-def solve_auto(sample, scene, params, options):
-    """``jaxbpm.solve(..., method="auto", tol=..., throw=..., progress=...)``."""
-    from jaxbpm.result import settle
-    from jaxbpm.sample import Sample
-    from jaxbpm.solving import _solve
+def solve_auto(sample, scene, params, options: dict, solve: Callable[..., Result]) -> Result:
+    """``jaxbpm.solve(..., method="auto", tol=..., throw=..., progress=...)``.
 
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      params: parameters (``None``: the sample's own), checked here.
+      options: ``tol``, ``throw`` and ``progress``.
+      solve: ``solve(sample, scene, params, options_object) -> Result``, the solvers' dispatch
+        (:func:`jaxbpm.solving.solve` passes its own).
+
+    Returns:
+      The chosen solver's :class:`~jaxbpm.result.Result`, ``stats["method_choice"]`` saying which and why.
+    """
     unknown = sorted(set(options) - set(OPTIONS))
     if unknown:
         raise SceneError(f"method='auto' takes only {', '.join(OPTIONS)}; got {', '.join(map(repr, unknown))} "
@@ -341,35 +397,45 @@ def solve_auto(sample, scene, params, options):
     throw = options.get("throw", True)
     if not isinstance(throw, bool):
         raise SceneError(f"throw must be True or False, got {throw!r}")
-    if params is not None:
-        from jaxbpm.physics.model import check_params
-
+    if params is not None:  # once per solve: the solvers below take them as they are
         params = check_params(params, sample)
     t0 = time.perf_counter()
-    fallback = None
     choice = choose(sample, scene, tol, params=params)
+    result, fallback, total, compile_time = _answer(sample, choice, params, options, throw, solve, t0)
+    _account(result, choice, fallback, total, compile_time)
+    return result
+
+
+def _answer(sample, choice: Choice, params, options, throw, solve, t0):
+    """The chosen solver's result: ``(result, fallback, seconds, compile_time)`` (``fallback``: why the nonlinear
+    DSM gave way to the DEM, else ``None``)."""
+    fallback = None
     if choice.route in choice.probe:  # the linear pass is the answer: no second solve
         result = dataclasses.replace(choice.probe[choice.route], stats=dict(choice.probe[choice.route].stats))
         result = settle(result, throw)
         total = choice.probe_time
         compile_time = _probe_compile_time(choice)
     else:
-        opts = dict(choice.options, throw=throw)
-        if choice.method == "dem" and "progress" in options:
-            opts["progress"] = options["progress"]
+        progress = {"progress": options["progress"]} if "progress" in options else {}
+        opts = choice.solver_options.replace(throw=throw, **(progress if choice.method == "dem" else {}))
         if choice.route == "dsm_nonlinear":  # accepted where Newton converges, else the DEM
-            first = _solve(sample, choice.scene, "dsm", params, dict(choice.options, throw=False))
-            if first.status == "converged":
+            first = solve(sample, choice.scene, params, opts.replace(throw=False))
+            if first.status.ok:
                 result = first
             else:
-                fallback = {"status": first.status, "failure": first.stats.get("failure"),
+                fallback = {"status": str(first.status), "failure": first.stats.get("failure"),
                             "wall_time": first.wall_time}
-                dem_opts = {"throw": throw, **({"progress": options["progress"]} if "progress" in options else {})}
-                result = _solve(sample, choice.scene, "dem", params, dem_opts)
+                result = solve(sample, choice.scene, params, resolve_options("dem", {"throw": throw, **progress}))
         else:
-            result = _solve(sample, choice.scene, choice.method, params, opts)
+            result = solve(sample, choice.scene, params, opts)
         total = time.perf_counter() - t0
         compile_time = result.compile_time + _probe_compile_time(choice)
+    return result, fallback, total, compile_time
+
+
+def _account(result, choice: Choice, fallback, total, compile_time) -> None:
+    """The choice's time in ``result`` (the linear pass counts as setup and compilation) and its
+    ``stats["method_choice"]``."""
     # the wall time covers the choice (the linear pass) and the answer; what is not the answer's own compile or
     # run counts as setup
     extra_compile = compile_time - result.compile_time
@@ -381,4 +447,3 @@ def solve_auto(sample, scene, params, options):
     if fallback is not None:
         record.update(method="dem", route="dem", options={}, fallback=fallback,
                       why=record["why"] + f"; the nonlinear DSM stopped with status {fallback['status']!r}: the DEM")
-    return result

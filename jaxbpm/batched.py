@@ -133,10 +133,11 @@ def _run_chunks(model, params, load, state, dt, alpha, origin, n_steps, vectoriz
 
 
 def _solve_batch(sample, scene, method, params_batch, vectorize, options) -> list[Result]:
-    from jaxbpm.options import options_for
+    from jaxbpm._options import resolve_options
     from jaxbpm.result import settle
 
-    method, options = options_for(method, options)
+    resolved = resolve_options(method, options)
+    method, options = resolved.method, resolved.asdict()
     if method != "dem":
         raise SceneError(f"solve_batch runs the DEM only, not {method!r}: solve the {method.upper()} runs one by one "
                          "with jaxbpm.solve (each is one linear solve; there are no time steps to share)")

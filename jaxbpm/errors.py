@@ -9,6 +9,7 @@ __all__ = [
     "NotFiniteError",
     "SolveError",
     "SceneError",
+    "OptionsError",
     "SimulationInterrupted",
 ]
 
@@ -27,6 +28,11 @@ class SampleFileError(JaxbpmError, OSError):
 
 class SceneError(JaxbpmError, ValueError):
     """A scene (boundary conditions, loading) does not fit the sample or is ill-posed."""
+
+
+class OptionsError(SceneError):
+    """A solver option is unknown (the message names the closest ones) or out of its range (the message names the
+    option). A :class:`SceneError`, so that ``except SceneError`` catches it."""
 
 
 class SolveError(JaxbpmError, RuntimeError):

@@ -3,36 +3,48 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Result", "STATUSES"]
+from jaxbpm.status import Status
 
-STATUSES = ("converged", "max_iterations", "unstable", "interrupted", "not_finite")
-"""What ``Result.status`` can be: ``"converged"`` (the answer is what the method promises), ``"max_iterations"``
-(an iterative solve stopped at its iteration budget above its tolerance), ``"unstable"`` (the DEM's time
-integration blew up), ``"interrupted"`` (a DEM run stopped early by Ctrl-C or a callback) and ``"not_finite"``
-(the stiffness came out NaN or infinite)."""
+__all__ = ["Result", "STATUSES", "Status", "timed_result", "settle"]
+
+STATUSES = tuple(s.value for s in Status)
+"""The values ``Result.status`` can take (:class:`~jaxbpm.status.Status` says what each means)."""
 
 
 @dataclasses.dataclass
 class Result:
-    """Outcome of :func:`jaxbpm.solve` on a scene.
+    """Outcome of :func:`jaxbpm.solve` on a scene, the same for every solver.
 
-    stiffness: K = dF/d(displacement) over the linear range [N/m]. youngs_modulus: E = K l / A [Pa].
-    displacement, force: the loading curve [m], [N] (compression positive); strain, stress: the same over l and A.
-    gauge_length l [m], area A [m^2]. wall_time [s]: what the call took, ``setup_time + compile_time + run_time``:
-    setup_time (building the model, estimator, geometry, preconditioner or neighbour list, on the host), compile_time
-    (tracing and compiling the solver's programs; 0 when this process, or the persistent compilation cache, had them)
-    and run_time (the solver's kernel, run once). stats: solver details (steps, time step, critical time step,
-    iterations, ...). state: the solver's final state (for restarts and inspection).
-    interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
-    stats cover the part that was run (stiffness NaN when the fit range was not reached).
-    status: one of :data:`STATUSES`, the same for every method; ``ok`` is ``status == "converged"``. With
-    ``throw=True`` (the default of every method) a status other than ``"converged"`` raises the matching
-    :class:`~jaxbpm.errors.SolveError` (which carries this result); ``throw=False`` returns the result and leaves
-    the status to the caller. ``stats["failure"]`` says what went wrong.
+    With ``throw=True`` (the default of every solver) a status other than ``"converged"`` raises its
+    ``Status.error`` (which carries this result); ``throw=False`` returns the result and leaves the status to the
+    caller.
+
+    Attributes:
+      method: the solver (``"dem"``, ``"dsm"``, ``"ste"``).
+      stiffness: K = dF/d(displacement) over the linear range [N/m].
+      youngs_modulus: E = K l / A [Pa].
+      gauge_length: l [m].
+      area: A [m^2].
+      displacement: ``[m]`` the loading curve's displacements [m] (compression positive); ``strain`` is the same
+        over l.
+      force: ``[m]`` its forces [N]; ``stress`` is the same over A.
+      wall_time: what the call took [s], ``setup_time + compile_time + run_time``.
+      compile_time: tracing and compiling the solver's programs [s] (0 when this process, or the persistent
+        compilation cache, had them).
+      run_time: the solver's kernel, run once [s].
+      stats: solver details (steps, time step, critical time step, iterations, ...); ``stats["failure"]`` says
+        what went wrong.
+      state: the solver's final state (for restarts and inspection).
+      interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
+        stats cover the part that was run (stiffness NaN when the fit range was not reached).
+      setup_time: building the model, estimator, geometry, preconditioner or neighbour list, on the host [s].
+      status: a :class:`~jaxbpm.status.Status` (a ``str``: ``result.status == "converged"``); ``ok`` is
+        ``status == "converged"``.
     """
 
     method: str
@@ -49,7 +61,10 @@ class Result:
     state: Any = None
     interrupted: bool = False
     setup_time: float = 0.0
-    status: str = "converged"
+    status: Status = Status.CONVERGED
+
+    def __post_init__(self):
+        self.status = Status(self.status)
 
     @property
     def poisson_ratio(self) -> float | None:
@@ -63,19 +78,31 @@ class Result:
     @property
     def ok(self) -> bool:
         """Whether the solve converged (``status == "converged"``)."""
-        return self.status == "converged"
+        return Status(self.status).ok
 
     @property
     def strain(self) -> np.ndarray:
+        """``[m]`` the loading curve's strains, displacement / gauge length."""
         return self.displacement / self.gauge_length
 
     @property
     def stress(self) -> np.ndarray:
+        """``[m]`` the loading curve's stresses [Pa], force / area."""
         return self.force / self.area
 
     def stress_at(self, strains) -> np.ndarray:
         """The stress [Pa] at the given strains, interpolated linearly on the loading curve (a stress-strain vector
-        target, e.g. Irazabal et al.'s 17 equispaced strains). Strains beyond the curve are an error."""
+        target, e.g. Irazabal et al.'s 17 equispaced strains).
+
+        Args:
+          strains: ``[k]`` strains within the loading curve.
+
+        Returns:
+          ``[k]`` the stresses [Pa].
+
+        Raises:
+          ValueError: a strain beyond the curve.
+        """
         strains = np.asarray(strains, np.float64)
         e = self.strain
         if len(e) == 0 or np.any(strains < min(e[0], 0.0) - 1e-12) or np.any(strains > e[-1] * (1 + 1e-9)):
@@ -84,12 +111,13 @@ class Result:
                          if e[0] > 0 else self.stress)
 
     def summary(self) -> str:
+        """The result as lines of text: method, stiffness, modulus, times and the scalar stats."""
         lines = [
             f"method            {self.method}",
             f"stiffness K       {self.stiffness:.6g} N/m",
             f"Young's modulus   {self.youngs_modulus:.6g} Pa  (l = {self.gauge_length:.4g} m, A = {self.area:.4g} m^2)",
-            f"wall time         {self.wall_time:.3f} s  (setup {self.setup_time:.3f} s, compile {self.compile_time:.3f} s, "
-            f"run {self.run_time:.3f} s)",
+            f"wall time         {self.wall_time:.3f} s  (setup {self.setup_time:.3f} s, "
+            f"compile {self.compile_time:.3f} s, run {self.run_time:.3f} s)",
         ]
         for k, v in self.stats.items():
             if isinstance(v, (int, float, np.integer, np.floating, str, bool)):
@@ -102,28 +130,83 @@ class Result:
                 f"youngs_modulus={self.youngs_modulus:.6g}, wall_time={self.wall_time:.3g}{status})")
 
 
-def settle(result: Result, throw: bool) -> Result:
-    """Give ``result`` its status from what the solver reported (an interruption, ``stats["converged"]``, a
-    stiffness that is not finite) and, with ``throw``, raise the matching :class:`~jaxbpm.errors.SolveError`
-    carrying it (an interruption is raised by the DEM itself, as a ``KeyboardInterrupt``)."""
-    from jaxbpm.errors import ConvergenceError, InstabilityError, NotFiniteError
+def timed_result(method: str, t0: float, *, stiffness: float, gauge_length: float, area: float, displacement,
+                 force, compile_time: float, setup_time: float | None = None, run_time: float | None = None,
+                 youngs_modulus: float | None = None, stats: dict | None = None, state: Any = None,
+                 interrupted: bool = False, status: Status | str = Status.CONVERGED) -> Result:
+    """A :class:`Result` of a solve that started at ``t0`` (``time.perf_counter()``), its timings made to add up.
 
-    status = result.status
-    if status == "converged":
+    The wall time is ``now - t0``. Give the solver's ``setup_time`` (then ``run_time = wall - setup - compile``) or
+    its ``run_time`` (then ``setup_time = max(wall - compile - run, 0)``: all that is neither compiling nor running
+    counts as setup), not both.
+
+    Args:
+      method: the solver's name (``"dem"``, ``"dsm"``, ``"ste"``).
+      t0: when the solve started [s, ``time.perf_counter()``].
+      stiffness: K [N/m].
+      gauge_length: l [m].
+      area: A [m^2].
+      displacement: ``[m]`` the loading curve's displacements [m].
+      force: ``[m]`` its forces [N].
+      compile_time: seconds spent tracing and compiling.
+      setup_time: seconds spent on the host before the solve (or ``None``, see above).
+      run_time: seconds spent in the solver's programs (or ``None``, see above).
+      youngs_modulus: E [Pa]; default ``K l / A``.
+      stats: the solver's details.
+      state: the solver's final state.
+      interrupted: the run was stopped early.
+      status: the :class:`~jaxbpm.status.Status` (``settle`` refines it from ``stats``).
+
+    Returns:
+      The :class:`Result`.
+    """
+    if (setup_time is None) == (run_time is None):
+        raise ValueError("timed_result: give setup_time or run_time, not both (the other is what is left)")
+    wall = time.perf_counter() - t0
+    if run_time is None:
+        run_time = wall - setup_time - compile_time
+    else:
+        setup_time = max(wall - compile_time - run_time, 0.0)
+    if youngs_modulus is None:
+        youngs_modulus = stiffness * gauge_length / area
+    return Result(method=method, stiffness=stiffness, youngs_modulus=youngs_modulus, gauge_length=gauge_length,
+                  area=area, displacement=displacement, force=force, wall_time=wall, setup_time=setup_time,
+                  compile_time=compile_time, run_time=run_time, stats={} if stats is None else stats, state=state,
+                  interrupted=interrupted, status=status)
+
+
+def settle(result: Result, throw: bool) -> Result:
+    """Give ``result`` its :class:`~jaxbpm.status.Status` from what the solver reported (an interruption,
+    ``stats["converged"]``, a stiffness that is not finite) and, with ``throw``, raise the status's ``error``
+    carrying it (an interruption is raised by the DEM itself, as a ``KeyboardInterrupt``).
+
+    Args:
+      result: the solver's result.
+      throw: raise the :class:`~jaxbpm.errors.SolveError` of a failed status.
+
+    Returns:
+      ``result``, its status set.
+
+    Raises:
+      SolveError: with ``throw``, the status's ``error`` (``ConvergenceError``, ``InstabilityError``,
+        ``NotFiniteError``), carrying ``result``.
+    """
+    try:
+        status = Status(result.status)
+    except ValueError:
+        raise ValueError(f"unknown status {result.status!r}; one of {STATUSES}") from None
+    if status is Status.CONVERGED:
         if result.interrupted:
-            status = "interrupted"
+            status = Status.INTERRUPTED
         elif result.stats.get("converged") is False:
-            status = "max_iterations"
+            status = Status.MAX_ITERATIONS
         elif not np.isfinite(result.stiffness):
-            status = "not_finite"
+            status = Status.NOT_FINITE
             result.stats.setdefault("failure", f"the {result.method.upper()} stiffness is {result.stiffness} "
                                                "(check the parameters: bond E > 0, -1 < bond nu < 0.5)")
-    if status not in STATUSES:
-        raise ValueError(f"unknown status {status!r}; one of {STATUSES}")
     result.status = status
-    if throw and status in ("max_iterations", "unstable", "not_finite"):
-        error = {"max_iterations": ConvergenceError, "unstable": InstabilityError, "not_finite": NotFiniteError}
+    if throw and status.error is not None:
         message = result.stats.get("failure") or f"{result.method.upper()} solve ended with status {status!r}"
-        raise error[status](f"{message} (status {status!r}; pass throw=False to get the result with its status)",
-                            result=result)
+        raise status.error(f"{message} (status {status!r}; pass throw=False to get the result with its status)",
+                           result=result)
     return result

@@ -16,10 +16,8 @@ only by the approximations the method names: no inertia, small motion (linear DS
   pairs within reach at rest (fixed in advance); a contact's tangential spring is the
   whole relative tangential displacement of its contact points since rest, capped by Coulomb (``|F_t| <= mu F_n``,
   ``slip=True``, the default) or not capped (``slip=False``: no slip, as Jarolin & Dosta 2020, 3.1.2, assumes); walls
-  are ideal
-  frictionless moving walls. Why slip by default: on contact-dominated samples most contacts slide in the DEM, and
-  the no-slip assumption was the main error of the static solve (+16 % to +35 % on a 400-particle box at 0.2-2 %
-  strain, +112 % on a bi-component agglomerate at 2 %; with slip -0.1 % to +0.0 % and +1.1 %).
+  are ideal frictionless moving walls. Why slip by default: on contact-dominated samples most contacts slide in the
+  DEM, and without slip the static solve overestimates the stiffness there.
 
 Convergence is measured by the residual norm relative to the norm of the reaction forces. A solve that misses its
 tolerance raises :class:`ConvergenceError` (``throw=True``, the default) or, with ``throw=False``, returns its

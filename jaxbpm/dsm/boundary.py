@@ -13,9 +13,19 @@ from jaxbpm.physics.model import Model
 
 
 def free_mask(model: Model, scene, sample):
-    """``(free [n, nd], fixed [n], driven [n])``: the DOFs the solve moves and the scene's clamped and driven
-    particles. Between walls, only the lateral rigid-body motions are pinned (three DOFs of two bottom particles,
-    which carry no load); with clamped layers, every DOF of the fixed and driven particles is prescribed."""
+    """The DOFs the solve moves and the scene's clamped and driven particles.
+
+    Between walls, only the lateral rigid-body motions are pinned (three DOFs of two bottom particles, which carry
+    no load); with clamped layers, every DOF of the fixed and driven particles is prescribed.
+
+    Args:
+      model: the model (its DOFs per particle).
+      scene: the scene.
+      sample: the bonded sample.
+
+    Returns:
+      ``(free [n, nd], fixed [n], driven [n])``.
+    """
     nd = 6 if model.rotations else 3
     n = model.n
     free = np.ones((n, nd), bool)
@@ -63,8 +73,17 @@ def _check_held(sample, model, free, clamped, contact_pairs=None, wall_touching=
 
 
 def contact_candidates(sample, model, skin):
-    """``[C, 2]`` particle pairs whose gap at rest is below ``skin`` [m] (the contacts the solve may close), bonded
-    pairs left out when the sample's bonds replace their contacts (``bond_contact="replace"``)."""
+    """The contacts the solve may close.
+
+    Args:
+      sample: the bonded sample.
+      model: the model (which pairs are bonded).
+      skin: the largest gap at rest [m].
+
+    Returns:
+      ``[C, 2]`` the particle pairs whose gap at rest is below ``skin``, bonded pairs left out when the sample's
+      bonds replace their contacts (``bond_contact="replace"``).
+    """
     from scipy.spatial import cKDTree
 
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
@@ -98,8 +117,17 @@ def _check_contact_skin(sample, pairs, disp, skin, stats):
 
 
 def affine_field(sample, model: Model, ax, delta):
-    """``[n, nd]``: the displacements of a uniform strain that moves the top of the sample by ``-delta`` along ``ax``
-    and holds its bottom (no rotations, no lateral motion)."""
+    """The displacements of a uniform strain (no rotations, no lateral motion).
+
+    Args:
+      sample: the bonded sample.
+      model: the model (its DOFs per particle).
+      ax: the load axis.
+      delta: how far the top of the sample moves against ``ax`` [m] (the bottom stays).
+
+    Returns:
+      ``[n, nd]`` the displacements.
+    """
     x = np.asarray(sample.positions)[:, ax]
     u = np.zeros((model.n, 6 if model.rotations else 3))
     u[:, ax] = -delta * (x - x.min()) / max(x.max() - x.min(), 1e-300)

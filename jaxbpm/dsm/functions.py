@@ -62,7 +62,21 @@ def load_cases(sample, scene, directions, params=None, *, dofs=None, tol=1e-8, p
                aggregate_size=None):
     """Reactions of several load cases on the same operator: the driven layer moved by ``strain * l`` along each
     unit vector in ``directions [L, 3]`` (e.g. the three axes: compression and two shears), all solved at once with
-    ``vmap``. Returns the ``[L, 3]`` matrix of reaction forces per unit displacement [N/m] (row: load case)."""
+    ``vmap``.
+
+    Args:
+      sample: the bonded sample.
+      scene: a bonds-only scene with clamped layers.
+      directions: ``[L, 3]`` the load cases' unit vectors.
+      params: the bond parameters (``None``: the sample's own).
+      dofs: 3 or 6 per particle (``None``: the model's choice).
+      tol: the CG's relative residual.
+      preconditioner: ``"auto"``, ``"two-level"`` or ``"jacobi"``.
+      aggregate_size: the coarse space's aggregate size [m] (``None``: its default).
+
+    Returns:
+      ``[L, 3]`` the reaction forces per unit displacement [N/m] (row: load case).
+    """
     from jaxbpm.physics.model import default_params
 
     rotations = None if dofs is None else {3: False, 6: True}[int(dofs)]

@@ -27,6 +27,16 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None, geome
     reduced Jacobians (81 or 9 numbers per bond) are returned for the preconditioner. With ``geometry``
     (:func:`bond_geometry`, computed once per sample) and ``params`` as ``{"bond_E", "bond_nu"}``, the Jacobians are
     built from it instead of differentiating the bond law again (same numbers to round-off).
+
+    Args:
+      model: the model.
+      params: the parameters.
+      operator: ``"jacobians"``, ``"jvp"`` or ``"auto"`` (above).
+      walls: the walls at the linearisation state, or ``None``.
+      geometry: the sample's :class:`BondGeometry`, or ``None``.
+
+    Returns:
+      ``(apply, reduced)``: ``apply(v) -> K v`` and the reduced per-bond Jacobians (``None`` for ``"jvp"``).
     """
     if operator == "auto":
         operator = "jvp" if (walls is not None or model.walls is not None or model.contacts) else "jacobians"
@@ -53,13 +63,24 @@ def linear_solve(model: Model, params, free, u_prescribed, *, tol=1e-6, maxiter=
                  geometry: BondGeometry | None = None):
     """Solve the linearised equilibrium for one load case.
 
-    free: ``[n, nd]`` bool, u_prescribed: ``[n, nd]`` (zero on free DOFs); operator: see :func:`tangent_operator`;
-    stiffness_tol: also stop once the strain energy has settled to this relative change (see :func:`cg`);
-    coarse: a :class:`CoarseSpace` for the two-level preconditioner (``None``: block-Jacobi alone); geometry: a
-    :class:`BondGeometry` (:func:`bond_geometry`) to build the bond Jacobians from.
-    Returns ``(u, info)`` with the full displacement field and ``info = {"residual": relative residual,
-    "iterations": CG iterations}``.
     Differentiable with respect to ``params``; ``vmap``-able over ``params`` or ``u_prescribed``.
+
+    Args:
+      model: the model.
+      params: the parameters.
+      free: ``[n, nd]`` bool, the DOFs solved for.
+      u_prescribed: ``[n, nd]`` the prescribed displacements (zero on free DOFs).
+      tol: the CG's relative residual.
+      maxiter: CG iterations at most (``None``: 10 x the DOFs).
+      walls: the walls at the linearisation state, or ``None``.
+      operator: see :func:`tangent_operator`.
+      stiffness_tol: also stop once the strain energy has settled to this relative change (see :func:`cg`).
+      coarse: a :class:`CoarseSpace` for the two-level preconditioner (``None``: block-Jacobi alone).
+      geometry: a :class:`BondGeometry` (:func:`bond_geometry`) to build the bond Jacobians from.
+
+    Returns:
+      ``(u, info)``: the full displacement field ``[n, nd]`` and ``{"residual": relative residual, "iterations":
+      CG iterations}``.
     """
     full, jac = tangent_operator(model, params, operator=operator, walls=walls, geometry=geometry)
     precond = build_preconditioner(model, params, free, jac, coarse, geometry)
@@ -76,15 +97,27 @@ def cg(full, precond, free, u_prescribed, tol, maxiter, stiffness_tol=None, dela
     (the Hestenes-Stiefel estimate; it over-estimates the true error in practice). The energy converges
     quadratically while the residual converges linearly, so this stops several times sooner for the same stiffness.
 
-    x0: a first guess of the displacements (``[n, nd]``, its free DOFs are used; ``None``: zero there).
+    Wrapped in ``lax.custom_linear_solve``: derivatives come from implicit differentiation (an adjoint solve stopped
+    by the residual), not from unrolling the iterations. The program holds three applications of ``full`` (one for
+    the prescribed displacements and the guess together, one in the iteration, one for the solution) and one of
+    ``precond`` (in the iteration, which preconditions the residual before it steps): each copy is compiled
+    separately, and they are most of the compile time.
 
-    Returns ``(u, residual, iterations, energy, ku)`` with ``ku = K u`` on all DOFs (the linearised internal forces
-    are ``-ku``). Wrapped in ``lax.custom_linear_solve``: derivatives come from implicit differentiation (an adjoint
-    solve stopped by the residual), not from unrolling the iterations.
+    Args:
+      full: ``v -> K v`` on all DOFs (:func:`tangent_operator`).
+      precond: the preconditioner, ``r -> M^-1 r`` (``[n, nd]`` in and out).
+      free: ``[n, nd]`` bool, the DOFs solved for.
+      u_prescribed: ``[n, nd]`` the prescribed displacements.
+      tol: the relative residual to reach.
+      maxiter: iterations at most.
+      stiffness_tol: stop once the strain energy has settled to this relative change (``None``: the residual
+        alone).
+      delay: the iterations the energy estimate sums over.
+      x0: a first guess of the displacements (``[n, nd]``, its free DOFs are used; ``None``: zero there).
 
-    The program holds three applications of ``full`` (one for the prescribed displacements and the guess together,
-    one in the iteration, one for the solution) and one of ``precond`` (in the iteration, which preconditions the
-    residual before it steps): each copy is compiled separately, and they are most of the compile time.
+    Returns:
+      ``(u, residual, iterations, energy, ku)`` with ``ku = K u`` on all DOFs (the linearised internal forces are
+      ``-ku``).
     """
     def matvec(v):
         # identity on the prescribed DOFs keeps the operator regular, so that the adjoint (transpose) solve of

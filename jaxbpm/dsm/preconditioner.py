@@ -76,8 +76,8 @@ def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_material
     if (n_materials is not None and 0 < n_materials <= _MAX_PRECOMPUTED_MATERIALS
             and n_materials * per_material * reduced.dtype.itemsize <= _MAX_PRECOMPUTED_BYTES):
         blocks, mats = _preconditioner_parts(model, reduced, coarse, int(n_materials))
-        # the reduced form was kept for the preconditioner only (2 x 81 numbers a bond: 3.7 GB on a million
-        # particles); a solve with another material count builds its Jacobians from the bond law instead
+        # the reduced form was kept for the preconditioner only (2 x 81 numbers a bond); a solve with another
+        # material count builds its Jacobians from the bond law instead
         geometry = dataclasses.replace(geometry, reduced=None, blocks=blocks, coarse=mats)
     return geometry
 
@@ -155,7 +155,7 @@ def coarse_matrix(model: Model, jac, coarse: CoarseSpace):
     pi, pj = coarse.basis[i], coarse.basis[j]
     ai, aj = coarse.labels[i], coarse.labels[j]
     ti, tj = jnp.swapaxes(pi, 1, 2), jnp.swapaxes(pj, 1, 2)
-    # batched `@` (4x faster on CPU than the same three-operand einsum, which XLA runs as two generic dots)
+    # batched `@` (faster on CPU than the same three-operand einsum, which XLA runs as two generic dots)
     blocks = [(ai, ai, ti @ (jb[:, :nd, :nd] @ pi)), (ai, aj, ti @ (jb[:, :nd, nd:] @ pj)),
               (aj, ai, tj @ (jb[:, nd:, :nd] @ pi)), (aj, aj, tj @ (jb[:, nd:, nd:] @ pj))]
     keys = jnp.concatenate([r * na + c for r, c, _ in blocks])
@@ -245,7 +245,7 @@ def _coarse_blocks_batched(axis_size, in_batched, a):
 class CholeskyBlocks:
     """A lower Cholesky factor ``L`` cut into diagonal blocks of ``size`` rows, for ``A^-1 r`` by blocked forward
     and back substitution: the inverses of the diagonal blocks and the off-diagonal panels are taken once, and every
-    application is a few matrix-vector products (4x faster on CPU than a triangular solve with one right-hand side,
+    application is a few matrix-vector products (faster on CPU than a triangular solve with one right-hand side,
     which XLA runs as a scalar loop)."""
 
     inv_diag: Any   # list of [b, b]: inverses of the diagonal blocks of L

@@ -37,7 +37,7 @@ Conventions and choices:
 * **Surface particles.** A particle whose centre lies within ``surface_depth`` (default one mean particle
   diameter) of the sample's boundary (its domain box or cylinder, else the spheres' bounding box) has a one-sided
   neighbourhood: Eq. 32 lets it relax as if the missing neighbours were absent, which under-counts the stiffness of
-  the bulk (by 15-20 % on a 1500-particle box). Such particles keep their local tensor and their Gamma (they still
+  the bulk. Such particles keep their local tensor and their Gamma (they still
   act on their neighbours) but are left out of the averages; ``surface_depth=0`` averages over every particle, as
   the paper did for samples of 10^5 particles.
 * **Singular particles** (fewer than three interactions, or all their interactions coplanar: the fabric
@@ -83,18 +83,3 @@ __all__ = [
     "SceneGeometry", "scene_geometry", "scene_stiffness", "stiffness_function", "solve_scene", "LocalMap", "local_map",
     "VOIGT",
 ]
-
-_MOVED = {"save_local_map", "export_local_map_vtk", "plot_local_map"}
-
-
-def __getattr__(name):
-    # the local map's writers live on the I/O side (jaxbpm.io); the old names work for one more release
-    if name in _MOVED:
-        import warnings
-
-        from jaxbpm import io
-
-        warnings.warn(f"jaxbpm.ste.{name} moved to jaxbpm.io.{name}; the old name goes in the next release",
-                      DeprecationWarning, stacklevel=2)
-        return getattr(io, name)
-    raise AttributeError(f"module 'jaxbpm.ste' has no attribute {name!r}")

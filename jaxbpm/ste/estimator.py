@@ -133,10 +133,9 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
       clamp_layers: the particles the scene clamps (boundary ``"layers"`` or ``fixed``/``driven`` masks; not walls)
         follow the affine field (no fluctuation), as their prescribed displacements do in the DEM and the DSM,
         instead of relaxing like free one-sided surface particles (the paper's form, the default). Exact on a
-        clamped simple-cubic lattice (to round-off, where the default is 2.1 % low on 10 x 10 x 20); on random
-        packings the estimate is then 3-6 % stiffer than the default and further from the DEM (a 1k / 3k box:
-        +8.4 % / +7.4 % against +2.6 % / +4.0 %): the relaxing end layers offset most of the affine estimate's
-        excess stiffness in the interior.
+        clamped simple-cubic lattice (to round-off; the default is low there); on random packings the estimate is
+        then stiffer than the default and further from the DEM: the relaxing end layers offset most of the affine
+        estimate's excess stiffness in the interior.
       dofs: 3 (translations, the paper's form) or 6 (translations and rotations) per particle.
       first_neighbour: the first-neighbour-only form (Eq. 33-35) instead of Eq. 32.
       contacts: override ``scene.contacts``.
@@ -148,9 +147,8 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
       volumes: ``[n]`` particle volumes V^n [m^3] to use instead of particle volume / global solid fraction.
       precision: ``"float64"`` (default) or ``"float32"``: the float type of the estimate's arithmetic. The
         geometry is always built in the float type JAX gives (float64 with x64 on) and then cast. float32 runs the
-        estimate 2-3x faster on CPU and moves it by ~1e-7 relative (the estimate itself is 5-20 % from the DEM);
-        reverse-mode gradients lose more (~2e-3 relative on a 1k-particle packing: the backward pass sums terms
-        that cancel), and finite differences drown in rounding: calibrate with float64 (the default).
+        estimate faster and moves it by ~1e-7 relative; reverse-mode gradients lose more (the backward pass sums
+        terms that cancel), and finite differences drown in rounding: calibrate with float64 (the default).
       pad: pad particles, pairs and layers to their size class (:func:`jaxbpm._compile.size_class`) so that samples
         of similar size share compiled programs. Padding particles are singular (no interaction, zero volume),
         padding pairs have zero stiffness: every result is that of the unpadded estimator (the local tensors and
@@ -167,12 +165,31 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         raise SceneError(f"precision must be 'float64' or 'float32', got {precision!r}")
     axis = 2 if scene is None else int(scene.axis)
     use_contacts = bool(getattr(scene, "contacts", False)) if contacts is None else bool(contacts)
-    pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
-    n = sample.n_particles
     model = _bond_model(sample, dofs)
-    dtype = model.positions0.dtype
+    pairs, d, cpairs, cd = _interactions(sample, model, scene, axis, use_contacts, contact_fraction)
+    valid = _non_singular(pairs, d, sample.n_particles)
+    parts = _particles(sample, scene, valid, clamp_layers, volumes, surface_depth)
+    layer, n_layers = _layers(sample, axis, _layer_thickness(sample, layer_thickness))
+    counts = np.array([sample.n_particles, len(sample.bonds), len(cpairs)], np.int64)
+    rad = np.asarray(sample.radii, np.float64)
+    arrays = dict(pairs=pairs, d=d, cd=cd, crad=rad[cpairs].reshape(-1, 2), layer=layer, **parts)
+    layers_cap = n_layers
+    if pad:
+        model, arrays = _padded(model, arrays, counts)
+        layers_cap = capacity(n_layers, minimum=4)
+    est = _assemble(sample, model, arrays, counts, n_layers, layers_cap, dofs, first_neighbour, axis)
+    if precision == "float32":
+        f32 = jnp.float32
+        est = dataclasses.replace(est, d=est.d.astype(f32), volume=est.volume.astype(f32),
+                                  geometry=None if est.geometry is None else est.geometry.astype(f32),
+                                  contact_k=None if est.contact_k is None else est.contact_k.astype(f32))
+    return est
 
-    # contacts active at the linearisation point
+
+def _interactions(sample, model, scene, axis, use_contacts, contact_fraction):
+    """``(pairs [P, 2], d [P, 3], contact pairs [C, 2], contact vectors [C, 3])``: the bonds, then the contacts
+    active at the linearisation point (their vectors shortened to the linearisation overlap)."""
+    pos = np.asarray(sample.positions, np.float64)
     cpairs = np.zeros((0, 2), np.int64)
     cd = np.zeros((0, 3))
     if use_contacts:
@@ -182,30 +199,37 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         if not (0 < frac <= 1):
             raise SceneError(f"contact_fraction must lie in (0, 1], got {contact_fraction!r}")
         cpairs, cd = _active_contacts(sample, model, axis, frac * scene.strain)
-
     bonds = np.asarray(sample.bonds, np.int64)
     pairs = np.concatenate([bonds, cpairs]).astype(np.int32)
     if len(pairs) == 0:
         raise SampleError("STE: the sample has no bonds (and no contacts): there is no stiffness to estimate")
     d = np.concatenate([pos[bonds[:, 1]] - pos[bonds[:, 0]], pos[cpairs[:, 1]] - pos[cpairs[:, 0]]])
+    return pairs, d, cpairs, cd
 
-    # singular particles: fewer than three interactions, or coplanar ones (smallest fabric eigenvalue ~ 0)
+
+def _non_singular(pairs, d, n) -> np.ndarray:
+    """``[n]``: the particles with at least three interactions, not all coplanar (smallest fabric eigenvalue above
+    :data:`_FABRIC_TOL` of the largest)."""
     unit = d / np.linalg.norm(d, axis=1, keepdims=True)
     ends = pairs.T.ravel()  # both ends of every pair: per-component bincounts (np.add.at is several times slower)
     fabric = np.stack([np.bincount(ends, np.tile(unit[:, a] * unit[:, b], 2), minlength=n)
                        for a in range(3) for b in range(3)], axis=1).reshape(n, 3, 3)
     count = np.bincount(ends, minlength=n)
     eig = np.linalg.eigvalsh(fabric)
-    valid = (count >= 3) & (eig[:, 0] > _FABRIC_TOL * np.maximum(eig[:, -1], 1e-300))
+    return (count >= 3) & (eig[:, 0] > _FABRIC_TOL * np.maximum(eig[:, -1], 1e-300))
 
+
+def _particles(sample, scene, valid, clamp_layers, volumes, surface_depth) -> dict:
+    """The per-particle arrays ``[n]``: ``valid``, ``free`` (valid and not clamped by the scene), ``vol`` (V^n)
+    and ``include`` (valid and at least ``surface_depth`` inside the sample)."""
+    n = sample.n_particles
+    rad = np.asarray(sample.radii, np.float64)
     # particles the scene clamps (its fixed and driven sets) have prescribed displacements: they follow the affine
     # field (no fluctuation), as in the DEM and the DSM, instead of relaxing as free one-sided surface particles
     clamped = np.zeros(n, bool)
     if clamp_layers and scene is not None and not scene.uses_walls:
         fixed, driven = scene.layers(sample)
         clamped = fixed | driven
-    free = valid & ~clamped
-
     if volumes is None:
         phi, _ = sample.packing_fraction()
         vol = 4.0 / 3.0 * np.pi * rad**3 / phi
@@ -213,7 +237,6 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         vol = np.asarray(volumes, np.float64)
         if vol.shape != (n,) or not np.all(np.isfinite(vol) & (vol > 0)):
             raise SceneError(f"volumes must be [{n}] finite positive particle volumes, got shape {vol.shape}")
-
     depth = 2.0 * float(np.mean(rad)) if surface_depth is None else float(surface_depth)
     if not (depth >= 0 and np.isfinite(depth)):
         raise SceneError(f"surface_depth must be a length >= 0, got {surface_depth!r}")
@@ -221,55 +244,61 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
     if not include.any():
         raise SceneError(f"STE: no particle is both non-singular ({int(valid.sum())} are) and deeper than "
                          f"surface_depth = {depth:.4g} m inside the sample; use a smaller surface_depth")
+    return {"valid": valid, "free": valid & ~clamped, "vol": vol, "include": include}
 
-    h = 4.0 * float(np.mean(rad)) if layer_thickness is None else float(layer_thickness)
+
+def _layer_thickness(sample, layer_thickness) -> float:
+    """The layered model's layer thickness [m] (default two mean particle diameters)."""
+    h = 4.0 * float(np.mean(sample.radii)) if layer_thickness is None else float(layer_thickness)
     if not (h > 0 and np.isfinite(h)):
         raise SceneError(f"layer_thickness must be a positive length, got {layer_thickness!r}")
-    layer, n_layers = _layers(sample, axis, h)
+    return h
 
-    nb, nc = len(bonds), len(cpairs)
-    counts = np.array([n, nb, nc], np.int64)
-    n_cap, nb_cap, nc_cap, layers_cap = n, nb, nc, n_layers
-    if pad:
-        n_cap, nb_cap, nc_cap = size_class(n, nb, nc)
-        layers_cap = capacity(n_layers, minimum=4)
-        model = pad_model(model, n_cap, nb_cap)
-        # padding pairs join the two first padding particles along x with zero stiffness
-        pad_pair = np.array([[n, n + 1]], np.int32)
-        pairs = np.concatenate([pairs[:nb], np.repeat(pad_pair, nb_cap - nb, 0), pairs[nb:],
-                                np.repeat(pad_pair, nc_cap - nc, 0)])
-        pp = np.asarray(model.positions0)
-        gap = pp[n + 1:n + 2] - pp[n:n + 1]  # the padding bonds' vector (zero stiffness)
-        d = np.concatenate([d[:nb], np.repeat(gap, nb_cap - nb, 0), d[nb:], np.repeat(gap, nc_cap - nc, 0)])
-        r_pad = np.full((nc_cap - nc, 2), 0.25 * float(np.linalg.norm(gap)))
-        cd = np.concatenate([cd, np.repeat(gap, nc_cap - nc, 0)])  # twice the sum of their radii apart: no touch
-        crad = np.concatenate([rad[cpairs].reshape(-1, 2), r_pad])
-        extra = n_cap - n
-        vol, valid, include, free = (np.concatenate([vol, np.zeros(extra)]),
-                                     np.concatenate([valid, np.zeros(extra, bool)]),
-                                     np.concatenate([include, np.zeros(extra, bool)]),
-                                     np.concatenate([free, np.zeros(extra, bool)]))
-        layer = np.concatenate([layer, np.zeros(extra, np.int32)])
-    else:
-        crad = rad[cpairs].reshape(-1, 2)
 
+def _padded(model, arrays: dict, counts):
+    """The model and the arrays padded to their size class: padding particles are singular (no interaction, zero
+    volume), padding pairs join the two first padding particles with zero stiffness, padding contacts do not
+    touch."""
+    n, nb, nc = (int(c) for c in counts)
+    n_cap, nb_cap, nc_cap = size_class(n, nb, nc)
+    model = pad_model(model, n_cap, nb_cap)
+    pairs, d = arrays["pairs"], arrays["d"]
+    # padding pairs join the two first padding particles along x with zero stiffness
+    pad_pair = np.array([[n, n + 1]], np.int32)
+    pairs = np.concatenate([pairs[:nb], np.repeat(pad_pair, nb_cap - nb, 0), pairs[nb:],
+                            np.repeat(pad_pair, nc_cap - nc, 0)])
+    pp = np.asarray(model.positions0)
+    gap = pp[n + 1:n + 2] - pp[n:n + 1]  # the padding bonds' vector (zero stiffness)
+    d = np.concatenate([d[:nb], np.repeat(gap, nb_cap - nb, 0), d[nb:], np.repeat(gap, nc_cap - nc, 0)])
+    r_pad = np.full((nc_cap - nc, 2), 0.25 * float(np.linalg.norm(gap)))
+    cd = np.concatenate([arrays["cd"], np.repeat(gap, nc_cap - nc, 0)])  # twice the sum of their radii apart
+    extra = n_cap - n
+    out = dict(pairs=pairs, d=d, cd=cd, crad=np.concatenate([arrays["crad"], r_pad]),
+               vol=np.concatenate([arrays["vol"], np.zeros(extra)]),
+               layer=np.concatenate([arrays["layer"], np.zeros(extra, np.int32)]))
+    for name in ("valid", "include", "free"):
+        out[name] = np.concatenate([arrays[name], np.zeros(extra, bool)])
+    return model, out
+
+
+def _assemble(sample, model, a: dict, counts, n_layers, layers_cap, dofs, first_neighbour, axis) -> Estimator:
+    """The :class:`Estimator` of the (padded) arrays ``a``; with 3 DOF each bond's ``K^nm`` per unit stiffness and
+    the contacts' ``K^nm``."""
+    dtype = model.positions0.dtype
     pm = sample.particle_material
     cparams = _contact_params(float(pm.E), float(pm.nu), float("inf"), float(pm.restitution), dtype.name, False)
-    est = Estimator(model=model, pairs=put(pairs), d=put(d, dtype), contact_d=put(cd, dtype),
-                    contact_radii=put(crad, dtype).reshape(-1, 2), contact_params=cparams, volume=put(vol, dtype),
-                    valid=put(valid), include=put(include), free=put(free), layer=put(layer, np.int32),
-                    layer_count=put(n_layers, np.int32), counts=counts, dofs=int(dofs),
-                    first_neighbour=bool(first_neighbour), n_layers=int(layers_cap), axis=axis)
+    est = Estimator(model=model, pairs=put(a["pairs"]), d=put(a["d"], dtype), contact_d=put(a["cd"], dtype),
+                    contact_radii=put(a["crad"], dtype).reshape(-1, 2), contact_params=cparams,
+                    volume=put(a["vol"], dtype), valid=put(a["valid"]), include=put(a["include"]),
+                    free=put(a["free"]), layer=put(a["layer"], np.int32), layer_count=put(n_layers, np.int32),
+                    counts=counts, dofs=int(dofs), first_neighbour=bool(first_neighbour), n_layers=int(layers_cap),
+                    axis=axis)
     if dofs == 3:
+        nc, nc_cap = int(counts[2]), int(a["cd"].shape[0])
         geometry, terms = _bond_geometry(model)
         ck = (-np.asarray(_contact_jacobians_jit(est))[:, :3, 3:].reshape(-1, 9) if nc_cap else np.zeros((0, 9)))
         ck[nc:] = 0.0  # padding contacts do not touch; their stiffness is zero to the last bit
         est = dataclasses.replace(est, geometry=geometry, terms=terms, contact_k=jnp.asarray(ck, dtype))
-    if precision == "float32":
-        f32 = jnp.float32
-        est = dataclasses.replace(est, d=est.d.astype(f32), volume=est.volume.astype(f32),
-                                  geometry=None if est.geometry is None else est.geometry.astype(f32),
-                                  contact_k=None if est.contact_k is None else est.contact_k.astype(f32))
     return est
 
 

@@ -33,8 +33,22 @@ class LocalMap(NamedTuple):
 
 
 def local_map(sample: Sample, params=None, *, scene=None, radius: float | None = None, **options) -> LocalMap:
-    """Local moduli averaged over spheres of ``radius`` (default 1.5 mean particle diameters, i.e. neighbourhoods
-    three diameters across, as in Jarolin & Dosta 2020) and their deviation from the mean (Eq. 36)."""
+    """Local moduli averaged over spheres and their deviation from the mean (Eq. 36).
+
+    Args:
+      sample: the bonded sample.
+      params: the bond parameters (``None``: the sample's own).
+      scene: the scene the estimator is built for (``None``: none, the z axis).
+      radius: the spheres' radius [m] (default 1.5 mean particle diameters, i.e. neighbourhoods three diameters
+        across, as in Jarolin & Dosta 2020).
+      **options: the estimator's options (:func:`~jaxbpm.ste.estimator`).
+
+    Returns:
+      The :class:`LocalMap`.
+
+    Raises:
+      SceneError: a radius that is not a positive length.
+    """
     from scipy.sparse import coo_matrix, identity
     from scipy.spatial import cKDTree
 

@@ -14,9 +14,11 @@ import numpy as np
 
 from jaxbpm._compile import compile_clock, Program, put, SetupCache, traced
 from jaxbpm.errors import SceneError
-from jaxbpm.physics.model import check_params, default_params
+from jaxbpm.physics.model import default_params
+from jaxbpm.result import settle, timed_result
 from jaxbpm.sample import Sample
 from jaxbpm.ste.estimator import Estimator, estimator
+from jaxbpm.ste.options import ESTIMATOR_OPTIONS, STE
 from jaxbpm.ste.tensor import body_tensor, isotropic_fit, local_tensors, moduli
 
 __all__ = ["layer_stiffness", "wall_series", "SceneGeometry", "scene_geometry", "scene_stiffness",
@@ -30,6 +32,15 @@ def layer_stiffness(est: Estimator, params, gauge_length, area):
     layer has none), cross-section ``A_k = V_k / h`` from the volume its particles represent; compliance of the
     stack ``sum_k h / (E_k A_k)`` over the sample's extent, scaled to the gauge length. ``area`` is used only to
     keep the units when a layer holds no particle at all (it then counts with ``area``).
+
+    Args:
+      est: the estimator.
+      params: the bond parameters.
+      gauge_length: l [m].
+      area: A [m^2].
+
+    Returns:
+      K [N/m].
     """
     ax = est.axis
     c = local_tensors(est, params)
@@ -66,8 +77,21 @@ class SceneGeometry(NamedTuple):
 
 
 def scene_geometry(est: Estimator, sample: Sample, scene, fraction: float | None = None):
-    """``(SceneGeometry, wall_law)`` of ``scene`` on ``sample`` for ``est`` (``wall_law`` ``None`` without walls).
-    NumPy work on the host; the masks have ``est.n`` rows (padding rows touch nothing)."""
+    """What the STE needs of ``scene`` besides the estimator (NumPy work on the host).
+
+    Args:
+      est: the estimator (the masks get its ``est.n`` rows; padding rows touch nothing).
+      sample: the bonded sample.
+      scene: the scene.
+      fraction: where the walls are linearised, a fraction of the target displacement (``None``: the middle of
+        the fit range).
+
+    Returns:
+      ``(SceneGeometry, wall_law)``; ``wall_law`` is ``None`` without walls.
+
+    Raises:
+      SceneError: a wall law the STE does not know, or linear walls without a stiffness.
+    """
     length, area = scene.geometry(sample)
     dtype = est.model.positions0.dtype
     n, law, ws = est.n, None, 0.0
@@ -127,7 +151,16 @@ def wall_series(k_body, est: Estimator, scene, sample: Sample, fraction: float |
     A wall's stiffness is the sum of the tangent stiffnesses of the particles touching it, each carrying an equal
     share of the force ``F = K * s * delta`` the sample carries at the middle ``s`` of the scene's fit range
     (``delta`` = target displacement); ``K`` and ``F`` are solved for together (fixed point).
-    Returns ``(K, {"k_bottom", "k_top", "n_bottom", "n_top"})``.
+
+    Args:
+      k_body: the body's stiffness [N/m].
+      est: the estimator.
+      scene: the scene (with walls).
+      sample: the bonded sample.
+      fraction: as in :func:`scene_geometry`.
+
+    Returns:
+      ``(K, {"k_bottom", "k_top", "n_bottom", "n_top"})``.
     """
     geo, law = scene_geometry(est, sample, scene, fraction)
     return _wall_series(k_body, est.model.radii, geo, law)
@@ -149,8 +182,15 @@ def _scene_stiffness(est: Estimator, params, geo: SceneGeometry, layered: bool, 
 def scene_stiffness(est: Estimator, params, sample: Sample, scene, *, layered: bool = False):
     """Stiffness K [N/m] of ``scene`` from the STE: ``E_axis A / l`` (or the layered model), walls in series.
 
-    Returns ``(K, parts)`` with ``parts = {"K_body", "E_axis", "tensor", ...}`` (jnp values). ``est.axis`` is the
-    load axis (the estimator is built for the scene).
+    Args:
+      est: the estimator built for the scene (``est.axis`` is the load axis).
+      params: the bond parameters.
+      sample: the bonded sample.
+      scene: the scene.
+      layered: the layered springs-in-series model.
+
+    Returns:
+      ``(K, parts)`` with ``parts = {"K_body", "E_axis", "tensor", ...}`` (jnp values).
     """
     geo, law = scene_geometry(est, sample, scene)
     return _scene_stiffness(est, params, geo, layered, law)
@@ -159,23 +199,46 @@ def scene_stiffness(est: Estimator, params, sample: Sample, scene, *, layered: b
 def _check_scene(scene):
     from jaxbpm.scenes import UniaxialCompression
 
-    if not isinstance(scene, UniaxialCompression):
+    methods = getattr(scene, "methods", None)
+    # scene.methods: the isinstance goes once every scene declares the solvers it supports
+    if (methods is not None and "ste" not in methods) or not isinstance(scene, UniaxialCompression):
         raise SceneError(f"the STE knows the UniaxialCompression scene, got {type(scene).__name__}")
 
 
-def stiffness_function(sample: Sample, scene, *, layered: bool = False, pad: bool = True, **options):
+def _estimator_for(sample, scene, options: STE):
+    """``(est, geometry, wall_law)`` of ``sample`` and ``scene``: the setup :func:`solve_scene` and
+    :func:`stiffness_function` share, kept for the last few samples."""
+    key = (scene, options.replace(layered=False, throw=True))  # (what the estimator does not depend on: one key)
+    return _setups.get(sample, key, lambda: _setup(sample, scene, options))
+
+
+def stiffness_function(sample: Sample, scene, options: STE | None = None, **overrides):
     """A pure function ``params -> K`` [N/m] of ``scene`` estimated by the STE (``jit``/``grad``/``vmap``-able,
-    e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``). ``options`` go to :func:`estimator`. The
-    estimator is the one :func:`solve_scene` keeps for the sample (padded to its size class unless ``pad=False``),
-    and a call with concrete parameters runs the program :func:`solve_scene` compiled (no compilation when the
-    process solved a sample of that class before)."""
+    e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``).
+
+    The estimator is the one :func:`solve_scene` keeps for the sample (padded to its size class unless
+    ``pad=False``), and a call with concrete parameters runs the program :func:`solve_scene` compiled (no
+    compilation when the process solved a sample of that class before).
+
+    Args:
+      sample: the bonded sample.
+      scene: a :class:`~jaxbpm.scenes.UniaxialCompression`.
+      options: the :class:`~jaxbpm.ste.options.STE` options (``None``: the defaults).
+      **overrides: options overriding those of ``options`` (``layered=True``, ...).
+
+    Returns:
+      ``stiffness(params) -> K``.
+    """
+    options = STE() if options is None else options
+    if overrides:
+        options = options.replace(**overrides)
     _check_scene(scene)
-    est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
-                                lambda: _setup(sample, scene, pad, options))
+    est, geo, law = _estimator_for(sample, scene, options)
+    layered = bool(options.layered)
 
     def stiffness(params):
         if not traced(params):
-            return solve_program(est, params, geo, layered=bool(layered), walls=law)[0][0]
+            return solve_program(est, params, geo, layered=layered, walls=law)[0][0]
         return _scene_stiffness(est, params, geo, layered, law)[0]
 
     return stiffness
@@ -193,40 +256,53 @@ solve_program = Program(_outputs, static_argnames=("layered", "walls"), prime=2)
 _setups = SetupCache()
 
 
-def _setup(sample, scene, pad, options):
-    est = estimator(sample, scene, pad=pad, **options)
+def _setup(sample, scene, options: STE):
+    est = estimator(sample, scene, pad=options.pad, **{k: getattr(options, k) for k in ESTIMATOR_OPTIONS})
     return (est,) + scene_geometry(est, sample, scene)
 
 
-def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pad: bool = True, throw: bool = True,
-                **options):
-    """Estimate the stiffness of ``scene`` with the STE; see :func:`jaxbpm.solve` (``method="ste"``).
+def solve_scene(sample: Sample, scene, params=None, options: STE | None = None):
+    """Estimate the stiffness of ``scene`` with the STE (what ``jaxbpm.solve(..., method="ste")`` runs).
 
-    pad: pad the estimator to its size class (:func:`estimator`), so that samples of similar size share one
-    compiled program (the result is the same to round-off). throw: raise :class:`~jaxbpm.errors.NotFiniteError`
-    when the stiffness is not finite (``False``: return the result with ``status="not_finite"``).
-    ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``, ``E_y``, ``E_z`` [Pa], ``nu`` (3x3),
-    ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls), ``skipped`` (singular particles),
-    ``surface`` (surface particles left out of the averages), ``clamped`` (particles of the scene's fixed and driven
-    sets, which follow the affine field),
-    ``particles``, ``bonds``, ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``,
-    ``k_top`` [N/m], ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
+    Args:
+      sample: the bonded sample.
+      scene: a :class:`~jaxbpm.scenes.UniaxialCompression`.
+      params: parameters checked by :func:`jaxbpm.physics.model.check_params` (``None``: the sample's own).
+      options: the :class:`~jaxbpm.ste.options.STE` options (``None``: the defaults).
+
+    Returns:
+      The :class:`~jaxbpm.result.Result`. Its ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``,
+      ``E_y``, ``E_z`` [Pa], ``nu`` (3x3), ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls),
+      ``skipped`` (singular particles), ``surface`` (surface particles left out of the averages), ``clamped``
+      (particles of the scene's fixed and driven sets, which follow the affine field), ``particles``, ``bonds``,
+      ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``, ``k_top`` [N/m],
+      ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
+
+    Raises:
+      NotFiniteError: with ``options.throw``, a stiffness that is not finite.
     """
-    from jaxbpm.result import Result, settle
-
+    options = STE() if options is None else options
     t0 = time.perf_counter()
     _check_scene(scene)
     params = default_params(sample) if params is None else params
-    params = check_params(params, sample)
     with compile_clock() as setup_compile:  # programs the setup compiles count as compilation
-        est, geo, law = _setups.get(sample, (scene, bool(pad), tuple(sorted(options.items()))),
-                                    lambda: _setup(sample, scene, pad, options))
+        est, geo, law = _estimator_for(sample, scene, options)
     setup_time = time.perf_counter() - t0 - setup_compile.seconds
-    out, compile_time, run_time = solve_program(est, params, geo, layered=bool(layered), walls=law)
+    out, compile_time, run_time = solve_program(est, params, geo, layered=bool(options.layered), walls=law)
     compile_time += setup_compile.seconds
     k, parts, e, nu, e_iso, nu_iso = jax.tree_util.tree_map(np.asarray, out)
     length, area = float(geo.length), float(geo.area)
     delta = scene.strain * length
+    stats = _stats(est, scene, parts, e, nu, e_iso, nu_iso, options.layered, setup_time)
+    k = float(k)
+    # what is neither setup nor compilation (moving the outputs to the host) counts as run time
+    return settle(timed_result("ste", t0, stiffness=k, gauge_length=length, area=area,
+                               displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
+                               compile_time=compile_time, setup_time=setup_time, stats=stats), options.throw)
+
+
+def _stats(est: Estimator, scene, parts, e, nu, e_iso, nu_iso, layered, setup_time) -> dict:
+    """The result's ``stats`` from the program's outputs (host arrays)."""
     stats = {"tensor": parts["tensor"].tolist(), "E_x": float(e[0]), "E_y": float(e[1]), "E_z": float(e[2]),
              "nu": nu.tolist(), "E_iso": float(e_iso), "nu_iso": float(nu_iso), "K_body": float(parts["K_body"]),
              "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface, "clamped": est.clamped,
@@ -239,10 +315,4 @@ def solve_scene(sample: Sample, scene, params=None, *, layered: bool = False, pa
     for name in ("k_bottom", "k_top", "n_bottom", "n_top"):
         if name in parts:
             stats[name] = float(parts[name]) if name.startswith("k") else int(parts[name])
-    k = float(k)
-    wall = time.perf_counter() - t0
-    # what is neither setup nor compilation (moving the outputs to the host) counts as run time
-    return settle(Result(method="ste", stiffness=k, youngs_modulus=k * length / area, gauge_length=length,
-                         area=area, displacement=np.array([0.0, delta]), force=np.array([0.0, k * delta]),
-                         wall_time=wall, setup_time=setup_time, compile_time=compile_time,
-                         run_time=wall - setup_time - compile_time, stats=stats, state=None), throw)
+    return stats

@@ -34,6 +34,13 @@ def pair_stiffness(est: Estimator, params) -> jnp.ndarray:
     """Stiffness ``[P, 2nd, 2nd]`` of every interaction (bonds, then contacts) at rest, global frame.
 
     The 3x3 block ``[:3, nd:nd+3]`` with its sign flipped is ``K^nm`` of the paper (force on i per displacement of j).
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[P, 2nd, 2nd]`` the pairs' stiffness matrices.
     """
     jac = _bond_jacobians(est, params)
     if est.n_contacts:
@@ -171,9 +178,9 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     ``sum_m N^m Gamma^m`` (regrouped by the neighbour) over the particles.
 
     The algebra of :func:`_fluctuations3` (which the local tensors use) with the per-particle sums D, B and N
-    gathered by one scatter per pair end into one ``[n, 63]`` array (30 % faster on CPU than a scatter per sum). The
-    two passes over the pairs fold over chunks of pairs on large samples (:func:`~jaxbpm.physics.chunks.fold_chunks`:
-    at a million particles the whole-sample per-pair rows were 3.6 GiB of scratch memory)."""
+    gathered by one scatter per pair end into one ``[n, 63]`` array (fewer scatters than one per sum). The two passes
+    over the pairs fold over chunks of pairs on large samples (:func:`~jaxbpm.physics.chunks.fold_chunks`), which
+    bounds the per-pair scratch memory."""
     K = coupling(est, params).reshape(-1, 9)
     n, d, dtype = est.n, est.d, est.d.dtype
     pairs = est.pairs
@@ -217,7 +224,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
         phi = gamma + jnp.where(free, _mul(A, hat), 0.0)  # Eq. 24 + 29
     t = gram.reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
     # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: one matrix product each that
-    # contracts (particle, a) -- rows [n * 3, 9] on both sides (4x faster on CPU than per-particle products summed)
+    # contracts (particle, a) -- rows [n * 3, 9] on both sides (faster on CPU than per-particle products summed)
     bw = (w[:, None, None, None] * B.reshape(n, 3, 3, 3)).transpose(0, 2, 3, 1).reshape(3 * n, 9)
     t = t - _gram(bw, phi.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
     if neighbours:
@@ -251,8 +258,16 @@ def _symmetrise(c):
 
 
 def raw_body_tensor(est: Estimator, params) -> jnp.ndarray:
-    """The body tensor ``[3, 3, 3, 3]`` before minor symmetrisation: ``C[i,j,k,l] = d sigma_ij / d G_lk``, the
-    V-weighted mean of Eq. 32 over the included particles (non-singular, not at the surface)."""
+    """The body tensor before minor symmetrisation: ``C[i,j,k,l] = d sigma_ij / d G_lk``, the V-weighted mean of
+    Eq. 32 over the included particles (non-singular, not at the surface).
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[3, 3, 3, 3]`` the tensor [Pa].
+    """
     if est.dofs == 3:
         return _raw_body_tensor3(est, params)
     return raw_body_tensor_edges(est, params)
@@ -275,14 +290,29 @@ def body_tensor(est: Estimator, params) -> jnp.ndarray:
     out the singular and surface particles, or clamping the scene's end layers, breaks that slightly (a fraction of
     a percent of the largest component on random packings, up to 2 % with 6 DOF and clamped ends), and that small
     antisymmetric part is removed here.
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[6, 6]`` the Voigt stiffness [Pa].
     """
     c6 = voigt(_symmetrise(raw_body_tensor(est, params)))
     return 0.5 * (c6 + c6.T)
 
 
 def local_tensors(est: Estimator, params) -> jnp.ndarray:
-    """Local stiffness tensors ``C^n`` in Voigt form ``[n, 6, 6]`` [Pa] (Eq. 32, or Eq. 33-35 with
-    ``first_neighbour``), minor-symmetrised; NaN for singular (skipped) particles."""
+    """Local stiffness tensors ``C^n`` in Voigt form (Eq. 32, or Eq. 33-35 with ``first_neighbour``),
+    minor-symmetrised.
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[n, 6, 6]`` [Pa]; NaN for singular (skipped) particles.
+    """
     if est.dofs == 3:
         return jnp.where(est.valid[:, None, None], _local_tensors3(est, params), jnp.nan)
     return local_tensors_edges(est, params)
@@ -304,14 +334,28 @@ def local_tensors_edges(est: Estimator, params) -> jnp.ndarray:
 
 
 def voigt(c) -> jnp.ndarray:
-    """``[..., 3, 3, 3, 3]`` -> ``[..., 6, 6]`` (order 11, 22, 33, 23, 13, 12)."""
+    """A fourth-order tensor in Voigt form (order 11, 22, 33, 23, 13, 12).
+
+    Args:
+      c: ``[..., 3, 3, 3, 3]`` the tensor.
+
+    Returns:
+      ``[..., 6, 6]``.
+    """
     i = np.array([p[0] for p in VOIGT])
     j = np.array([p[1] for p in VOIGT])
     return c[..., i[:, None], j[:, None], i[None, :], j[None, :]]
 
 
 def tensor_from_voigt(c6) -> jnp.ndarray:
-    """``[..., 6, 6]`` -> ``[..., 3, 3, 3, 3]`` with the minor symmetries."""
+    """A Voigt stiffness as a fourth-order tensor with the minor symmetries.
+
+    Args:
+      c6: ``[..., 6, 6]`` the Voigt form.
+
+    Returns:
+      ``[..., 3, 3, 3, 3]``.
+    """
     idx = np.zeros((3, 3), int)
     for k, (a, b) in enumerate(VOIGT):
         idx[a, b] = idx[b, a] = k
@@ -319,11 +363,15 @@ def tensor_from_voigt(c6) -> jnp.ndarray:
 
 
 def moduli(c6) -> dict:
-    """Engineering constants of a Voigt stiffness ``[..., 6, 6]``.
+    """Engineering constants of a Voigt stiffness.
 
-    Returns ``{"E": [..., 3]`` Young's moduli along x, y, z; ``"nu": [..., 3, 3]`` Poisson ratios nu_ij =
-    -S_ij / S_ii (lateral strain j per axial strain i); ``"G": [..., 3]`` shear moduli G_23, G_13, G_12;
-    ``"compliance": [..., 6, 6]}``.
+    Args:
+      c6: ``[..., 6, 6]`` the Voigt stiffness [Pa].
+
+    Returns:
+      ``{"E": [..., 3]`` Young's moduli along x, y, z; ``"nu": [..., 3, 3]`` Poisson ratios nu_ij = -S_ij / S_ii
+      (lateral strain j per axial strain i); ``"G": [..., 3]`` shear moduli G_23, G_13, G_12;
+      ``"compliance": [..., 6, 6]}``.
     """
     s = jnp.linalg.inv(c6)
     diag = jnp.diagonal(s, axis1=-2, axis2=-1)
@@ -332,8 +380,16 @@ def moduli(c6) -> dict:
 
 
 def directional_modulus(c6, direction) -> jnp.ndarray:
-    """Young's modulus [Pa] along ``direction [3]`` (any length): ``1 / (b^T S b)``, ``b`` the Voigt form of
-    ``n n^T`` with ``n`` the unit direction."""
+    """Young's modulus along a direction: ``1 / (b^T S b)``, ``b`` the Voigt form of ``n n^T`` with ``n`` the unit
+    direction.
+
+    Args:
+      c6: ``[6, 6]`` the Voigt stiffness [Pa].
+      direction: ``[3]`` the direction (any length).
+
+    Returns:
+      The modulus [Pa].
+    """
     n = jnp.asarray(direction, c6.dtype)
     n = n / jnp.linalg.norm(n)
     b = jnp.stack([n[0] ** 2, n[1] ** 2, n[2] ** 2, n[1] * n[2], n[0] * n[2], n[0] * n[1]])
@@ -341,7 +397,14 @@ def directional_modulus(c6, direction) -> jnp.ndarray:
 
 
 def isotropic_fit(c6) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """``(E, nu)`` of the isotropic tensor nearest to ``c6`` (least squares over the 81 components)."""
+    """The isotropic tensor nearest to ``c6`` (least squares over the 81 components).
+
+    Args:
+      c6: ``[6, 6]`` the Voigt stiffness [Pa].
+
+    Returns:
+      ``(E, nu)``: its Young's modulus [Pa] and Poisson's ratio.
+    """
     c = tensor_from_voigt(c6)
     a = jnp.einsum("...iijj->...", c)   # 9 lambda + 6 mu
     b = jnp.einsum("...ijij->...", c)   # 3 lambda + 12 mu
