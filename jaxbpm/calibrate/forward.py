@@ -15,6 +15,7 @@ import jax
 import numpy as np
 
 from jaxbpm.calibrate.space import DEFAULT_SCENE, CalibrationError
+from jaxbpm.status import Status
 
 __all__ = ["Forward", "STRENGTH_OBSERVABLES"]
 
@@ -103,7 +104,7 @@ STRENGTH_OBSERVABLES = ("strength", "peak_force", "broken_tensile", "broken_shea
 def _checked(result, key, params):
     """``result`` if its solve converged; else a :class:`CalibrationError` naming the scene, the parameters and the
     status (a calibrator never fits to an answer its solver does not vouch for)."""
-    if result.status == "converged":
+    if result.status == Status.CONVERGED:
         return result
     shown = {k: np.asarray(v).tolist() for k, v in params.items()}
     raise CalibrationError(f"the {result.method.upper()} solve of scene {key!r} at {shown} ended with status "

@@ -6,6 +6,7 @@ import pytest
 
 from jaxbpm.calibrate import CalibrationError, Forward
 from jaxbpm.calibrate.forward import _checked
+from jaxbpm.status import Status
 
 pytestmark = pytest.mark.xdist_group("calibrate-module")
 
@@ -41,7 +42,9 @@ class _Result:
 
 
 def test_a_solve_that_did_not_converge_is_an_error():
-    ok = _Result("converged")
-    assert _checked(ok, "main", {"bond_E": np.array([1e9])}) is ok
-    with pytest.raises(CalibrationError, match="DSM solve of scene 'main' at .* status 'max_iterations': the CG"):
-        _checked(_Result("max_iterations"), "main", {"bond_E": np.array([1e9])})
+    for status in (Status.CONVERGED, "converged"):  # a Status, or its string
+        ok = _Result(status)
+        assert _checked(ok, "main", {"bond_E": np.array([1e9])}) is ok
+    for status in (Status.MAX_ITERATIONS, "max_iterations"):
+        with pytest.raises(CalibrationError, match="DSM solve of scene 'main' at .* status 'max_iterations': the CG"):
+            _checked(_Result(status), "main", {"bond_E": np.array([1e9])})
