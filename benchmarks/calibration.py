@@ -59,13 +59,13 @@ def main(argv=None):
         params = [cal.Parameter("bond_E", index=None, ratio=ratio if len(ratio) > 1 else None,
                                 bounds=(E0 / 10, E0 * 10))]
         runs = {
-            "adam-fd/dem": dict(method="adam", model="dem", shortcut=False, gradient="fd-forward", fd_step=1e-2,
+            "adam-fd/dem": dict(method="adam", solver="dem", shortcut=False, gradient="fd-forward", fd_step=1e-2,
                                 max_iterations=args.dem_iterations),
-            "adam-fd/dsm": dict(method="adam", model="dsm", shortcut=False, gradient="fd-forward",
+            "adam-fd/dsm": dict(method="adam", solver="dsm", shortcut=False, gradient="fd-forward",
                                 max_iterations=6),
-            "adam-autodiff/dsm": dict(method="adam", model="dsm", shortcut=False, gradient="autodiff",
+            "adam-autodiff/dsm": dict(method="adam", solver="dsm", shortcut=False, gradient="autodiff",
                                       max_iterations=6),
-            "surrogate/dsm": dict(method="surrogate", model="dsm", n_runs=args.surrogate_runs, n_trees=200,
+            "surrogate/dsm": dict(method="surrogate", solver="dsm", n_runs=args.surrogate_runs, n_trees=200,
                                   L_s=500, it_max=20, I_e=0.2, chunk=args.chunk,
                                   parameters=[cal.Parameter("bond_E", index=None,
                                                             ratio=ratio if len(ratio) > 1 else None,

@@ -5,9 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
+import sys
 
 
 def add_parser(sub) -> None:
+    """Add the ``calibrate`` command to the sub-parsers of the ``jaxbpm`` command.
+
+    Args:
+      sub: the object ``argparse.ArgumentParser.add_subparsers`` returns.
+    """
     p = sub.add_parser(
         "calibrate", help="calibrate the bond moduli of a sample to measured targets",
         description="Calibrate the bond parameters of a sample so that a uniaxial compression reproduces the "
@@ -15,7 +21,7 @@ def add_parser(sub) -> None:
                     "points), several parameters and calibrator options from --config FILE.json: "
                     '{"targets": [{"observable": "stress", "at": [...], "value": [...], "weight": 1}], '
                     '"parameters": [{"key": "bond_E", "index": 0, "bounds": [lo, hi]}], "options": {...}}. The '
-                    'config may also set "method", "model" and "tol"; --method, --model and --tol given on the '
+                    'config may also set "method", "solver" and "tol"; --method, --solver and --tol given on the '
                     'command line override them.')
     p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
     p.add_argument("--target-E", type=float, default=None, dest="target_E", metavar="PA",
@@ -25,13 +31,14 @@ def add_parser(sub) -> None:
     p.add_argument("--config", type=pathlib.Path, default=None, help="JSON file with targets, parameters, options")
     p.add_argument("--method", default=None, choices=("auto", "adam", "surrogate", "closed-form"),
                    help="calibrator (default: auto = multi-fidelity, closed form where it applies)")
-    p.add_argument("--model", default=None, choices=("dsm", "ste", "dem"),
+    p.add_argument("--solver", default=None, choices=("dsm", "ste", "dem"),
                    help="solver for adam/surrogate/closed-form (default: dsm)")
+    p.add_argument("--model", default=None, choices=("dsm", "ste", "dem"), help=argparse.SUPPRESS)  # old --solver
     p.add_argument("--tol", type=float, default=None, help="relative tolerance on every target (default: 0.05)")
     p.add_argument("--strain", type=float, default=0.002, help="compression strain (default: 0.002)")
     p.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="loading axis (default: 2)")
     p.add_argument("--check", default=None, choices=("dsm", "ste", "dem"),
-                   help="solve once at the answer with this model and report its errors")
+                   help="solve once at the answer with this solver and report its errors")
     p.add_argument("--no-shortcut", action="store_true", dest="no_shortcut",
                    help="do not replace Adam by the closed form where it applies")
     p.add_argument("--history", type=pathlib.Path, default=None, help="write the history to this HDF5 file")
@@ -39,10 +46,12 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-_DEFAULTS = {"method": "auto", "model": "dsm", "tol": 0.05}  # of the options a --config can also set
+_DEFAULTS = {"method": "auto", "solver": "dsm", "tol": 0.05}  # of the options a --config can also set
 
 
 def _config(path: pathlib.Path) -> dict:
+    """The calibration config in the JSON file ``path``; its old key ``"model"`` becomes ``"solver"`` (a
+    deprecation message on stderr)."""
     from jaxbpm.calibrate import CalibrationError
 
     if not path.exists():
@@ -53,13 +62,35 @@ def _config(path: pathlib.Path) -> dict:
         raise CalibrationError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(cfg, dict):
         raise CalibrationError(f"{path}: the config must be a JSON object")
-    unknown = set(cfg) - {"targets", "parameters", "options", "method", "model", "tol", "lab"}
+    unknown = set(cfg) - {"targets", "parameters", "options", "method", "solver", "model", "tol", "lab"}
     if unknown:
         raise CalibrationError(f"{path}: unknown config keys {sorted(unknown)}")
+    if "model" in cfg:
+        if "solver" in cfg:
+            raise CalibrationError(f'{path}: give "solver" only ("model" is its deprecated name)')
+        _deprecated(f'{path}: the config key "model" is deprecated and will be removed in the next release; '
+                    'use "solver"')
+        cfg["solver"] = cfg.pop("model")
     return cfg
 
 
+def _deprecated(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
+    """Run ``jaxbpm calibrate`` (or, for a config with a ``"lab"`` object, the staged laboratory calibration).
+
+    Args:
+      args: the parsed command line.
+
+    Returns:
+      The exit status: 0 when every target is reached within the tolerance, else 1.
+
+    Raises:
+      CalibrationError: a bad config, no target, a bad calibrator option, or a calibration that fails (the
+        ``jaxbpm`` command prints it and exits with 2).
+    """
     from jaxbpm.calibrate import CalibrationError, Parameter, Target, calibrate
     from jaxbpm.io import load_sample
     from jaxbpm.scenes import UniaxialCompression
@@ -94,12 +125,15 @@ def run(args: argparse.Namespace) -> int:
     sample = load_sample(args.sample)
     scene = UniaxialCompression(axis=args.axis, strain=args.strain)
     # defaults < --config < options given on the command line (those default to None when not given)
-    method, model, tol = (getattr(args, key) if getattr(args, key) is not None else cfg.get(key, default)
-                          for key, default in _DEFAULTS.items())
-    print(f"calibrating {sample.n_particles} particles, {sample.n_bonds} bonds: method {method}, model {model}, "
+    if args.model is not None:
+        _deprecated("--model is deprecated and will be removed in the next release; use --solver")
+        args.solver = args.model if args.solver is None else args.solver
+    method, solver, tol = (getattr(args, key) if getattr(args, key) is not None else cfg.get(key, default)
+                           for key, default in _DEFAULTS.items())
+    print(f"calibrating {sample.n_particles} particles, {sample.n_bonds} bonds: method {method}, solver {solver}, "
           f"tol {100 * tol:g} %", flush=True)
     try:
-        result = calibrate(sample, scene, targets, method=method, model=model, parameters=parameters, tol=tol,
+        result = calibrate(sample, scene, targets, method=method, solver=solver, parameters=parameters, tol=tol,
                            shortcut=not args.no_shortcut, check=args.check, progress=not args.quiet, **options)
     except TypeError as exc:
         raise CalibrationError(f"bad calibrator option: {exc}") from None
@@ -107,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     if "check" in result.info:
         c = result.info["check"]
-        print(f"check with {c['model']}: largest error {100 * c['max_error']:.3f} % ({c['wall_time']:.2f} s)")
+        print(f"check with {c['solver']}: largest error {100 * c['max_error']:.3f} % ({c['wall_time']:.2f} s)")
     if args.history is not None:
         print(f"wrote {result.save(args.history)}")
     return 0 if result.converged else 1

@@ -115,13 +115,24 @@ def _cmd_export_vtk(args: argparse.Namespace) -> int:
 
 def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: bool = True,
              calibrate: bool = True, target_factor: float = 1.25) -> dict[str, Any]:
-    """The demo: generate a random box sample of ``n`` particles (at the generator's automatic packing fraction;
-    the time the generation took is printed), save it to ``out_dir/demo_sample.h5``, then compress it uniaxially
-    (0.2 % strain, clamped layers) with the three methods -- the explicit DEM (the reference), the direct stiffness
-    method (at its default tolerance and with ``stiffness_tol=1e-3``) and the stiffness tensor estimate -- and
-    report each one's stiffness, difference to the DEM and cost; then calibrate the bond modulus to a target Young's
-    modulus (``target_factor`` x the DEM's) with the multi-fidelity path, checked by one DEM run. Writes
+    """The demo: generate a random box sample, solve it three ways, calibrate its bond modulus.
+
+    Generates a random box sample of ``n`` particles (at the generator's automatic packing fraction; the time the
+    generation took is printed), saves it to ``out_dir/demo_sample.h5``, then compresses it uniaxially (0.2 % strain,
+    clamped layers) with the three methods -- the explicit DEM (the reference), the direct stiffness method (at its
+    default tolerance and with ``stiffness_tol=1e-3``) and the stiffness tensor estimate -- and reports each one's
+    stiffness, difference to the DEM and cost; then calibrates the bond modulus to a target Young's modulus
+    (``target_factor`` x the DEM's) with the multi-fidelity path, checked by one DEM run. Writes
     ``demo_results.json`` and the speed-against-accuracy chart ``demo_speed_accuracy.png``.
+
+    Args:
+      out_dir: the folder the files go to (made if missing).
+      n: particles of the sample.
+      seed: the generator's seed.
+      quiet: no progress bars.
+      solve: solve the sample (else only generate and save it).
+      calibrate: calibrate the bond modulus after the solves.
+      target_factor: the target Young's modulus over the DEM's.
 
     Returns:
       ``{"out_dir": Path, "sample_path": Path, "sample": Sample, "results": {label: Result},
@@ -254,7 +265,12 @@ def _positive_float(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``jaxbpm`` argument parser (one sub-parser per command)."""
+    """The ``jaxbpm`` argument parser.
+
+    Returns:
+      An :class:`argparse.ArgumentParser` with one sub-parser per command (each command's options loaded on first
+      use).
+    """
     from jaxbpm._version import __version__
 
     parser = argparse.ArgumentParser(
@@ -265,6 +281,29 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"jaxbpm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_CommandParser)
 
+    _add_generate(sub)
+    _add_info(sub)
+    _add_export_vtk(sub)
+    _add_demo(sub)
+
+    # commands defined in packages that import JAX: their options are added when the command is used (or its
+    # help shown), so that `jaxbpm --help` and the other commands' parsing stay free of JAX
+    lazy = {name: sub.add_parser(name, help=text) for name, text in _LAZY_COMMANDS.items()}
+    for name, parser_ in lazy.items():
+        parser_.populate = functools.partial(_populate, lazy, _LAZY_LOADERS[name])
+    # the cache options are global, accepted before the command and after it (SUPPRESS: an option absent after the
+    # command does not overwrite the value given before it)
+    _add_cache_options(parser, argparse.SUPPRESS)
+    for name, command_parser in sub.choices.items():
+        if name not in lazy:
+            _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
+    parser.set_defaults(no_cache=False, cache_dir=None)
+    return parser
+
+
+
+def _add_generate(sub) -> None:
+    """The ``generate`` command: a bonded sample saved to an HDF5 file."""
     d = _GENERATE_DEFAULTS
     p = sub.add_parser(
         "generate", help="generate a bonded sample and save it to an HDF5 file",
@@ -295,6 +334,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress output while generating")
     p.set_defaults(func=_cmd_generate)
 
+
+
+def _add_info(sub) -> None:
+    """The ``info`` command: a summary of a sample file or of the compilation cache."""
     p = sub.add_parser("info", help="print a summary of a sample file (or of the compilation cache)",
                        description="Print a summary of a sample file: counts, coordination, clusters, packing "
                                    "fraction, radii, extent and mass. With --cache, also (or, without a sample "
@@ -305,6 +348,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "cached programs and its size")
     p.set_defaults(func=_cmd_info, usage_error=p.error)
 
+
+
+def _add_export_vtk(sub) -> None:
+    """The ``export-vtk`` command: a sample file as VTK for ParaView."""
     p = sub.add_parser("export-vtk", help="export a sample file to VTK for ParaView",
                        description="Export a sample file to VTK: particles as points/vertices (radius, mass, "
                                    "coordination) and bonds as lines (bond_radius, material, length). The suffix "
@@ -313,6 +360,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", type=pathlib.Path, help="VTK file to write (.vtu or .vtk)")
     p.set_defaults(func=_cmd_export_vtk)
 
+
+
+def _add_demo(sub) -> None:
+    """The ``demo`` command: :func:`run_demo`."""
     p = sub.add_parser("demo", help="run the demo (a sample: STE, DSM and DEM stiffness, a calibration, a chart)",
                        description="Run the demo: generate a random box sample, save it to OUT/demo_sample.h5, "
                                    "compute its stiffness by STE, DSM (two tolerances) and DEM, compare stiffness "
@@ -330,21 +381,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-calibrate", action="store_true", dest="no_calibrate",
                    help="skip the calibration step")
     p.set_defaults(func=_cmd_demo)
-
-    # commands defined in packages that import JAX: their options are added when the command is used (or its
-    # help shown), so that `jaxbpm --help` and the other commands' parsing stay free of JAX
-    lazy = {name: sub.add_parser(name, help=text) for name, text in _LAZY_COMMANDS.items()}
-    for name, parser_ in lazy.items():
-        parser_.populate = functools.partial(_populate, lazy, _LAZY_LOADERS[name])
-    # the cache options are global, accepted before the command and after it (SUPPRESS: an option absent after the
-    # command does not overwrite the value given before it)
-    _add_cache_options(parser, argparse.SUPPRESS)
-    for name, command_parser in sub.choices.items():
-        if name not in lazy:
-            _add_cache_options(command_parser.add_argument_group("compilation cache"), argparse.SUPPRESS)
-    parser.set_defaults(no_cache=False, cache_dir=None)
-    return parser
-
 
 # commands whose options come from another module (it imports JAX): name -> one-line help, name -> loader
 _LAZY_COMMANDS = {
@@ -452,10 +488,17 @@ def _is_number(token: str) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``jaxbpm`` command with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+    """Run the ``jaxbpm`` command.
 
     Sample and file errors print ``error: <message>`` on stderr and return 2; argparse exits (``--help``,
     ``--version``, usage errors) raise :class:`SystemExit` as usual.
+
+    Args:
+      argv: the arguments (default ``sys.argv[1:]``).
+
+    Returns:
+      The exit code: 0 on success, 1 where a command reports a failure (e.g. a calibration that did not converge),
+      2 on an error, 130 when interrupted.
     """
     parser = build_parser()
     args = parser.parse_args(_negative_values(sys.argv[1:] if argv is None else list(argv)))

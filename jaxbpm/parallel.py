@@ -40,8 +40,17 @@ class WorkerLost(RuntimeError):
 
 
 def check_executor(executor):
-    """``executor`` if it is ``None`` or has the :class:`concurrent.futures.Executor` interface (``submit``), else a
-    ``TypeError`` that says what to pass."""
+    """An executor checked.
+
+    Args:
+      executor: ``None``, or an object with the :class:`concurrent.futures.Executor` interface (``submit``).
+
+    Returns:
+      ``executor``.
+
+    Raises:
+      TypeError: anything else (the message says what to pass).
+    """
     if executor is None or (callable(getattr(executor, "submit", None)) and not isinstance(executor, type)):
         return executor
     raise TypeError(f"executor must be a concurrent.futures.Executor (e.g. ProcessPoolExecutor, or a Dask "
@@ -49,14 +58,29 @@ def check_executor(executor):
 
 
 def check_retries(retries) -> int:
-    """``retries`` as an int, or a ``ValueError`` unless it is a whole number >= 0."""
+    """A retry count checked.
+
+    Args:
+      retries: a whole number >= 0.
+
+    Returns:
+      ``retries`` as an int.
+
+    Raises:
+      ValueError: anything else.
+    """
     if isinstance(retries, bool) or not isinstance(retries, (int, np.integer)) or retries < 0:
         raise ValueError(f"retries must be a whole number >= 0, got {retries!r}")
     return int(retries)
 
 
 def worker_settings() -> dict:
-    """The JAX settings a worker takes from the submitting process: float64 and the compilation cache directory."""
+    """The JAX settings a worker takes from the submitting process.
+
+    Returns:
+      ``{"x64": bool, "cache_dir": str or None}``: float64 on or off, and the compilation cache directory where the
+      cache is on.
+    """
     import jax
 
     cache = getattr(jax.config, "jax_compilation_cache_dir", None)
@@ -115,10 +139,24 @@ def run_tasks(executor, tasks: Sequence[Task], *, on_result: Callable[[int, Any]
               retries: int = 2, progress=None) -> list:
     """Run ``tasks`` on ``executor`` and return their results in order.
 
-    on_result: called ``(index, result)`` in the submitting process as each task finishes (in completion order), e.g.
-    to store it. retries: how often a task whose worker died is submitted again. progress: a bar with ``update(k)``
-    (:mod:`jaxbpm.progress`) or ``None``. An error of a task is raised here once the tasks already running have
-    finished and been passed to ``on_result``; the tasks not yet started are cancelled.
+    An error of a task is raised here once the tasks already running have finished and been passed to ``on_result``;
+    the tasks not yet started are cancelled.
+
+    Args:
+      executor: a :class:`concurrent.futures.Executor`.
+      tasks: the :class:`Task` s.
+      on_result: called ``(index, result)`` in the submitting process as each task finishes (in completion order),
+        e.g. to store it.
+      retries: how often a task whose worker died is submitted again.
+      progress: a bar with ``update(k)`` (:mod:`jaxbpm.progress`) or ``None``.
+
+    Returns:
+      The tasks' results, in the order of ``tasks``.
+
+    Raises:
+      WorkerLost: a task's worker died more often than ``retries`` allows, or the executor broke.
+      KeyboardInterrupt: interrupted (the tasks not yet started are cancelled).
+      Exception: the first error a task raised.
     """
     from jaxbpm._interrupt import check, guard
 

@@ -27,22 +27,40 @@ __all__ = ["sweep", "batch_size"]
 
 
 def batch_size(batch) -> int:
-    """Size of the leading axis shared by every leaf of ``batch`` (raises ``ValueError`` if they differ)."""
+    """Size of the leading axis shared by every leaf of ``batch``.
+
+    Args:
+      batch: a pytree of arrays with a leading batch axis.
+
+    Returns:
+      The batch size.
+
+    Raises:
+      ValueError: no arrays, a scalar leaf, or leaves of different leading sizes.
+    """
     sizes = {int(np.shape(leaf)[0]) if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(batch)}
     if not sizes:
         raise ValueError("sweep: the batch has no arrays")
     if -1 in sizes or len(sizes) != 1:
-        raise ValueError(f"sweep: every leaf of the batch needs the same leading (batch) axis; got sizes {sorted(sizes)}"
-                         " (-1: a scalar leaf)")
+        raise ValueError("sweep: every leaf of the batch needs the same leading (batch) axis; got sizes "
+                         f"{sorted(sizes)} (-1: a scalar leaf)")
     return sizes.pop()
 
 
 def sweep(fn: Callable, batch, *, devices: Sequence[Any] | None = None, chunk: int | None = None):
-    """``jax.vmap(fn)(batch)``, with the batch axis sharded over ``devices`` (default: all of the default backend).
+    """``jax.vmap(fn)(batch)``, with the batch axis sharded over ``devices``.
 
-    fn: a pure JAX function of one parameter set (a pytree); batch: the same pytree with a leading batch axis on
-    every leaf. chunk: at most this many sets per device in one evaluation (default: the whole share). Returns the
-    stacked outputs (leading axis = batch size), as NumPy-compatible JAX arrays on the default device.
+    Args:
+      fn: a pure JAX function of one parameter set (a pytree).
+      batch: the same pytree with a leading batch axis on every leaf.
+      devices: the devices to shard over (default: all of the default backend).
+      chunk: at most this many sets per device in one evaluation (default: the whole share).
+
+    Returns:
+      The stacked outputs (leading axis = batch size), as NumPy-compatible JAX arrays on the default device.
+
+    Raises:
+      ValueError: a bad batch (see :func:`batch_size`), no devices, or a bad ``chunk``.
     """
     size = batch_size(batch)
     devices = list(jax.devices() if devices is None else devices)

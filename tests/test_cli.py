@@ -215,32 +215,6 @@ def test_help_and_version_import_no_jax():
     assert "usage: jaxbpm convert" in res.stdout and ".vtkhdf" in res.stdout and "--radius1" in res.stdout
 
 
-def test_calibrate_options_override_the_config(tmp_path, capsys, monkeypatch):
-    """defaults < --config < options given on the command line."""
-    import jaxbpm.calibrate
-    from jaxbpm.errors import JaxbpmError
-
-    calls = []
-
-    def fake_calibrate(sample, scene, targets, **kw):
-        calls.append({k: kw[k] for k in ("method", "model", "tol")})
-        raise JaxbpmError("stop after the options")
-
-    monkeypatch.setattr(jaxbpm.calibrate, "calibrate", fake_calibrate)
-    sample = io.save_sample(tmp_path / "s.h5", _tiny())
-    config = tmp_path / "config.json"
-    config.write_text(json.dumps({"method": "adam", "model": "ste", "tol": 0.02}))
-    for argv, expected in (
-            ([], {"method": "auto", "model": "dsm", "tol": 0.05}),  # the defaults
-            (["--config", config], {"method": "adam", "model": "ste", "tol": 0.02}),  # the config over them
-            (["--config", config, "--model", "dem", "--tol", 0.1], {"method": "adam", "model": "dem", "tol": 0.1}),
-            (["--method", "surrogate", "--config", config], {"method": "surrogate", "model": "ste", "tol": 0.02}),
-            (["--model", "dsm", "--config", config], {"method": "adam", "model": "dsm", "tol": 0.02})):  # = default
-        code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, *argv)
-        assert code == 2 and "stop after the options" in err
-        assert calls[-1] == expected, argv
-
-
 def _env():
     env = dict(os.environ)
     env["JAX_PLATFORMS"] = "cpu"

@@ -1,12 +1,15 @@
-"""Helpers shared by the calibrators: ties between parameters and targets, results, progress output."""
+"""Helpers shared by the calibrators: ties between parameters and targets, results, progress output, renamed
+keywords. It imports no calibrator and not the problem (``problem`` arguments are
+:class:`~jaxbpm.calibrate.objective.Problem` s), so that every module of the package can use it."""
 
 from __future__ import annotations
 
+import warnings
 from typing import Callable, Mapping
 
 import numpy as np
 
-from jaxbpm.calibrate.objective import CalibrationError, Problem
+from jaxbpm.calibrate.space import CalibrationError
 from jaxbpm.calibrate.result import CalibrationResult, History
 
 # parameter key -> observables measured in the same units (Qu et al. 2020, Eq. 14: the macroscopic value is a first
@@ -15,11 +18,21 @@ _SAME_UNITS = {"bond_E": ("youngs_modulus",), "bond_nu": ("poisson_ratio",),
                "bond_tensile_strength": ("strength",), "bond_shear_strength": ("strength",)}
 
 
-def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | None:
+def resolve_tie(problem, tie: Mapping[str, str] | None) -> list[int] | None:
     """Index of the target each parameter is tied to (Qu et al. 2020, 3.5-3.6), or None when there is no tie.
 
-    ``tie`` maps parameter names to target names; ``None`` ties the only parameter to the only target when the
-    problem has one of each (a scalar target)."""
+    Args:
+      problem: a :class:`~jaxbpm.calibrate.objective.Problem`.
+      tie: ``{parameter name: target name}``; ``None`` ties the only parameter to the only target when the problem
+        has one of each (a scalar target).
+
+    Returns:
+      One target index per parameter, or None.
+
+    Raises:
+      CalibrationError: a tie that is not a mapping, names an unknown parameter or target, leaves a parameter out or
+        ties one to a vector target.
+    """
     names, targets = problem.space.names, problem.target_names
     if tie is None:
         if problem.space.n == 1 and len(problem.targets) == 1 and problem.targets[0].size == 1:
@@ -45,14 +58,31 @@ def resolve_tie(problem: Problem, tie: Mapping[str, str] | None) -> list[int] | 
     return out
 
 
-def same_units(problem: Problem, ties: list[int]) -> bool:
+def same_units(problem, ties: list[int]) -> bool:
+    """Whether each parameter shares the units of its tied target (bond E and Young's modulus, bond strengths and
+    strengths): Qu et al. 2020's Eq. 14 then starts each parameter at its target's value.
+
+    Args:
+      problem: a :class:`~jaxbpm.calibrate.objective.Problem`.
+      ties: the target index of each parameter (:func:`resolve_tie`).
+
+    Returns:
+      True when every parameter shares its target's units.
+    """
     return all(problem.targets[k].observable in _SAME_UNITS.get(p.key, ())
                for p, k in zip(problem.space.parameters, ties))
 
 
 def printer(prefix: str = "") -> Callable[[dict, list[str], list[str]], None]:
-    """A progress callback printing one line per iteration on stderr (:func:`jaxbpm.progress.say`: above any
-    progress bar, beside the packing's and the DEM's progress)."""
+    """A progress callback printing one line per iteration on stderr (:func:`jaxbpm.progress.say`: above any progress
+    bar, beside the packing's and the DEM's progress).
+
+    Args:
+      prefix: text before each line.
+
+    Returns:
+      A callable ``(row, parameter_names, target_names)``.
+    """
     from jaxbpm.progress import say
 
     def show(row, parameter_names, target_names):
@@ -65,6 +95,17 @@ def printer(prefix: str = "") -> Callable[[dict, list[str], list[str]], None]:
 
 
 def progress_fn(progress):
+    """The progress callback that a calibrator's ``progress=`` asks for.
+
+    Args:
+      progress: True (print a line per iteration), None or False (nothing), or a callable.
+
+    Returns:
+      A callable ``(row, parameter_names, target_names)``, or None.
+
+    Raises:
+      CalibrationError: anything else.
+    """
     if progress is True:
         return printer()
     if progress in (None, False):
@@ -74,7 +115,22 @@ def progress_fn(progress):
     raise CalibrationError(f"progress must be True, False or a callable, got {progress!r}")
 
 
-def record(history: History, problem: Problem, progress, *, kind, values, errors, time, level=None) -> dict:
+def record(history: History, problem, progress, *, kind, values, errors, time, level=None) -> dict:
+    """Append one evaluated point to ``history`` and report it to ``progress``.
+
+    Args:
+      history: the calibration's :class:`~jaxbpm.calibrate.result.History`.
+      problem: the :class:`~jaxbpm.calibrate.objective.Problem` (its loss, per-target errors and solve count).
+      progress: a callable ``(row, parameter_names, target_names)``, or None.
+      kind: what the point is (``"initial"``, ``"adam"``, ``"narrow"``, ...).
+      values: the parameter values ``[n]``.
+      errors: the relative errors ``[m]`` of every target element.
+      time: seconds the iteration took.
+      level: the level's name (default: the forward's name).
+
+    Returns:
+      The row appended.
+    """
     row = history.append(kind=kind, level=level or problem.forward.name, values=values,
                          loss=float(problem.loss_of(np.asarray(errors))), errors=problem.per_target(errors),
                          evaluations=problem.evaluations, time=time)
@@ -83,28 +139,88 @@ def record(history: History, problem: Problem, progress, *, kind, values, errors
     return row
 
 
-def make_result(problem: Problem, history: History, values, errors, *, method: str, tol: float, wall_time: float,
+def make_result(problem, history: History, values, errors, *, method: str, tol: float, wall_time: float,
                 evaluations: int, notes=(), info=None, band=None, converged=None,
                 iterations: int | None = None) -> CalibrationResult:
+    """The :class:`~jaxbpm.calibrate.result.CalibrationResult` of a calibrator's answer.
+
+    Args:
+      problem: the :class:`~jaxbpm.calibrate.objective.Problem`.
+      history: the evaluated points.
+      values: the answer ``[n]``.
+      errors: its relative errors ``[m]``.
+      method: the calibrator's name.
+      tol: the relative tolerance.
+      wall_time: seconds the calibration took.
+      evaluations: solves it ran.
+      notes, info, band: the result's notes, details and uncertainty band.
+      converged: whether it converged (default: every target within ``tol``).
+      iterations: evaluated points (default: the rows of ``history``).
+
+    Returns:
+      The result, its ``solver`` the forward's name.
+    """
     values = np.asarray(values, dtype=np.float64)
     params = {k: np.asarray(v) for k, v in problem.space.to_params(values).items()}
     if converged is None:
         converged = bool(np.all(problem.max_errors(errors) <= tol))
     return CalibrationResult(values=problem.space.describe(values), params=params,
                              errors=problem.signed_errors(errors), converged=bool(converged), method=method,
-                             model=problem.forward.name, evaluations=int(evaluations),
+                             solver=problem.forward.name, evaluations=int(evaluations),
                              iterations=len(history) if iterations is None else int(iterations),
                              wall_time=float(wall_time), tol=float(tol), history=history, notes=list(notes),
                              band=band, info=dict(info or {}))
 
 
 def check_tol(tol) -> float:
+    """A relative tolerance checked.
+
+    Args:
+      tol: a number in (0, 1).
+
+    Returns:
+      ``tol`` as a float.
+
+    Raises:
+      CalibrationError: anything else.
+    """
     if not (isinstance(tol, (int, float, np.number)) and 0 < tol < 1):
         raise CalibrationError(f"tol must be a relative tolerance in (0, 1), got {tol!r}")
     return float(tol)
 
 
 def check_count(name, value, minimum=1) -> int:
+    """A whole-number option checked.
+
+    Args:
+      name: the option's name (in the message).
+      value: its value.
+      minimum: the smallest value allowed.
+
+    Returns:
+      ``value`` as an int.
+
+    Raises:
+      CalibrationError: a value that is not a whole number (booleans included) or is below ``minimum``.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         raise CalibrationError(f"{name} must be a whole number >= {minimum}, got {value!r}")
     return int(value)
+
+
+def renamed_keyword(value, old_value, *, new: str, old: str):
+    """The value of the keyword ``new``, or of its deprecated name ``old`` where that was given.
+
+    Args:
+      value: the value given as ``new`` (or its default).
+      old_value: the value given as ``old``; ``None`` when it was not given.
+      new, old: the keyword's name and its deprecated name.
+
+    Returns:
+      ``old_value`` where it was given (with a :class:`DeprecationWarning` naming ``new``), else ``value``.
+    """
+    if old_value is None:
+        return value
+    warnings.warn(f"{old}= is deprecated and will be removed in the next release; use {new}= (the same value)",
+                  DeprecationWarning, stacklevel=3)
+    return old_value

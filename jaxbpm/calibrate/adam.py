@@ -27,6 +27,7 @@ the model, one forward and one adjoint solve).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Mapping
 
@@ -35,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
 
@@ -48,9 +49,20 @@ def loss_and_gradient(problem: Problem, z, method: str = "autodiff", *, step: fl
                       tie: list[int] | None = None, base=None):
     """Loss, gradient ``dL/dz [n]`` and the relative errors at ``z``.
 
-    method: ``"autodiff"``, ``"fd-forward"`` or ``"fd-central"`` (perturbed points evaluated as one batch), or
-    ``"simplified"`` (needs ``tie``: one point with every parameter perturbed, Qu et al. 2020 Eq. 16-19).
-    base: the errors at ``z`` when already known (finite differences then skip the base solve).
+    Args:
+      problem: the targets, parameters and forward.
+      z: the point ``[n]`` in the optimisation variable.
+      method: ``"autodiff"``, ``"fd-forward"`` or ``"fd-central"`` (perturbed points evaluated as one batch), or
+        ``"simplified"`` (needs ``tie``: one point with every parameter perturbed, Qu et al. 2020 Eq. 16-19).
+      step: the finite-difference step in ``z``.
+      tie: the index of the target each parameter is tied to (the simplified scheme).
+      base: the errors at ``z`` when already known (finite differences then skip the base solve).
+
+    Returns:
+      ``(loss, gradient [n], errors [m])``.
+
+    Raises:
+      CalibrationError: an unknown method, a step outside (0, 1), or the simplified scheme without ``tie``.
     """
     z = np.asarray(z, dtype=np.float64)
     n = z.size
@@ -97,22 +109,84 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
          first_estimate: bool | None = None, second_estimate: bool | None = None, tie: Mapping[str, str] | None = None,
          simplified: bool = False, fd_step: float = 1e-3, optimizer: optax.GradientTransformation | None = None,
          progress=None) -> CalibrationResult:
-    """Calibrate ``problem`` with Adam (Qu et al. 2020). Returns a :class:`CalibrationResult` at the best point seen.
+    """Calibrate ``problem`` with Adam (Qu et al. 2020), stopping at the first point where every target is within
+    ``tol``.
 
-    gradient: one of :data:`GRADIENTS`. learning_rate, b1, b2, eps: Adam's (Qu et al. 2020 uses b2 = 0.99); the step is
-    in ``z`` (log form: a relative change). optimizer: an ``optax.GradientTransformation`` that makes the step instead
-    (e.g. ``optax.sgd(0.05)``, ``optax.chain(optax.clip_by_global_norm(1.0), optax.adam(0.1))``; learning_rate, b1,
-    b2 and eps are then unused); default ``optax.adam(learning_rate, b1=b1, b2=b2, eps=eps)``. tol: stop when every
-    target's relative error is within it (Qu et al. 2020 5.1.2: 5 %). max_iterations: evaluated points at most
-    (estimates included). loss_scaled: Eq. 9.
-    first_estimate / second_estimate: Eq. 14 / 15; ``None`` = on where they make sense (a tie exists; Eq. 14 only
-    when each parameter and its target share units, e.g. bond E and Young's modulus). tie: ``{parameter: target}``
-    (default: the only parameter to the only scalar target). simplified: Eq. 16-19 (needs ties): ``True``/``"secant"``
-    (one parameter set per iteration) or ``"perturbed"`` (one perturbed set per iteration). fd_step: step in ``z``
-    (target-scaled form: a fraction of the target). progress: True (print), a callable
-    ``(row, parameter_names, target_names)`` or None.
+    Args:
+      problem: the targets, parameters and forward.
+      gradient: one of :data:`GRADIENTS`.
+      learning_rate, b1, b2, eps: Adam's (Qu et al. 2020 uses b2 = 0.99); the step is in ``z`` (log form: a relative
+        change).
+      tol: stop when every target's relative error is within it (Qu et al. 2020 5.1.2: 5 %).
+      max_iterations: evaluated points at most (estimates included).
+      loss_scaled: the step multiplied by the loss (Eq. 9).
+      first_estimate, second_estimate: Eq. 14 / 15; ``None`` = on where they make sense (a tie exists; Eq. 14 only
+        when each parameter and its target share units, e.g. bond E and Young's modulus).
+      tie: ``{parameter: target}`` (default: the only parameter to the only scalar target).
+      simplified: Eq. 16-19 (needs ties): ``True``/``"secant"`` (one parameter set per iteration) or
+        ``"perturbed"`` (one perturbed set per iteration).
+      fd_step: the finite-difference step in ``z`` (target-scaled form: a fraction of the target).
+      optimizer: an ``optax.GradientTransformation`` that makes the step instead (e.g. ``optax.sgd(0.05)``,
+        ``optax.chain(optax.clip_by_global_norm(1.0), optax.adam(0.1))``; learning_rate, b1, b2 and eps are then
+        unused); default ``optax.adam(learning_rate, b1=b1, b2=b2, eps=eps)``.
+      progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+
+    Returns:
+      A :class:`CalibrationResult` at the best point seen (``info``: the gradient, optimiser and options used).
+
+    Raises:
+      CalibrationError: an unknown gradient or optimiser, an option out of range, autodiff on a forward that is not
+        differentiable, or an option that needs ties (estimates, the simplified scheme) without them.
     """
     t_start = time.perf_counter()
+    plan = _plan(problem, gradient=gradient, learning_rate=learning_rate, b1=b1, b2=b2, eps=eps, tol=tol,
+                 max_iterations=max_iterations, first_estimate=first_estimate, second_estimate=second_estimate,
+                 tie=tie, simplified=simplified, optimizer=optimizer)
+    progress = _common.progress_fn(progress)
+    space = problem.space
+    notes = []
+    run = _Run(problem, plan, History(space.names, problem.target_names), progress)
+    run.start(notes)
+    evals0 = problem.evaluations
+    for it in range(1, plan.max_iterations + 1):
+        if run.iteration(last=it == plan.max_iterations, loss_scaled=loss_scaled, fd_step=fd_step, notes=notes):
+            break
+    _, values, e = run.best
+    if loss_scaled:
+        notes.append("step scaled by the loss (Qu et al. 2020, Eq. 9)")
+    if simplified:
+        notes.append("simplified scheme (Qu et al. 2020, Eq. 16-19): " + (
+            f"one parameter set per iteration ({run.secants} secant gradients between successive points)"
+            if plan.secant else "one perturbed point per iteration"))
+    info = {"gradient": plan.grad_method, "optimizer": plan.opt_name,
+            "learning_rate": learning_rate if plan.opt_name == "adam" else None, "scaling": space.scaling,
+            "first_estimate": bool(plan.first_estimate), "second_estimate": bool(plan.second_estimate),
+            "loss_scaled": bool(loss_scaled), "simplified": ("secant" if plan.secant else "perturbed") if simplified
+            else False, "secant_gradients": run.secants, "fd_step": fd_step}
+    return _common.make_result(problem, run.history, values, e, method="adam", tol=plan.tol,
+                               wall_time=time.perf_counter() - t_start,
+                               evaluations=problem.evaluations - evals0, notes=notes, info=info)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    """Adam's checked options: what to run, decided before the first solve."""
+
+    tol: float
+    max_iterations: int
+    gradient: str
+    grad_method: str  # the gradient the iterations take ("simplified" for the simplified scheme)
+    optimizer: optax.GradientTransformation
+    opt_name: str
+    ties: list[int] | None
+    secant: bool
+    first_estimate: bool
+    second_estimate: bool
+
+
+def _plan(problem: Problem, *, gradient, learning_rate, b1, b2, eps, tol, max_iterations, first_estimate,
+          second_estimate, tie, simplified, optimizer) -> _Plan:
+    """Check Adam's options against ``problem`` and settle the defaults (the estimates, the optimiser)."""
     if gradient not in GRADIENTS:
         raise CalibrationError(f"unknown gradient {gradient!r}; choose one of {GRADIENTS}")
     tol = _common.check_tol(tol)
@@ -136,7 +210,6 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
     ties = _common.resolve_tie(problem, tie)
     if simplified not in (False, True, "secant", "perturbed"):
         raise CalibrationError(f"simplified must be False, True / 'secant' or 'perturbed', got {simplified!r}")
-    secant = simplified in (True, "secant")
     if simplified and ties is None:
         raise CalibrationError("simplified=True needs each parameter tied to one scalar target: pass "
                                "tie={parameter: target}")
@@ -150,86 +223,105 @@ def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float
         first_estimate = ties is not None and _common.same_units(problem, ties)
     if second_estimate is None:
         second_estimate = ties is not None
-    progress = _common.progress_fn(progress)
-    space = problem.space
-    notes = []
-    grad_method = "simplified" if simplified else gradient
+    return _Plan(tol=tol, max_iterations=max_iterations, gradient=gradient,
+                 grad_method="simplified" if simplified else gradient, optimizer=optimizer, opt_name=opt_name,
+                 ties=ties, secant=simplified in (True, "secant"), first_estimate=first_estimate,
+                 second_estimate=second_estimate)
 
-    values = space.initial.copy()
-    kind = "initial"
-    if first_estimate:
-        values = space.clip([problem.targets[k].value for k in ties])
-        kind = "estimate-1"
-        notes.append("first estimate (Qu et al. 2020, Eq. 14): each parameter starts at its target's value")
-    z = space.to_z(values)
-    state = optimizer.init(jnp.asarray(z))
-    pending_second = bool(second_estimate)
-    history = History(space.names, problem.target_names)
-    evals0 = problem.evaluations
-    best = None
-    previous = None  # (z, errors) of the last evaluated point: the simplified scheme's secant
-    secants = 0
-    for it in range(1, max_iterations + 1):
+
+class _Run:
+    """The state of one Adam calibration between iterations: the point ``z``, the optimiser's state, the best
+    point seen, the previous point (the simplified scheme's secant) and the history."""
+
+    def __init__(self, problem: Problem, plan: _Plan, history: History, progress):
+        self.problem, self.plan, self.history, self.progress = problem, plan, history, progress
+        self.best = None  # (loss, values, errors)
+        self.previous = None  # (z, errors) of the last evaluated point
+        self.secants = 0
+        self.pending_second = bool(plan.second_estimate)
+
+    def start(self, notes: list[str]) -> None:
+        """The first point: the initial values, or the targets themselves (Eq. 14)."""
+        problem, space = self.problem, self.problem.space
+        values = space.initial.copy()
+        self.kind = "initial"
+        if self.plan.first_estimate:
+            values = space.clip([problem.targets[k].value for k in self.plan.ties])
+            self.kind = "estimate-1"
+            notes.append("first estimate (Qu et al. 2020, Eq. 14): each parameter starts at its target's value")
+        self.z = space.to_z(values)
+        self.state = self.plan.optimizer.init(jnp.asarray(self.z))
+
+    def iteration(self, *, last: bool, loss_scaled: bool, fd_step: float, notes: list[str]) -> bool:
+        """Evaluate the point ``z`` and move to the next one (the second estimate or an Adam step); True when the
+        calibration stops here (every target within ``tol``, or the last iteration)."""
         t0 = time.perf_counter()
-        last = it == max_iterations
-        if gradient == "autodiff" and not pending_second and not last:
-            loss, g, e = loss_and_gradient(problem, z, "autodiff")
-        else:
-            g = None
-            e = np.asarray(problem.errors_of(problem.outputs(space.from_z(z[None, :]))[0]))
-            loss = float(problem.loss_of(e))
-        err = problem.max_errors(e)
-        done = bool(np.all(err <= tol))
-        values = space.from_z(z)
-        if best is None or loss < best[0]:
-            best = (loss, values.copy(), e.copy())
-        if done or last:
-            _common.record(history, problem, progress, kind=kind, values=values, errors=e,
-                           time=time.perf_counter() - t0)
-            break
-        if pending_second:
-            pending_second = False
-            ratio = np.array([problem.targets[k].value / (problem.targets[k].value + problem.targets[k].scale
-                                                          * e[problem.slices[k]][0]) for k in ties])
-            if np.all(ratio > 0):
-                _common.record(history, problem, progress, kind=kind, values=values, errors=e,
-                               time=time.perf_counter() - t0)
-                previous = (z.copy(), e.copy())
-                z = space.to_z(space.clip(values * ratio))
-                kind = "estimate-2"
-                if not any("Eq. 15" in n for n in notes):
-                    notes.append("second estimate (Qu et al. 2020, Eq. 15): parameters scaled by target / model value")
-                continue
+        loss, g, e = self._evaluate(last)
+        values = self.problem.space.from_z(self.z)
+        if self.best is None or loss < self.best[0]:
+            self.best = (loss, values.copy(), e.copy())
+        if bool(np.all(self.problem.max_errors(e) <= self.plan.tol)) or last:
+            self._record(values, e, t0)
+            return True
+        if self.pending_second:
+            self.pending_second = False
+            if self._second_estimate(values, e, t0, notes):
+                return False
             notes.append("second estimate skipped: a model value has the opposite sign of its target")
-        if g is None and secant and previous is not None and np.all(np.abs(z - previous[0]) >= 0.1 * fd_step):
-            parts, parts0 = problem.target_losses(e), problem.target_losses(previous[1])
-            g = np.array([(parts[k] - parts0[k]) / (z[i] - previous[0][i]) for i, k in enumerate(ties)])
-            secants += 1
         if g is None:
-            _, g, _ = loss_and_gradient(problem, z, grad_method, step=fd_step, tie=ties, base=e)
-        _common.record(history, problem, progress, kind=kind, values=values, errors=e,
+            g = self._gradient(e, fd_step)
+        self._record(values, e, t0)
+        self._step(g, loss, e, loss_scaled)
+        return False
+
+    def _evaluate(self, last: bool):
+        """Loss, gradient (autodiff only, else None) and errors at ``z``."""
+        problem, z = self.problem, self.z
+        if self.plan.gradient == "autodiff" and not self.pending_second and not last:
+            return loss_and_gradient(problem, z, "autodiff")
+        e = np.asarray(problem.errors_of(problem.outputs(problem.space.from_z(z[None, :]))[0]))
+        return float(problem.loss_of(e)), None, e
+
+    def _record(self, values, e, t0) -> None:
+        _common.record(self.history, self.problem, self.progress, kind=self.kind, values=values, errors=e,
                        time=time.perf_counter() - t0)
+
+    def _second_estimate(self, values, e, t0, notes) -> bool:
+        """Scale each parameter by its tied target over the model value (Eq. 15); False where a model value has
+        the opposite sign of its target (the estimate is skipped)."""
+        problem, space = self.problem, self.problem.space
+        ratio = np.array([problem.targets[k].value / (problem.targets[k].value + problem.targets[k].scale
+                                                      * e[problem.slices[k]][0]) for k in self.plan.ties])
+        if not np.all(ratio > 0):
+            return False
+        self._record(values, e, t0)
+        self.previous = (self.z.copy(), e.copy())
+        self.z = space.to_z(space.clip(values * ratio))
+        self.kind = "estimate-2"
+        if not any("Eq. 15" in n for n in notes):
+            notes.append("second estimate (Qu et al. 2020, Eq. 15): parameters scaled by target / model value")
+        return True
+
+    def _gradient(self, e, fd_step):
+        """The gradient at ``z``: the secant between successive points (the simplified scheme, where every
+        parameter moved by at least ``fd_step / 10``), else finite differences around ``z``."""
+        problem, z, previous = self.problem, self.z, self.previous
+        if self.plan.secant and previous is not None and np.all(np.abs(z - previous[0]) >= 0.1 * fd_step):
+            parts, parts0 = problem.target_losses(e), problem.target_losses(previous[1])
+            self.secants += 1
+            return np.array([(parts[k] - parts0[k]) / (z[i] - previous[0][i]) for i, k in enumerate(self.plan.ties)])
+        _, g, _ = loss_and_gradient(problem, z, self.plan.grad_method, step=fd_step, tie=self.plan.ties, base=e)
+        return g
+
+    def _step(self, g, loss, e, loss_scaled) -> None:
+        """The optimiser's step from ``z`` (times the loss for Eq. 9), clipped to the parameter bounds."""
+        space, z = self.problem.space, self.z
         with jax.numpy_dtype_promotion("standard"):  # optax mixes float decay rates with an int32 step count
-            updates, state = optimizer.update(jnp.asarray(g), state, jnp.asarray(z))
+            updates, self.state = self.plan.optimizer.update(jnp.asarray(g), self.state, jnp.asarray(z))
             updates = np.asarray(updates)
             if loss_scaled:
                 updates = updates * loss
             stepped = np.asarray(optax.apply_updates(z, updates), dtype=np.float64)
-        previous = (z.copy(), e.copy())
-        z = space.to_z(space.clip(space.from_z(stepped)))
-        kind = "adam"
-    _, values, e = best
-    if loss_scaled:
-        notes.append("step scaled by the loss (Qu et al. 2020, Eq. 9)")
-    if simplified:
-        notes.append("simplified scheme (Qu et al. 2020, Eq. 16-19): " + (
-            f"one parameter set per iteration ({secants} secant gradients between successive points)" if secant
-            else "one perturbed point per iteration"))
-    info = {"gradient": grad_method, "optimizer": opt_name,
-            "learning_rate": learning_rate if opt_name == "adam" else None, "scaling": space.scaling,
-            "first_estimate": bool(first_estimate), "second_estimate": bool(second_estimate),
-            "loss_scaled": bool(loss_scaled), "simplified": ("secant" if secant else "perturbed") if simplified
-            else False, "secant_gradients": secants, "fd_step": fd_step}
-    return _common.make_result(problem, history, values, e, method="adam", tol=tol,
-                               wall_time=time.perf_counter() - t_start,
-                               evaluations=problem.evaluations - evals0, notes=notes, info=info)
+        self.previous = (z.copy(), e.copy())
+        self.z = space.to_z(space.clip(space.from_z(stepped)))
+        self.kind = "adam"

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
 
@@ -37,9 +37,22 @@ def closed_form(problem: Problem, *, tol: float = 0.05, max_iterations: int = 6,
                 verify: bool = False, fd_step: float = 1e-4, progress=None) -> CalibrationResult:
     """Calibrate the bond moduli of a bonds-only elastic problem in closed form (see the module docstring).
 
-    The errors reported at the answer are the linear prediction (exact for one free scale); ``verify=True`` solves
-    once more at the answer and reports the measured errors. Raises :class:`CalibrationError` when the shortcut
-    does not apply or the targets do not determine the free moduli.
+    Args:
+      problem: the targets, parameters (bond moduli only) and a forward linear in them.
+      tol: relative tolerance on every target.
+      max_iterations: linearisations at most (one for one free scale).
+      step_tol: stop when the relative change of the moduli falls below it.
+      verify: solve once more at the answer and report the measured errors (else the linear prediction, exact for
+        one free scale).
+      fd_step: the relative finite-difference step of the Jacobian where the forward is not differentiable.
+      progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+
+    Returns:
+      A :class:`CalibrationResult` (``method="closed-form"``).
+
+    Raises:
+      CalibrationError: the closed form does not apply (the message says why) or the targets do not determine the
+        free moduli.
     """
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)

@@ -13,8 +13,8 @@ or walls break the homogeneity, the same update is a fixed-point iteration that 
 weakly on the scale. Each solve measures both (``Result.poisson_ratio``: the DSM's static solution, the DEM's
 loaded state, the STE's tensor).
 
-A bonds-only BPM spans a limited range of macroscopic Poisson ratios (about 0.03-0.19 on random packings for bond
-ratios in (-0.5, 0.5)): a target outside it is reported with the range the sample reaches, not chased.
+A bonds-only BPM spans a limited range of macroscopic Poisson ratios (``benchmarks/poisson.py`` maps it against the
+bond Poisson ratio): a target outside it is reported with the range the sample reaches, not chased.
 """
 
 from __future__ import annotations
@@ -25,36 +25,46 @@ from typing import Mapping
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Parameter, ParameterSpace, Problem, Target, forward_model
 from jaxbpm.calibrate.result import CalibrationResult, History
 
 __all__ = ["calibrate_elastic"]
 
 _NU_BOUNDS = (-0.9, 0.499)  # bond Poisson ratios the iteration may use (the material range is (-1, 0.5))
-_FIRST_SLOPE = 0.1  # d nu / d nu_bond to size the first step (measured 0.08-0.2 on random packings)
+_FIRST_SLOPE = 0.1  # a typical d nu / d nu_bond of random packings, to size the first step
 
 
-def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None = None, model: str = "dsm",
+def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None = None, solver: str = "dsm",
                       tol: float = 0.01, max_solves: int = 6, check: str | None = None,
-                      solve_options: Mapping | None = None, progress=None) -> CalibrationResult:
+                      solve_options: Mapping | None = None, progress=None,
+                      model: str | None = None) -> CalibrationResult:
     """Calibrate the bond modulus and the bond Poisson ratio so that ``scene`` gives Young's modulus ``E`` [Pa]
     and Poisson's ratio ``nu`` (either may be left out).
 
     Args:
       sample, scene: the specimen and a :class:`~jaxbpm.scenes.UniaxialCompression` (a slender one, length / width
         >= 2, or frictionless walls: the lateral strain is measured in the middle third).
-      model: the solver (``"dsm"``, ``"dem"`` or ``"ste"``).
+      solver: the solver (``"dsm"``, ``"dem"`` or ``"ste"``).
       tol: relative tolerance on each target. max_solves: solves at most.
-      check: a model (e.g. ``"dem"``) solved once at the answer; its errors go to ``result.info["check"]``.
-      solve_options: options of ``jaxbpm.solve`` for ``model``.
+      check: a solver (e.g. ``"dem"``) run once at the answer; its errors go to ``result.info["check"]``.
+      solve_options: options of ``jaxbpm.solve`` for ``solver``.
       progress: True to print each solve (stderr), or a callable.
+      model: deprecated name of ``solver`` (a :class:`DeprecationWarning`); removed in the next release.
 
-    Every bond material keeps its modulus ratios and gets one bond Poisson ratio. Raises
-    :class:`CalibrationError` when a Poisson ratio target lies outside what the sample reaches (the message gives
-    the range) or the solves run out.
+    Every bond material keeps its modulus ratios and gets one bond Poisson ratio.
+
+    Returns:
+      A :class:`~jaxbpm.calibrate.CalibrationResult` (``method="elastic"``; ``info["bond_nu_path"]``: the bond and
+      macroscopic Poisson ratios of each solve, ``info["check"]``: the errors on ``check``).
+
+    Raises:
+      CalibrationError: no target given, a target out of range, a Poisson ratio target outside what the sample
+        reaches (the message gives the range), or no answer within ``max_solves``.
     """
-    from jaxbpm.calibrate import default_parameters
+    from jaxbpm.calibrate.dispatch import default_parameters
+
+    solver = _common.renamed_keyword(solver, model, new="solver", old="model")
 
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)
@@ -81,7 +91,7 @@ def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None
     if dataclasses.is_dataclass(scene) and scene.breakage is not True:
         scene = dataclasses.replace(scene, breakage=False)  # elastic properties: no bond may break on the way
     space = ParameterSpace(parameters, base, scaling="log" if nu is None else "target")
-    fwd = forward_model(sample, scene, model, **dict(solve_options or {}))
+    fwd = forward_model(sample, scene, solver, **dict(solve_options or {}))
     problem = Problem(fwd, targets, space)
     progress = _common.progress_fn(progress)
     history = History(space.names, problem.target_names)
@@ -94,7 +104,7 @@ def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None
         y = problem.outputs(v[None, :])[0]
         e = np.asarray(problem.errors_of(y))
         _common.record(history, problem, progress, kind="solve", values=v, errors=e, time=time.perf_counter() - t0,
-                       level=model)
+                       level=solver)
         got = dict(zip(names, y))
         if nu is not None:
             seen.append((float(v[1]), float(got["poisson_ratio"])))
@@ -114,7 +124,7 @@ def calibrate_elastic(sample, scene, *, E: float | None = None, nu: float | None
         tc = time.perf_counter()
         check_problem = Problem(forward_model(sample, scene, check), targets, space)
         ec = np.asarray(check_problem.errors_of(check_problem.outputs(v[None, :])[0]))
-        result.info["check"] = {"model": check, "errors": check_problem.signed_errors(ec),
+        result.info["check"] = {"solver": check, "errors": check_problem.signed_errors(ec),
                                 "max_error": float(np.max(np.abs(ec))), "wall_time": time.perf_counter() - tc}
     return result
 

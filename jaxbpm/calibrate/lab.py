@@ -8,10 +8,10 @@ tensile strength and flexural strength.
    bond modulus and Poisson ratio then hold for every specimen.
 2. **Strength** (``ucs``, ``bts``, ``flexural``): the bond tensile strength ``sigma_c`` and shear strength
    ``tau_c`` by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (a
-   finite-difference Jacobian, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the UCS (compression fails the bonds in shear),
-   ``sigma_c`` to the BTS where given, else to the flexural strength (both fail in tension). A strength target
-   without its tied parameter's partner leaves the other at its current value. The failure runs of one iteration go
-   to ``executor`` when given (:mod:`jaxbpm.parallel`).
+   finite-difference Jacobian, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the UCS
+   (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
+   fail in tension). A strength target without its tied parameter's partner leaves the other at its current value.
+   The failure runs of one iteration go to ``executor`` when given (:mod:`jaxbpm.parallel`).
 3. **Translation**: the answer as the parameters of LAMMPS, PFC, Yade and MUSEN (:mod:`jaxbpm.interop.conventions`)
    for the specimen's mean particle pair.
 
@@ -29,6 +29,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError
 
 __all__ = ["lab", "LabResult", "LAB_TARGETS"]
@@ -65,11 +66,23 @@ class LabResult:
         return not self.unreached and all(abs(e) <= self.tol_of(k) for k, (_, e) in self.achieved.items())
 
     def tol_of(self, key) -> float:
+        """The tolerance a target was calibrated to.
+
+        Args:
+          key: a lab target (``"E"``, ``"nu"``, ``"ucs"``, ``"bts"``, ``"flexural"``).
+
+        Returns:
+          The tolerance of its stage (0 where the stage did not run).
+        """
         stage = self.stages.get("elastic" if key in ("E", "nu") else "strength")
         return float(stage.tol) if stage is not None else 0.0
 
     def table(self) -> str:
-        """Targets, what the answer gives and its error, as text."""
+        """Targets, what the answer gives and its error, then the bond parameters, as text.
+
+        Returns:
+          The table, one line per row.
+        """
         lines = [f"{'target':<10} {'wanted':>12} {'achieved':>12} {'error':>8}"]
         for key in LAB_TARGETS:
             if key not in self.targets:
@@ -84,9 +97,17 @@ class LabResult:
         return "\n".join(lines)
 
     def report(self, path) -> pathlib.Path:
-        """Write a one-page report: ``path`` (Markdown: targets, parameters, other codes' parameters, solves) and a
-        chart beside it (``<stem>.png``: each stage's error history, the stress-strain curves at the answer).
-        Both atomically; returns the Markdown path."""
+        """Write a one-page report and its chart, both atomically.
+
+        ``path`` gets the Markdown (targets, parameters, other codes' parameters, solves); ``<stem>.png`` beside it the
+        chart (each stage's error history, the stress-strain curves at the answer).
+
+        Args:
+          path: the Markdown file.
+
+        Returns:
+          The Markdown path.
+        """
         from jaxbpm.io import atomic_write
 
         path = pathlib.Path(path)
@@ -137,10 +158,10 @@ class LabResult:
 
 
 def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Mapping[str, Any] | None = None,
-        elastic_model: str = "dsm", check: str | None = "dem", elastic_tol: float = 0.02, tol: float = 0.05,
+        elastic_solver: str = "dsm", check: str | None = "dem", elastic_tol: float = 0.02, tol: float = 0.05,
         max_iterations: int = 6, fd_step: float = 0.2,
         solve_options: Mapping | None = None, executor=None, progress=None,
-        failure_rule: str | None = None) -> LabResult:
+        failure_rule: str | None = None, elastic_model: str | None = None) -> LabResult:
     """Calibrate bond parameters to laboratory targets in stages (see the module docstring).
 
     Args:
@@ -150,7 +171,7 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       scenes: override the tests' scenes (``"elastic"``, ``"ucs"``, ``"bts"``, ``"flexural"``); defaults
         ``UniaxialCompression(strain=1e-3)``, ``UniaxialCompression.to_failure(strain=0.02)``,
         ``BrazilianDisc()``, ``ThreePointBending(strain=0.1)``.
-      elastic_model: the elastic stage's solver; check: the model that checks its answer (``None``: none).
+      elastic_solver: the elastic stage's solver; check: the solver that checks its answer (``None``: none).
       elastic_tol, tol: relative tolerances of the elastic and the strength targets.
       max_iterations, fd_step: the strength stage's Gauss-Newton iterations after the two estimates, and its
         finite-difference step (a fraction of each bond strength).
@@ -160,32 +181,23 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       failure_rule: the bond failure rule of the strength scenes: ``"separate"`` (PFC's parallel bond, MUSEN),
         ``"summed"`` (LAMMPS ``bpm/rotational``) or ``"max"`` (Yade), so that the strengths found hold in the code
         they are for (:data:`jaxbpm.physics.bond.FAILURE_RULES`); ``None``: the scenes' own (default ``"separate"``).
+      elastic_model: deprecated name of ``elastic_solver`` (a :class:`DeprecationWarning`); removed in the next
+        release.
+
+    Returns:
+      A :class:`LabResult`: the parameters, what each target reached, each stage's result, the targets not reached
+      and why, and the parameters in other codes' conventions.
+
+    Raises:
+      CalibrationError: unknown or invalid targets, a missing specimen, strength scenes with different failure
+        rules, or a stage that fails for a reason other than an unreachable target.
     """
-    from jaxbpm.calibrate.elastic import calibrate_elastic
-    from jaxbpm.sample import Sample
     from jaxbpm.scenes import BrazilianDisc, ThreePointBending, UniaxialCompression
 
+    elastic_solver = _common.renamed_keyword(elastic_solver, elastic_model, new="elastic_solver", old="elastic_model")
     t0 = time.perf_counter()
-    targets = dict(targets)
-    unknown = sorted(set(targets) - set(LAB_TARGETS))
-    if unknown or not targets:
-        raise CalibrationError(f"lab targets must be some of {LAB_TARGETS}, got {sorted(targets)}")
-    for key, value in targets.items():
-        ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and np.isfinite(value)
-        if not ok or (key != "nu" and value <= 0) or (key == "nu" and not -1 < value < 0.5):
-            raise CalibrationError(f"target {key!r} must be {'in (-1, 0.5)' if key == 'nu' else 'a number > 0'} "
-                                   f"[{'-' if key == 'nu' else 'Pa'}], got {value!r}")
-    samples = dict(samples)
-    if "elastic" not in samples and "ucs" in samples:
-        samples["elastic"] = samples["ucs"]
-    need = ({"elastic"} if {"E", "nu"} & set(targets) else set()) | {k for k in _SCENE_OF if k in targets}
-    missing = sorted(need - set(samples))
-    if missing:
-        raise CalibrationError(f"no specimen for {missing}: pass samples={{{', '.join(repr(m) for m in missing)}: "
-                               "Sample, ...}} (the elastic targets default to the 'ucs' specimen)")
-    for key in need:
-        if not isinstance(samples[key], Sample):
-            raise CalibrationError(f"samples[{key!r}] must be a jaxbpm.Sample, got {type(samples[key]).__name__}")
+    targets = _checked_targets(targets)
+    samples, need = _specimens(samples, targets)
     scene_of = {"elastic": UniaxialCompression(strain=1e-3), "ucs": UniaxialCompression.to_failure(strain=0.02),
                 "bts": BrazilianDisc(), "flexural": ThreePointBending(strain=0.1), **dict(scenes or {})}
     if failure_rule is not None:
@@ -201,51 +213,103 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
     stages, unreached, achieved, solves = {}, {}, {}, {}
     params = _current(samples[sorted(need)[0]])
 
-    # 1. elastic
     if {"E", "nu"} & set(targets):
-        try:
-            res = calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets.get("E"), nu=targets.get("nu"),
-                                    model=elastic_model, tol=elastic_tol, check=check, progress=progress)
-        except CalibrationError as err:
-            if "nu" not in targets or "out of this sample's reach" not in str(err):
-                raise
-            unreached["nu"] = str(err)
-            res = (calibrate_elastic(samples["elastic"], scene_of["elastic"], E=targets["E"], model=elastic_model,
-                                     tol=elastic_tol, check=check, progress=progress) if "E" in targets else None)
-        if res is not None:
-            stages["elastic"] = res
-            params.update(bond_E=res.values["bond_E"], bond_nu=res.values.get("bond_nu", params["bond_nu"]))
-            solves["elastic"] = res.evaluations
-            errors = res.info["check"]["errors"] if "check" in res.info else res.errors
-            for key, name in (("E", "youngs_modulus"), ("nu", "poisson_ratio")):
-                if key in targets and name in errors:
-                    achieved[key] = (targets[key] * (1 + errors[name]), float(errors[name]))
-    # every specimen takes the elastic answer
-    samples = {k: _with(s, params) for k, s in samples.items()}
-
-    # 2. strengths
+        _elastic_stage(samples["elastic"], scene_of["elastic"], targets, params, stages, unreached, achieved, solves,
+                       solver=elastic_solver, tol=elastic_tol, check=check, progress=progress)
+    samples = {k: _with(s, params) for k, s in samples.items()}  # every specimen takes the elastic answer
     curves = {}
     wanted = [k for k in ("ucs", "bts", "flexural") if k in targets]
     if wanted:
-        res = _strength_stage(samples, scene_of, targets, wanted, params, tol=tol, max_iterations=max_iterations,
-                              fd_step=fd_step, solve_options=dict(solve_options or {"transits": 30}),
-                              executor=executor, progress=progress)
-        stages["strength"] = res
-        solves["strength (DEM failure runs)"] = res.evaluations
-        params.update(bond_tensile_strength=res.values.get("bond_tensile_strength", params["bond_tensile_strength"]),
-                      bond_shear_strength=res.values.get("bond_shear_strength", params["bond_shear_strength"]))
-        if not res.converged:
-            for k in wanted:
-                if abs(res.errors[f"{_SCENE_OF[k]}.strength"]) > tol:
-                    unreached[k] = (f"not within {tol:.0%} after {res.iterations} iterations (best "
-                                    f"{res.errors[f'{_SCENE_OF[k]}.strength']:+.1%}); raise max_iterations")
-        curves = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved, targets)
-        solves["answer runs (DEM)"] = len(wanted)
+        curves = _strengths(samples, scene_of, targets, wanted, params, stages, unreached, achieved, solves, tol=tol,
+                            max_iterations=max_iterations, fd_step=fd_step, solve_options=solve_options,
+                            executor=executor, progress=progress)
     conventions = _translations(samples[sorted(need)[0]], params)
     return LabResult(targets=targets, params={k: float(v) for k, v in params.items()}, achieved=achieved,
                      stages=stages, unreached=unreached, conventions=conventions, curves=curves,
                      wall_time=time.perf_counter() - t0, solves=solves,
                      failure_rule=rules[0] if rules else "separate")
+
+
+def _checked_targets(targets) -> dict:
+    """The lab targets as a dict, each checked (a number > 0 [Pa], or a Poisson ratio in (-1, 0.5))."""
+    targets = dict(targets)
+    unknown = sorted(set(targets) - set(LAB_TARGETS))
+    if unknown or not targets:
+        raise CalibrationError(f"lab targets must be some of {LAB_TARGETS}, got {sorted(targets)}")
+    for key, value in targets.items():
+        ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) and np.isfinite(value)
+        if not ok or (key != "nu" and value <= 0) or (key == "nu" and not -1 < value < 0.5):
+            raise CalibrationError(f"target {key!r} must be {'in (-1, 0.5)' if key == 'nu' else 'a number > 0'} "
+                                   f"[{'-' if key == 'nu' else 'Pa'}], got {value!r}")
+    return targets
+
+
+def _specimens(samples, targets):
+    """``(samples, need)``: the specimens by test (the elastic one defaults to the UCS cylinder) and the tests the
+    targets need, each checked to be a :class:`~jaxbpm.Sample`."""
+    from jaxbpm.sample import Sample
+
+    samples = dict(samples)
+    if "elastic" not in samples and "ucs" in samples:
+        samples["elastic"] = samples["ucs"]
+    need = ({"elastic"} if {"E", "nu"} & set(targets) else set()) | {k for k in _SCENE_OF if k in targets}
+    missing = sorted(need - set(samples))
+    if missing:
+        raise CalibrationError(f"no specimen for {missing}: pass samples={{{', '.join(repr(m) for m in missing)}: "
+                               "Sample, ...}} (the elastic targets default to the 'ucs' specimen)")
+    for key in need:
+        if not isinstance(samples[key], Sample):
+            raise CalibrationError(f"samples[{key!r}] must be a jaxbpm.Sample, got {type(samples[key]).__name__}")
+    return samples, need
+
+
+def _elastic_stage(sample, scene, targets, params, stages, unreached, achieved, solves, *, solver, tol, check,
+                   progress) -> None:
+    """Stage 1: E and nu by :func:`~jaxbpm.calibrate.elastic.calibrate_elastic` (E alone where nu is out of the
+    sample's reach); its answer goes into ``params`` and its record into ``stages``, ``unreached``, ``achieved`` and
+    ``solves``."""
+    from jaxbpm.calibrate.elastic import calibrate_elastic
+
+    try:
+        res = calibrate_elastic(sample, scene, E=targets.get("E"), nu=targets.get("nu"), solver=solver, tol=tol,
+                                check=check, progress=progress)
+    except CalibrationError as err:
+        if "nu" not in targets or "out of this sample's reach" not in str(err):
+            raise
+        unreached["nu"] = str(err)
+        res = (calibrate_elastic(sample, scene, E=targets["E"], solver=solver, tol=tol, check=check,
+                                 progress=progress) if "E" in targets else None)
+    if res is None:
+        return
+    stages["elastic"] = res
+    params.update(bond_E=res.values["bond_E"], bond_nu=res.values.get("bond_nu", params["bond_nu"]))
+    solves["elastic"] = res.evaluations
+    errors = res.info["check"]["errors"] if "check" in res.info else res.errors
+    for key, name in (("E", "youngs_modulus"), ("nu", "poisson_ratio")):
+        if key in targets and name in errors:
+            achieved[key] = (targets[key] * (1 + errors[name]), float(errors[name]))
+
+
+def _strengths(samples, scene_of, targets, wanted, params, stages, unreached, achieved, solves, *, tol,
+               max_iterations, fd_step, solve_options, executor, progress) -> dict:
+    """Stage 2: the bond strengths by DEM failure runs (:func:`_strength_stage`), then one failure run per test at
+    the answer; the answer goes into ``params`` and its record into ``stages``, ``unreached``, ``achieved`` and
+    ``solves``. Returns the stress-strain curves of the runs at the answer."""
+    res = _strength_stage(samples, scene_of, targets, wanted, params, tol=tol, max_iterations=max_iterations,
+                          fd_step=fd_step, solve_options=dict(solve_options or {"transits": 30}),
+                          executor=executor, progress=progress)
+    stages["strength"] = res
+    solves["strength (DEM failure runs)"] = res.evaluations
+    params.update(bond_tensile_strength=res.values.get("bond_tensile_strength", params["bond_tensile_strength"]),
+                  bond_shear_strength=res.values.get("bond_shear_strength", params["bond_shear_strength"]))
+    if not res.converged:
+        for k in wanted:
+            if abs(res.errors[f"{_SCENE_OF[k]}.strength"]) > tol:
+                unreached[k] = (f"not within {tol:.0%} after {res.iterations} iterations (best "
+                                f"{res.errors[f'{_SCENE_OF[k]}.strength']:+.1%}); raise max_iterations")
+    curves = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved, targets)
+    solves["answer runs (DEM)"] = len(wanted)
+    return curves
 
 
 def _current(sample) -> dict:
@@ -274,7 +338,6 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of the bonds:
     the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1 sigma_c, so
     Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
-    from jaxbpm.calibrate import _common
     from jaxbpm.calibrate.objective import Parameter, ParameterSpace, Problem, Target, base_params, forward_model
     from jaxbpm.calibrate.result import History
 

@@ -1,6 +1,6 @@
-"""Multi-fidelity calibration: cheap models first, dearer ones only while they change the answer.
+"""Multi-fidelity calibration: cheap solvers first, dearer ones only while they change the answer.
 
-Levels run from the cheapest to the most faithful model, by default STE -> DSM (``jaxbpm.solve`` methods ``"ste"``
+Levels run from the cheapest to the most faithful solver, by default STE -> DSM (``jaxbpm.solve`` methods ``"ste"``
 and ``"dsm"``; DEM can be appended as a last level, or asked for as a final check only). The first level is
 calibrated; every later level first evaluates the current answer (one solve): if every target is within ``tol``
 there, the answer is accepted at that level without calibrating it (early stop); else the level is calibrated
@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.adam import adam
 from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.objective import CalibrationError, Forward, ParameterSpace, Problem, forward_model
@@ -26,7 +26,11 @@ __all__ = ["default_levels", "calibrate_level", "multifidelity"]
 
 
 def default_levels() -> tuple[str, ...]:
-    """``("ste", "dsm")`` when the STE solver is available, else ``("dsm",)``."""
+    """The default multi-fidelity levels.
+
+    Returns:
+      ``("ste", "dsm")`` when the STE solver is available, else ``("dsm",)``.
+    """
     from jaxbpm import solving as solve_mod
 
     return ("ste", "dsm") if "ste" in solve_mod.METHODS else ("dsm",)
@@ -34,7 +38,19 @@ def default_levels() -> tuple[str, ...]:
 
 def calibrate_level(problem: Problem, *, tol: float, shortcut: bool = True, progress=None,
                     adam_options: dict | None = None) -> CalibrationResult:
-    """Calibrate one model: the closed form where it applies (and the targets determine the moduli), else Adam."""
+    """Calibrate one level: the closed form where it applies (and the targets determine the moduli), else Adam.
+
+    Args:
+      problem: the targets, parameters and the level's forward.
+      tol: relative tolerance on every target.
+      shortcut: use the closed form where it applies.
+      progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+      adam_options: options of :func:`~jaxbpm.calibrate.adam.adam` (default gradient: autodiff on a differentiable
+        forward, else forward differences).
+
+    Returns:
+      The level's :class:`CalibrationResult`.
+    """
     ok, why = problem.closed_form_applies()
     m = sum(t.size for t in problem.targets)
     if shortcut and ok and m >= problem.space.n:
@@ -52,24 +68,41 @@ def _forward(level, sample, scenes, solve_options) -> Forward:
         return level
     if isinstance(level, str):
         return forward_model(sample, scenes, level, **(solve_options or {}).get(level, {}))
-    raise CalibrationError(f"a level must be a model name or a Forward, got {level!r}")
+    raise CalibrationError(f"a level must be a solver name or a Forward, got {level!r}")
 
 
 def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Sequence | None = None,
                   tol: float = 0.05, shortcut: bool = True, solve_options: dict | None = None,
                   adam_options: dict | None = None, progress=None) -> CalibrationResult:
-    """Calibrate through ``levels`` (model names or :class:`Forward`; default :func:`default_levels`).
+    """Calibrate through ``levels``, from the cheapest solver to the most faithful (see the module docstring).
 
-    solve_options: ``{model name: options for jaxbpm.solve}``. Returns the answer of the last level reached, with
-    ``levels`` = per level: ``model``, ``action`` (``"calibrated"``, ``"accepted"``: the previous answer was within
-    ``tol`` there, or ``"escalated"``: it was not and the level was calibrated), ``evaluations``, ``wall_time``,
-    ``max_error`` and ``errors``.
+    Args:
+      sample: a :class:`~jaxbpm.Sample`, or ``{scene key: Sample}``.
+      scenes: a scene or ``{key: scene}``.
+      targets: :class:`Target` s or ``{observable: value}``.
+      space: the free parameters.
+      levels: solver names or :class:`Forward` s; default :func:`default_levels`.
+      tol: relative tolerance on every target.
+      shortcut: use the closed form where it applies.
+      solve_options: ``{solver name: options for jaxbpm.solve}``.
+      adam_options: options of :func:`~jaxbpm.calibrate.adam.adam` where a level needs it.
+      progress: True (print), a callable ``(row, parameter_names, target_names)`` or None.
+
+    Returns:
+      The answer of the last level reached (``method="multi-fidelity"``), its ``levels`` one entry per level:
+      ``solver``, ``action`` (``"calibrated"``, ``"accepted"``: the previous answer was within ``tol`` there, or
+      ``"escalated"``: it was not and the level was calibrated), ``evaluations``, ``wall_time``, ``max_error`` and
+      ``errors``.
+
+    Raises:
+      CalibrationError: no level, a level that is neither a solver name nor a :class:`Forward`, or a level's
+        calibration that fails.
     """
     t_start = time.perf_counter()
     tol = _common.check_tol(tol)
     levels = list(default_levels() if levels is None else levels)
     if not levels:
-        raise CalibrationError("levels must name at least one model")
+        raise CalibrationError("levels must name at least one solver")
     progress = _common.progress_fn(progress)
     values = space.clip(space.initial)
     history = History(space.names, [])
@@ -89,7 +122,7 @@ def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Seq
             if np.all(problem.max_errors(e) <= tol):
                 final = _common.make_result(problem, History(space.names, problem.target_names), values, e,
                                             method="multi-fidelity", tol=tol, wall_time=0.0, evaluations=0)
-                report.append({"model": fwd.name, "action": "accepted", "evaluations": problem.evaluations,
+                report.append({"solver": fwd.name, "action": "accepted", "evaluations": problem.evaluations,
                                "wall_time": time.perf_counter() - t0, "max_error": float(problem.max_errors(e).max()),
                                "errors": problem.signed_errors(e)})
                 total += problem.evaluations
@@ -99,15 +132,15 @@ def multifidelity(sample, scenes, targets, space: ParameterSpace, *, levels: Seq
         values = np.asarray([res.values[n] for n in space.names])
         notes += [f"{fwd.name}: {n}" for n in res.notes]
         final = res
-        report.append({"model": fwd.name, "action": "calibrated" if i == 0 else "escalated",
+        report.append({"solver": fwd.name, "action": "calibrated" if i == 0 else "escalated",
                        "method": res.method, "evaluations": problem.evaluations, "wall_time": time.perf_counter() - t0,
                        "max_error": res.max_error, "errors": res.errors})
         total += problem.evaluations
     result = CalibrationResult(values=space.describe(values), params=final.params, errors=final.errors,
                                converged=bool(final.max_error <= tol), method="multi-fidelity",
-                               model=report[-1]["model"], evaluations=total,
+                               solver=report[-1]["solver"], evaluations=total,
                                iterations=sum(r["kind"] != "prediction" for r in history.rows),
                                wall_time=time.perf_counter() - t_start, tol=tol,
                                history=history, notes=notes, levels=report,
-                               info={"levels": [lv["model"] for lv in report]})
+                               info={"levels": [lv["solver"] for lv in report]})
     return result

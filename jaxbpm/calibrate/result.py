@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,7 @@ __all__ = ["History", "CalibrationResult", "plot_history", "load_history"]
 @dataclasses.dataclass
 class History:
     """One row per evaluated point: ``iteration`` (1-based), ``kind`` (``"initial"``, ``"estimate-1"``,
-    ``"estimate-2"``, ``"adam"``, ``"closed-form"``, ``"check"``, ...), ``level`` (the model), parameter
+    ``"estimate-2"``, ``"adam"``, ``"closed-form"``, ``"check"``, ...), ``level`` (the solver), parameter
     ``values``, ``loss``, each target's relative ``errors`` (signed for a scalar target, the largest magnitude for a
     vector target), cumulative ``evaluations`` and the ``time`` [s]
     the iteration took."""
@@ -25,6 +26,20 @@ class History:
 
     def append(self, *, kind: str, level: str, values, loss: float, errors: np.ndarray, evaluations: int,
                time: float) -> dict:
+        """Append one evaluated point.
+
+        Args:
+          kind: what the point is (``"initial"``, ``"adam"``, ``"narrow"``, ...).
+          level: the solver (or level) it was evaluated on.
+          values: parameter values ``[n]``.
+          loss: the objective there.
+          errors: each target's relative error ``[k]``.
+          evaluations: solves so far.
+          time: seconds the iteration took.
+
+        Returns:
+          The row appended (``iteration`` numbered from 1).
+        """
         row = {"iteration": len(self.rows) + 1, "kind": kind, "level": level,
                "values": np.asarray(values, dtype=np.float64).copy(), "loss": float(loss),
                "errors": np.asarray(errors, dtype=np.float64).copy(), "evaluations": int(evaluations),
@@ -33,6 +48,11 @@ class History:
         return row
 
     def extend(self, other: "History") -> None:
+        """Append the rows of another history, renumbered after this one's.
+
+        Args:
+          other: a :class:`History` with the same parameters and targets.
+        """
         for r in other.rows:
             self.rows.append({**r, "iteration": len(self.rows) + 1})
 
@@ -40,12 +60,29 @@ class History:
         return len(self.rows)
 
     def column(self, name: str) -> np.ndarray:
+        """One field of every row.
+
+        Args:
+          name: a row key (``"loss"``, ``"values"``, ``"errors"``, ``"evaluations"``, ...).
+
+        Returns:
+          The field of every row, stacked.
+        """
         return np.asarray([r[name] for r in self.rows])
 
     def save(self, path, extra: dict | None = None):
-        """Write the history to an HDF5 file atomically (``/values [T, n]``, ``/loss``, ``/errors [T, k]``
-        relative error per target), ``/evaluations``, ``/time``, ``/kind``, ``/level``; names and the
-        result summary as JSON attributes)."""
+        """Write the history to an HDF5 file atomically.
+
+        Datasets ``/values [T, n]``, ``/loss``, ``/errors [T, k]`` (relative error per target), ``/evaluations``,
+        ``/time``, ``/kind``, ``/level``; names and the result summary as JSON attributes.
+
+        Args:
+          path: the file.
+          extra: a summary stored as the ``extra`` attribute (JSON).
+
+        Returns:
+          The path written.
+        """
         import h5py
 
         from jaxbpm.io import atomic_write
@@ -80,7 +117,14 @@ def _jsonable(obj):
 
 
 def load_history(path) -> History:
-    """Read a history written by :meth:`History.save`."""
+    """Read a history written by :meth:`History.save`.
+
+    Args:
+      path: the HDF5 file.
+
+    Returns:
+      The :class:`History`.
+    """
     import h5py
 
     with h5py.File(path, "r") as f:
@@ -100,10 +144,11 @@ class CalibrationResult:
     values: ``{parameter name: calibrated value}``; params: the full parameter pytree to pass to
     :func:`jaxbpm.solve`. errors: ``{target name: signed relative error}`` at the answer (``(y - t) / s``; predicted
     by the surrogate for ``method="surrogate"``); converged: every target within ``tol``. method: the calibrator
-    that produced the answer (``"closed-form"``, ``"adam"``, ``"surrogate"``, ``"multi-fidelity"``); model: the
-    solver it calibrated against. evaluations: solves (one parameter set on one scene); iterations: evaluated
-    points (rows of ``history``). levels: per-model cost of a multi-fidelity run. band: ``{name: (lo, hi)}``
-    (surrogate). notes: what was done and why (e.g. the closed-form shortcut). info: calibrator details.
+    that produced the answer (``"closed-form"``, ``"adam"``, ``"surrogate"``, ``"multi-fidelity"``); solver: the
+    solver it calibrated against (``"dsm"``, ``"ste"``, ``"dem"`` or a :class:`Forward`'s name). evaluations:
+    solves (one parameter set on one scene); iterations: evaluated points (rows of ``history``). levels: per-solver
+    cost of a multi-fidelity run. band: ``{name: (lo, hi)}`` (surrogate). notes: what was done and why (e.g. the
+    closed-form shortcut). info: calibrator details.
     """
 
     values: dict[str, float]
@@ -111,7 +156,7 @@ class CalibrationResult:
     errors: dict[str, Any]
     converged: bool
     method: str
-    model: str
+    solver: str
     evaluations: int
     iterations: int
     wall_time: float
@@ -123,22 +168,48 @@ class CalibrationResult:
     info: dict = dataclasses.field(default_factory=dict)
 
     @property
+    def model(self) -> str:
+        """Deprecated name of :attr:`solver` (a :class:`DeprecationWarning`); removed in the next release."""
+        warnings.warn("CalibrationResult.model is deprecated and will be removed in the next release; use "
+                      "CalibrationResult.solver", DeprecationWarning, stacklevel=2)
+        return self.solver
+
+    @property
     def max_error(self) -> float:
         return float(max(np.max(np.abs(np.asarray(e))) for e in self.errors.values()))
 
     def save(self, path):
-        """Write the history (and a summary of this result) to an HDF5 file atomically."""
+        """Write the history (and a summary of this result) to an HDF5 file atomically.
+
+        Args:
+          path: the file.
+
+        Returns:
+          The path written.
+        """
         extra = {"values": self.values, "errors": self.errors, "converged": self.converged, "method": self.method,
-                 "model": self.model, "evaluations": self.evaluations, "iterations": self.iterations,
+                 "model": self.solver, "evaluations": self.evaluations, "iterations": self.iterations,
                  "wall_time": self.wall_time, "tol": self.tol, "notes": self.notes, "levels": self.levels,
                  "band": self.band}
         return self.history.save(path, extra=extra)
 
     def plot(self, path=None):
-        """:func:`plot_history` of this result's history: the figure, saved to ``path`` if given."""
+        """:func:`plot_history` of this result's history.
+
+        Args:
+          path: where to save the figure (the format from its suffix); None: not saved.
+
+        Returns:
+          The :class:`matplotlib.figure.Figure`.
+        """
         return plot_history(self.history, path)
 
     def table(self) -> str:
+        """The answer, its errors, the calibrator and solver, the cost, each level and the notes, as text.
+
+        Returns:
+          The table, one line per row.
+        """
         lines = [f"{'parameter':<16}{'value':>14}" + (f"{'band':>30}" if self.band else "")]
         for name, v in self.values.items():
             band = f"  [{self.band[name][0]:.5g}, {self.band[name][1]:.5g}]" if self.band else ""
@@ -148,11 +219,11 @@ class CalibrationResult:
             e = np.asarray(e)
             txt = f"{100 * float(e):+.3f} %" if e.ndim == 0 else f"max {100 * float(np.max(np.abs(e))):.3f} %"
             lines.append(f"{name:<16}{txt:>14}")
-        lines.append(f"method {self.method} on {self.model}: {'converged' if self.converged else 'NOT converged'} "
+        lines.append(f"method {self.method} on {self.solver}: {'converged' if self.converged else 'NOT converged'} "
                      f"(tol {100 * self.tol:g} %), {self.iterations} iterations, {self.evaluations} evaluations, "
                      f"{self.wall_time:.2f} s")
         for lv in self.levels:
-            lines.append(f"  level {lv['model']:<8} {lv['action']:<11} {lv['evaluations']:>3} evaluations "
+            lines.append(f"  level {lv['solver']:<8} {lv['action']:<11} {lv['evaluations']:>3} evaluations "
                          f"{lv['wall_time']:8.2f} s  max error {100 * lv['max_error']:.3f} %")
         for note in self.notes:
             lines.append(f"note: {note}")
@@ -160,14 +231,23 @@ class CalibrationResult:
 
     def __repr__(self) -> str:
         vals = ", ".join(f"{k}={v:.6g}" for k, v in self.values.items())
-        return (f"CalibrationResult({vals}; method={self.method!r}, model={self.model!r}, "
+        return (f"CalibrationResult({vals}; method={self.method!r}, solver={self.solver!r}, "
                 f"max_error={self.max_error:.3g}, evaluations={self.evaluations}, iterations={self.iterations})")
 
 
 def plot_history(history: History, path=None):
-    """Plot loss, largest error per target and parameter values against the iteration; save to ``path`` if
-    given (atomically, the format from its suffix). Returns the :class:`matplotlib.figure.Figure`, made without
-    pyplot or any global matplotlib state (in a notebook, show it as a cell's last expression)."""
+    """Plot loss, largest error per target and parameter values against the iteration.
+
+    The figure is made without pyplot or any global matplotlib state (in a notebook, show it as a cell's last
+    expression).
+
+    Args:
+      history: a :class:`History`.
+      path: where to save the figure (atomically, the format from its suffix); None: not saved.
+
+    Returns:
+      The :class:`matplotlib.figure.Figure`.
+    """
     from matplotlib.figure import Figure
 
     it = history.column("iteration")

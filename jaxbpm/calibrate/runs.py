@@ -13,10 +13,11 @@ import dataclasses
 import json
 import pathlib
 import time
+import warnings
 
 import numpy as np
 
-from jaxbpm.calibrate import _common
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 
 __all__ = ["RunSet", "run_set", "latin_hypercube", "RUNSET_FORMAT"]
@@ -25,7 +26,17 @@ RUNSET_FORMAT = "jaxbpm-runset"
 
 
 def latin_hypercube(n: int, lower, upper, *, seed=0, optimize: bool = True) -> np.ndarray:
-    """``n`` points ``[n, d]`` of a (centred-discrepancy optimised) Latin hypercube within ``[lower, upper]``."""
+    """A (centred-discrepancy optimised) Latin hypercube.
+
+    Args:
+      n: points.
+      lower, upper: the box ``[d]``.
+      seed: the sampler's seed.
+      optimize: optimise the centred discrepancy (``"random-cd"``, two dimensions or more).
+
+    Returns:
+      ``[n, d]`` points within ``[lower, upper]``.
+    """
     from scipy.stats import qmc
 
     lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
@@ -37,8 +48,10 @@ def latin_hypercube(n: int, lower, upper, *, seed=0, optimize: bool = True) -> n
 @dataclasses.dataclass
 class RunSet:
     """Solved parameter sets: inputs ``X [N, n]`` (named ``parameter_names``, sampled in ``[lower, upper]``) and
-    outputs ``Y [N, m]``, the model values of the named outputs (``output_names``, each ``output_sizes`` long;
-    a target re-uses an output of the same name and size)."""
+    outputs ``Y [N, m]``, the solver's values of the named outputs (``output_names``, each ``output_sizes`` long;
+    a target re-uses an output of the same name and size). solver: the name of the forward that solved them
+    (``"dsm"``, ``"ste"``, ``"dem"`` or a :class:`~jaxbpm.calibrate.Forward`'s name; stored as the file's
+    ``model`` attribute)."""
 
     parameter_names: list[str]
     X: np.ndarray
@@ -47,9 +60,16 @@ class RunSet:
     output_names: list[str]
     output_sizes: list[int]
     Y: np.ndarray
-    model: str = ""
+    solver: str = ""
     info: dict = dataclasses.field(default_factory=dict)
     done: np.ndarray | None = None  # [N] bool: the runs solved so far (None: all); rows of the others are NaN
+
+    @property
+    def model(self) -> str:
+        """Deprecated name of :attr:`solver` (a :class:`DeprecationWarning`); removed in the next release."""
+        warnings.warn("RunSet.model is deprecated and will be removed in the next release; use RunSet.solver",
+                      DeprecationWarning, stacklevel=2)
+        return self.solver
 
     @property
     def n_runs(self) -> int:
@@ -60,6 +80,18 @@ class RunSet:
         return self.done is None or bool(np.all(self.done))
 
     def output(self, name: str, size: int) -> np.ndarray:
+        """The columns of one named output.
+
+        Args:
+          name: the output (a target's name).
+          size: its number of values.
+
+        Returns:
+          ``[N, size]``.
+
+        Raises:
+          CalibrationError: the run set has no such output, or one of another size.
+        """
         if name not in self.output_names:
             raise CalibrationError(f"the run set has no output {name!r} (outputs: {self.output_names}); a second "
                                    "target must be of a quantity the runs recorded")
@@ -71,7 +103,14 @@ class RunSet:
         return self.Y[:, a:a + size]
 
     def save(self, path):
-        """Write the run set to an HDF5 file atomically."""
+        """Write the run set to an HDF5 file atomically.
+
+        Args:
+          path: the file.
+
+        Returns:
+          The path written.
+        """
         import h5py
 
         from jaxbpm.io import atomic_write
@@ -82,7 +121,7 @@ class RunSet:
                 f.attrs["parameter_names"] = json.dumps(self.parameter_names)
                 f.attrs["output_names"] = json.dumps(self.output_names)
                 f.attrs["output_sizes"] = json.dumps([int(s) for s in self.output_sizes])
-                f.attrs["model"] = self.model
+                f.attrs["model"] = self.solver
                 f.attrs["info"] = json.dumps(self.info, default=float)
                 for name in ("X", "lower", "upper", "Y"):
                     f.create_dataset(name, data=np.asarray(getattr(self, name), dtype=np.float64))
@@ -94,8 +133,19 @@ class RunSet:
 
     @classmethod
     def load(cls, path, *, partial: bool = False) -> "RunSet":
-        """Read a run set file. partial: also accept one whose runs are not all solved (an interrupted run set;
-        ``done`` says which are); else such a file is an error that says how to finish it."""
+        """Read a run set file.
+
+        Args:
+          path: the HDF5 file.
+          partial: also accept one whose runs are not all solved (an interrupted run set; ``done`` says which are).
+
+        Returns:
+          The :class:`RunSet`.
+
+        Raises:
+          CalibrationError: not a run set file, or an interrupted one without ``partial`` (the message says how to
+            finish it).
+        """
         import h5py
 
         try:
@@ -106,7 +156,7 @@ class RunSet:
                            lower=np.asarray(f["lower"]), upper=np.asarray(f["upper"]),
                            output_names=json.loads(f.attrs["output_names"]),
                            output_sizes=json.loads(f.attrs["output_sizes"]), Y=np.asarray(f["Y"]),
-                           model=str(f.attrs["model"]), info=json.loads(f.attrs["info"]),
+                           solver=str(f.attrs["model"]), info=json.loads(f.attrs["info"]),
                            done=np.asarray(f["done"], dtype=bool) if "done" in f else None)
         except OSError as exc:
             raise CalibrationError(f"{path}: not a readable run set file ({exc})") from exc
@@ -119,16 +169,28 @@ class RunSet:
 
 def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None,
             chunk: int | None = None, progress: bool = False, path=None) -> RunSet:
-    """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` (within its bounds, or ``lower``/``upper``)
-    in batches of ``chunk`` (``None``: one batch; see :meth:`Problem.outputs`) and record the outputs its targets
-    need. progress: a bar of the runs solved (where they are solved in parts).
+    """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` and record the outputs its targets need.
 
-    The runs of a model that is not batched (DEM) go one after another, or to the problem's ``executor`` (e.g. a
-    Dask cluster, :mod:`jaxbpm.parallel`). path: an HDF5 file that holds the run set; each finished run is stored
-    as it arrives (the file is replaced atomically), so that a run set interrupted (Ctrl-C, a killed process, a
-    failed run) resumes when called again with the same arguments: runs already in the file are not repeated. A
-    file that holds a different run set (other parameters, ranges, seed or outputs) is an error, never
-    overwritten.
+    The runs of a forward that is not batched (DEM) go one after another, or to the problem's ``executor`` (e.g. a
+    Dask cluster, :mod:`jaxbpm.parallel`). With ``path``, each finished run is stored as it arrives (the file is
+    replaced atomically), so that a run set interrupted (Ctrl-C, a killed process, a failed run) resumes when called
+    again with the same arguments: runs already in the file are not repeated.
+
+    Args:
+      problem: the targets, parameters and forward.
+      n_runs: parameter sets (at least 2).
+      seed: the Latin hypercube's seed.
+      lower, upper: the ranges ``[n]`` (default: the parameters' bounds).
+      chunk: solve in batches of this many (``None``: one batch; see :meth:`Problem.outputs`).
+      progress: a bar of the runs solved (where they are solved in parts).
+      path: an HDF5 file that holds the run set.
+
+    Returns:
+      The :class:`RunSet`.
+
+    Raises:
+      CalibrationError: bad ranges or ``n_runs``, or a file at ``path`` that holds a different run set (other
+        parameters, ranges, seed or outputs; never overwritten).
     """
     n_runs = _common.check_count("n_runs", n_runs, 2)
     space = problem.space
@@ -141,7 +203,7 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     X = latin_hypercube(n_runs, lower, upper, seed=seed)
     sizes = [t.size for t in problem.targets]
     runs = RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
-                  output_sizes=sizes, Y=np.full((n_runs, int(np.sum(sizes))), np.nan), model=problem.forward.name,
+                  output_sizes=sizes, Y=np.full((n_runs, int(np.sum(sizes))), np.nan), solver=problem.forward.name,
                   info={"seed": seed, "chunk": chunk}, done=np.zeros(n_runs, bool))
     if path is not None and pathlib.Path(path).exists():
         runs = _resumable(path, runs)
@@ -157,13 +219,13 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
 
 
 def _resumable(path, planned: RunSet) -> RunSet:
-    """The run set stored at ``path`` if it is ``planned`` (same inputs, ranges, outputs and model), with its solved
+    """The run set stored at ``path`` if it is ``planned`` (same inputs, ranges, outputs and solver), with its solved
     runs; else an error naming what differs."""
     stored = RunSet.load(path, partial=True)
     same = {"parameter names": stored.parameter_names == planned.parameter_names,
             "output names": stored.output_names == planned.output_names,
             "output sizes": list(stored.output_sizes) == list(planned.output_sizes),
-            "model": stored.model == planned.model,
+            "solver": stored.solver == planned.solver,
             "ranges": np.array_equal(stored.lower, planned.lower) and np.array_equal(stored.upper, planned.upper),
             "parameter sets (n_runs or seed)": stored.X.shape == planned.X.shape and np.array_equal(stored.X,
                                                                                                     planned.X)}
@@ -178,8 +240,18 @@ def _resumable(path, planned: RunSet) -> RunSet:
 
 
 def run_missing(problem, runs: RunSet, X, todo, path, chunk, progress) -> None:
-    """Run the rows ``todo`` of ``X`` into ``runs.Y``, each stored in ``path`` (when given) as it arrives, so that an
-    interrupted run set resumes without repeating them; ``runs.done`` is cleared at the end."""
+    """Run the rows ``todo`` of ``X`` into ``runs.Y``; ``runs.done`` is cleared at the end.
+
+    Args:
+      problem: the :class:`~jaxbpm.calibrate.objective.Problem` that solves them.
+      runs: the run set filled.
+      X: its parameter sets ``[N, n]``.
+      todo: the indices of the rows to solve.
+      path: an HDF5 file each row is stored in as it arrives (so that an interrupted run set resumes without
+        repeating them), or None.
+      chunk: solve in batches of this many.
+      progress: a bar of the runs solved.
+    """
     def store(k, row):
         runs.Y[todo[k]], runs.done[todo[k]] = row, True
         runs.save(path)

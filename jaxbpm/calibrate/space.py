@@ -99,7 +99,17 @@ class Target:
         return self.observable in ELASTIC_OBSERVABLES
 
     def extract(self, observations: Mapping[str, Mapping[str, Any]]):
-        """This target's model value ``[size]`` from ``{scene: {observable: value}}`` (NumPy or JAX arrays)."""
+        """This target's value from a forward's observations.
+
+        Args:
+          observations: ``{scene: {observable: value}}`` (NumPy or JAX arrays).
+
+        Returns:
+          ``[size]`` (a stress target: the curve interpolated at ``at``).
+
+        Raises:
+          CalibrationError: the observations lack the target's scene or observable.
+        """
         try:
             obs = observations[self.scene]
         except KeyError:
@@ -116,13 +126,30 @@ class Target:
         return xp.reshape(xp.asarray(obs[self.observable], dtype=xp.float64), (-1,))
 
     def relative_error(self, y):
-        """``(y - t) / s`` per element."""
+        """The relative error of a forward's value.
+
+        Args:
+          y: the value ``[size]`` (NumPy or JAX).
+
+        Returns:
+          ``(y - t) / s`` per element.
+        """
         xp = jnp if isinstance(y, jax.Array) else np
         return (y - xp.reshape(xp.asarray(self.value), (-1,))) / self.scale
 
 
 def as_targets(targets) -> list[Target]:
-    """Targets from a :class:`Target`, a list of them, or a mapping ``{observable: value}``."""
+    """Targets from the forms the calibrators accept.
+
+    Args:
+      targets: a :class:`Target`, a list of them, or a mapping ``{observable: value}``.
+
+    Returns:
+      A list of :class:`Target`.
+
+    Raises:
+      CalibrationError: anything else, or an empty list.
+    """
     if isinstance(targets, Target):
         return [targets]
     if isinstance(targets, Mapping):
@@ -252,15 +279,39 @@ class ParameterSpace:
         return len(self.parameters)
 
     def with_scales(self, scales) -> "ParameterSpace":
+        """This space with other scales of the target-scaled form.
+
+        Args:
+          scales: ``[n]`` numbers > 0.
+
+        Returns:
+          A new :class:`ParameterSpace`.
+        """
         return ParameterSpace(self.parameters, self.base, scaling=self.scaling, scales=scales)
 
     def with_initial(self, values) -> "ParameterSpace":
+        """This space starting from other values.
+
+        Args:
+          values: ``[n]``, clipped to the bounds.
+
+        Returns:
+          A new :class:`ParameterSpace`.
+        """
         values = self.clip(values)
         params = [dataclasses.replace(p, initial=float(v)) for p, v in zip(self.parameters, values)]
         return ParameterSpace(params, self.base, scaling=self.scaling, scales=self.scales)
 
     def subspace(self, names: Sequence[str], fixed_values) -> "ParameterSpace":
-        """The space of the parameters ``names`` only; the others fixed at ``fixed_values`` (all ``n`` values)."""
+        """The space of some parameters only, the others fixed.
+
+        Args:
+          names: the parameters kept.
+          fixed_values: all ``n`` values; those of the parameters left out are written into the base pytree.
+
+        Returns:
+          A new :class:`ParameterSpace`.
+        """
         base = self.to_params(np.asarray(fixed_values, dtype=np.float64))
         keep = [i for i, p in enumerate(self.parameters) if p.name in names]
         params = [dataclasses.replace(self.parameters[i], initial=float(np.clip(fixed_values[i], self.lower[i],
@@ -269,16 +320,41 @@ class ParameterSpace:
         return ParameterSpace(params, base, scaling=self.scaling, scales=self.scales[keep])
 
     def clip(self, values) -> np.ndarray:
+        """Values clipped to the bounds.
+
+        Args:
+          values: ``[..., n]``.
+
+        Returns:
+          The clipped values (NumPy).
+        """
         return np.clip(np.asarray(values, dtype=np.float64), self.lower, self.upper)
 
     # the optimisation variable z
     def to_z(self, values):
+        """The optimisation variable of parameter values.
+
+        Args:
+          values: ``[..., n]`` (NumPy or JAX).
+
+        Returns:
+          ``z = log(v / v0)`` in log form, ``z = v / scale`` in target-scaled form.
+        """
         xp = jnp if isinstance(values, jax.Array) else np
         if self.scaling == "log":
             return xp.log(values / self.initial)
         return values / self.scales
 
     def from_z(self, z, initial=None, scales=None):
+        """Parameter values of the optimisation variable (the inverse of :meth:`to_z`).
+
+        Args:
+          z: ``[..., n]`` (NumPy or JAX).
+          initial, scales: override the space's own (traced arguments of a compiled loss).
+
+        Returns:
+          The values ``[..., n]``.
+        """
         xp = jnp if isinstance(z, jax.Array) else np
         if self.scaling == "log":
             return (self.initial if initial is None else initial) * xp.exp(z)
@@ -290,7 +366,16 @@ class ParameterSpace:
         return tuple((p.key, p.index, p.ratio) for p in self.parameters) + (self.scaling,)
 
     def to_params(self, values, base=None) -> dict:
-        """The full parameter pytree for values ``[n]`` (traceable; ``base`` overrides the base pytree)."""
+        """The full parameter pytree for parameter values (traceable).
+
+        Args:
+          values: ``[n]``.
+          base: overrides the base pytree.
+
+        Returns:
+          ``{entry: array}``: the base with the free entries set (a common value times ``ratio`` where ``index`` is
+          None).
+        """
         out = dict(self.base if base is None else base)
         for i, p in enumerate(self.parameters):
             v = values[i]
@@ -304,6 +389,14 @@ class ParameterSpace:
         return out
 
     def describe(self, values) -> dict[str, float]:
+        """Values by parameter name.
+
+        Args:
+          values: ``[n]``.
+
+        Returns:
+          ``{name: float}``.
+        """
         return {name: float(v) for name, v in zip(self.names, np.asarray(values))}
 
 

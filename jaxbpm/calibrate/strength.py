@@ -24,6 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
+import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.adam import adam
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem,
                                         Target)
@@ -44,11 +45,12 @@ def _positive(name, v) -> float:
 
 
 def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, scheme: str = "original",
-                       ucs_scene=None, tpb_scene=None, model="dem", first_estimate: bool = True,
+                       ucs_scene=None, tpb_scene=None, solver="dem", first_estimate: bool = True,
                        second_estimate: bool = True, initial: Mapping[str, float] | None = None,
                        learning_rate: float = 0.05, fd_step: float = 0.05, loss_scaled: bool = False,
                        weights=(0.5, 0.5), tol: float = 0.05, max_iterations: int = 8, bounds: float = 100.0,
-                       solve_options: Mapping | None = None, progress=None, executor=None) -> CalibrationResult:
+                       solve_options: Mapping | None = None, progress=None, executor=None,
+                       model=None) -> CalibrationResult:
     """Calibrate ``sigma_c`` and ``tau_c`` so that the UCS and the flexural strength reach their targets (Qu et al.).
 
     Args:
@@ -58,8 +60,8 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
       scheme: ``"original"`` or ``"simplified"`` (see the module docstring).
       ucs_scene, tpb_scene: default ``UniaxialCompression.to_failure(strain=0.02)`` and
         ``ThreePointBending(strain=0.1)``.
-      model: ``"dem"`` (the solver for ``jaxbpm.solve``) or a :class:`~jaxbpm.calibrate.Forward` with scenes
-        ``"ucs"`` and ``"tpb"`` reporting ``"strength"`` (e.g. a cheap stand-in model).
+      solver: ``"dem"`` (the solver for ``jaxbpm.solve``) or a :class:`~jaxbpm.calibrate.Forward` with scenes
+        ``"ucs"`` and ``"tpb"`` reporting ``"strength"`` (e.g. a cheap stand-in function).
       first_estimate, second_estimate: Eq. 14 / Eq. 15. initial: ``{"bond_tensile_strength": ...,
         "bond_shear_strength": ...}`` start values when ``first_estimate=False`` (default: the sample's table).
       learning_rate, fd_step, loss_scaled: Adam's step, the finite-difference step (a fraction of the target in the
@@ -71,11 +73,19 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
       executor: a :class:`concurrent.futures.Executor` (e.g. Dask's ``Client(...).get_executor()``): the runs of one
         iteration (the point and its perturbed points, each a UCS and a bending run) go to it as parallel tasks
         (:mod:`jaxbpm.parallel`); the answer is the same as without it.
+      model: deprecated name of ``solver`` (a :class:`DeprecationWarning`); removed in the next release.
 
-    Returns a :class:`~jaxbpm.calibrate.CalibrationResult`; ``info["targets"]`` holds the targets and
-    ``info["scheme"]`` the scheme; :func:`strength_table` gives its history table.
+    Returns:
+      A :class:`~jaxbpm.calibrate.CalibrationResult`; ``info["targets"]`` holds the targets and ``info["scheme"]``
+      the scheme; :func:`strength_table` gives its history table.
+
+    Raises:
+      CalibrationError: an unknown scheme, invalid targets, weights, bounds or initial values, or a
+        :class:`~jaxbpm.calibrate.Forward` without the scenes ``"ucs"`` and ``"tpb"``.
     """
-    from jaxbpm.calibrate import calibrate
+    from jaxbpm.calibrate.dispatch import calibrate
+
+    solver = _common.renamed_keyword(solver, model, new="solver", old="model")
 
     if scheme not in STRENGTH_SCHEMES:
         raise CalibrationError(f"unknown strength calibration scheme {scheme!r}; choose one of {STRENGTH_SCHEMES}")
@@ -95,7 +105,7 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
         if unknown:
             raise CalibrationError(f"initial: unknown entries {unknown} (entries: {list(STRENGTH_KEYS)})")
         start.update({k: _positive(f"initial {k}", v) for k, v in initial.items()})
-    elif not first_estimate and not isinstance(model, Forward):
+    elif not first_estimate and not isinstance(solver, Forward):
         for k, attr in zip(STRENGTH_KEYS, ("tensile_strength", "shear_strength")):
             v = float(np.asarray(getattr(ucs_sample.materials, attr), dtype=np.float64).reshape(-1)[0])
             if np.isfinite(v) and v > 0:
@@ -106,11 +116,11 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
     options = dict(gradient="fd-forward", learning_rate=learning_rate, fd_step=fd_step, loss_scaled=loss_scaled,
                    first_estimate=first_estimate, second_estimate=second_estimate, tie=dict(TIE),
                    simplified="secant" if scheme == "simplified" else False, max_iterations=max_iterations)
-    if isinstance(model, Forward):
-        if set(model.scenes) != {UCS, TPB}:
-            raise CalibrationError(f"a strength model needs the scenes {UCS!r} and {TPB!r}, got {model.scenes}")
+    if isinstance(solver, Forward):
+        if set(solver.scenes) != {UCS, TPB}:
+            raise CalibrationError(f"a strength model needs the scenes {UCS!r} and {TPB!r}, got {solver.scenes}")
         base = {k: np.asarray([start[k]]) for k in STRENGTH_KEYS}
-        problem = Problem(model, targets, ParameterSpace(parameters, base, scaling="target"), executor=executor)
+        problem = Problem(solver, targets, ParameterSpace(parameters, base, scaling="target"), executor=executor)
         result = adam(problem, tol=tol, progress=progress, **options)
     else:
         from jaxbpm.scenes import ThreePointBending, UniaxialCompression
@@ -118,9 +128,9 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
         scenes = {UCS: ucs_scene if ucs_scene is not None else UniaxialCompression.to_failure(strain=0.02),
                   TPB: tpb_scene if tpb_scene is not None else ThreePointBending(strain=0.1)}
         opts = {"transits": 30} if solve_options is None else dict(solve_options)
-        result = calibrate({UCS: ucs_sample, TPB: tpb_sample}, scenes, targets, method="adam", model=model,
+        result = calibrate({UCS: ucs_sample, TPB: tpb_sample}, scenes, targets, method="adam", solver=solver,
                            parameters=parameters, scaling="target", tol=tol, shortcut=False,
-                           solve_options={model: opts}, progress=progress, executor=executor, **options)
+                           solve_options={solver: opts}, progress=progress, executor=executor, **options)
     result.info.update(scheme=scheme, targets={UCS: ucs, TPB: flexural}, parameter_sets=result.evaluations // 2)
     ratio = result.values["bond_tensile_strength"] / result.values["bond_shear_strength"]
     if scheme == "simplified" and ratio >= 0.8:
@@ -130,9 +140,19 @@ def calibrate_strength(ucs_sample, tpb_sample, *, ucs: float, flexural: float, s
 
 
 def strength_table(result: CalibrationResult) -> list[dict]:
-    """The history of a strength calibration as in Qu et al.'s Tables 4 and 5: per evaluated point the iteration
-    (from 0), its kind, ``sigma_c``, ``tau_c``, the flexural strength and the UCS, their errors, and the cost so far:
-    ``models`` (parameter sets, Qu et al.'s count: one UCS and one bending run each) and ``runs`` (solves)."""
+    """The history of a strength calibration as in Qu et al.'s Tables 4 and 5.
+
+    Args:
+      result: the result of :func:`calibrate_strength`.
+
+    Returns:
+      One row per evaluated point: the iteration (from 0), its kind, ``sigma_c``, ``tau_c``, the flexural strength
+      and the UCS, their errors, and the cost so far: ``models`` (parameter sets, Qu et al.'s count: one UCS and one
+      bending run each) and ``runs`` (solves).
+
+    Raises:
+      CalibrationError: ``result`` is not the result of :func:`calibrate_strength`.
+    """
     if not isinstance(result, CalibrationResult) or "targets" not in result.info:
         raise CalibrationError("strength_table needs the result of calibrate_strength")
     h = result.history
@@ -152,7 +172,14 @@ def strength_table(result: CalibrationResult) -> list[dict]:
 
 
 def format_strength_table(rows: list[dict]) -> str:
-    """:func:`strength_table` rows as text."""
+    """:func:`strength_table` rows as text.
+
+    Args:
+      rows: the rows of :func:`strength_table`.
+
+    Returns:
+      The table, a header and one line per row.
+    """
     head = (f"{'it':>3} {'kind':<11} {'sigma_c [Pa]':>13} {'tau_c [Pa]':>13} {'flexural [Pa]':>14} {'UCS [Pa]':>13} "
             f"{'err f':>8} {'err UCS':>8} {'models':>6} {'runs':>5}")
     lines = [head]

@@ -28,12 +28,12 @@ def _targets(**kw):
     return out["ucs"]["strength"], out["tpb"]["strength"]
 
 
-def _run(scheme, model_kw=None, **kw):
-    model_kw = model_kw or {}
+def _run(scheme, forward_kw=None, **kw):
+    forward_kw = forward_kw or {}
     log = []
-    ucs, f = _targets(**model_kw)
-    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme, model=_stand_in(log=log, **model_kw),
-                                 **kw)
+    ucs, f = _targets(**forward_kw)
+    res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme=scheme,
+                                 solver=_stand_in(log=log, **forward_kw), **kw)
     return res, log
 
 
@@ -51,7 +51,7 @@ def test_estimates_follow_eq14_and_eq15():
     np.testing.assert_allclose(rows[0]["ucs_error"], m_ucs / ucs - 1, rtol=1e-12)
     assert [r["models"] for r in rows] == [1, 2] and [r["runs"] for r in rows] == [2, 4] and len(log) == 2
     # without cross-coupling the strengths are proportional: the second estimate is the answer
-    exact, log = _run("simplified", model_kw={"b": 0.0, "d": 0.0}, tol=1e-9, max_iterations=5)
+    exact, log = _run("simplified", forward_kw={"b": 0.0, "d": 0.0}, tol=1e-9, max_iterations=5)
     assert exact.converged and exact.iterations == 2 and exact.info["parameter_sets"] == 2
     np.testing.assert_allclose([exact.values["bond_tensile_strength"], exact.values["bond_shear_strength"]], TRUE,
                                rtol=1e-9)
@@ -83,8 +83,8 @@ def test_cross_coupling_costs_the_simplified_scheme_accuracy():
     strength to tau_c (outside the range Qu et al. allows it for) it is off, the original scheme's gradient is not."""
     strong = {"b": 0.05, "d": 0.5}
     kw = dict(tol=0.01, max_iterations=8, learning_rate=0.05, fd_step=0.05)
-    full, flog = _run("original", model_kw=strong, **kw)
-    simp, slog = _run("simplified", model_kw=strong, **kw)
+    full, flog = _run("original", forward_kw=strong, **kw)
+    simp, slog = _run("simplified", forward_kw=strong, **kw)
     # one set per point, plus one perturbed set where Adam's step was too short for a secant
     fallback = simp.iterations - 2 - simp.info["secant_gradients"]
     assert 0 <= fallback <= 2 and simp.info["parameter_sets"] == len(slog) == simp.iterations + fallback
@@ -98,7 +98,7 @@ def test_cross_coupling_costs_the_simplified_scheme_accuracy():
     # a note warns when the answer lies outside the ratio Qu et al. 2020 allows for the simplified scheme
     ucs, f = 2e6, 3e6
     res = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, scheme="simplified",
-                                 model=_stand_in(a=0.3, b=0.0, c=0.3, d=0.0), tol=1e-6, max_iterations=3)
+                                 solver=_stand_in(a=0.3, b=0.0, c=0.3, d=0.0), tol=1e-6, max_iterations=3)
     assert res.values["bond_tensile_strength"] / res.values["bond_shear_strength"] > 0.8
     assert any("0.8" in n for n in res.notes)
 
@@ -111,14 +111,14 @@ def test_history_table_and_errors():
     assert [r["iteration"] for r in rows] == list(range(len(rows)))
     assert all(a["models"] < b["models"] for a, b in zip(rows, rows[1:]))
     with pytest.raises(CalibrationError, match="scheme"):
-        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, scheme="fast", model=_stand_in())
+        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, scheme="fast", solver=_stand_in())
     with pytest.raises(CalibrationError, match="ucs"):
-        cal.calibrate_strength(None, None, ucs=-1.0, flexural=1e6, model=_stand_in())
+        cal.calibrate_strength(None, None, ucs=-1.0, flexural=1e6, solver=_stand_in())
     with pytest.raises(CalibrationError, match="scenes"):
         cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6,
-                               model=Forward(name="x", evaluate=lambda p: {}, scenes=("main",)))
+                               solver=Forward(name="x", evaluate=lambda p: {}, scenes=("main",)))
     with pytest.raises(CalibrationError, match="initial"):
-        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, model=_stand_in(), initial={"bond_E": 1.0})
+        cal.calibrate_strength(None, None, ucs=1e6, flexural=1e6, solver=_stand_in(), initial={"bond_E": 1.0})
     with pytest.raises(CalibrationError, match="calibrate_strength"):
         cal.strength_table(cal.adam(_identity_problem(), max_iterations=1))
 
@@ -143,7 +143,7 @@ def test_one_dem_iteration_reads_strengths_from_the_failure_runs():
     res = cal.calibrate_strength(cyl, beam, ucs=1e6, flexural=1.5e6, tol=1e-6, max_iterations=1,
                                  solve_options={"transits": 15})
     row = cal.strength_table(res)[0]
-    assert res.evaluations == 2 and row["models"] == 1 and res.model == "dem"
+    assert res.evaluations == 2 and row["models"] == 1 and res.solver == "dem"
     assert row["sigma_c"] == 1.5e6 and row["tau_c"] == 1e6  # Eq. 14
     assert 0 < row["ucs"] < 1e6 and 0 < row["flexural"] < 1.5e6  # bonds at the macroscopic strengths: weaker
     # the same numbers as a direct solve
@@ -153,3 +153,12 @@ def test_one_dem_iteration_reads_strengths_from_the_failure_runs():
     p = {**default_params(beam), "bond_tensile_strength": np.array([1.5e6]), "bond_shear_strength": np.array([1e6])}
     direct = jaxbpm.solve(beam, ThreePointBending(strain=0.1), "dem", params=p, transits=15)
     np.testing.assert_allclose(row["flexural"], direct.stats["strength"], rtol=1e-9)
+
+
+def test_model_keyword_still_works_with_a_deprecation_warning():
+    """``model=`` is the old name of ``solver=``: it warns, naming ``solver=``, and gives the same answer."""
+    ucs, f = _targets()
+    new = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, solver=_stand_in(), max_iterations=4)
+    with pytest.warns(DeprecationWarning, match="solver="):
+        old = cal.calibrate_strength(None, None, ucs=ucs, flexural=f, model=_stand_in(), max_iterations=4)
+    assert old.values == new.values and old.errors == new.errors and old.solver == new.solver == "stand-in"

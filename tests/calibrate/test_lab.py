@@ -78,3 +78,9 @@ def test_lab_errors_and_the_command(specimens, tmp_path):
 
     assert main(["calibrate", str(tmp_path / "cyl.h5"), "--config", str(tmp_path / "lab.json"), "--quiet"]) == 0
     assert (tmp_path / "out.md").exists() and (tmp_path / "out.png").exists()
+
+
+def test_elastic_model_is_the_old_name_of_elastic_solver():
+    with pytest.warns(DeprecationWarning, match="elastic_solver="):
+        with pytest.raises(CalibrationError, match="lab targets"):
+            lab({}, {"young": 1e9}, elastic_model="dsm")

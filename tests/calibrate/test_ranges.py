@@ -31,20 +31,20 @@ def E_now(box):
     return {m: float(jaxbpm.solve(box, SCENE, m).youngs_modulus) for m in ("ste", "dsm")}
 
 
-def _solved(sample, res, model="ste", scene=SCENE):
-    return float(jaxbpm.solve(sample, scene, model, params=res.params).youngs_modulus)
+def _solved(sample, res, solver="ste", scene=SCENE):
+    return float(jaxbpm.solve(sample, scene, solver, params=res.params).youngs_modulus)
 
 
-def _no_closed_form(sample, model="ste"):
-    """The model with its closed form switched off: the ranges start at the initial values and must widen."""
-    return dataclasses.replace(cal.forward_model(sample, SCENE, model), homogeneous=False, _compiled={})
+def _no_closed_form(sample, solver="ste"):
+    """The forward with its closed form switched off: the ranges start at the initial values and must widen."""
+    return dataclasses.replace(cal.forward_model(sample, SCENE, solver), homogeneous=False, _compiled={})
 
 
 @pytest.mark.parametrize("f", [1.37, 0.5, 3.0])
 def test_default_call_succeeds_off_the_current_modulus(box, E_now, f):
     """The issue's call, default settings: the ranges centre on the closed-form estimate (one solve)."""
     target = f * E_now["ste"]
-    res = cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", model="ste")
+    res = cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", solver="ste")
     assert res.converged and res.info["n_runs"] == 100 and res.evaluations == 101, res.notes
     (start,) = res.info["ranges"]  # no widening needed
     assert start["from"] == "the closed-form estimate" and start["reach"][0]["inside"]
@@ -57,7 +57,7 @@ def test_default_call_succeeds_off_the_current_modulus(box, E_now, f):
 def test_default_call_succeeds_on_the_default_dsm_model(box, E_now):
     target = 1.37 * E_now["dsm"]
     res = cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", verify=True)
-    assert res.model == "dsm" and res.converged and res.info["n_runs"] == 100
+    assert res.solver == "dsm" and res.converged and res.info["n_runs"] == 100
     assert abs(_solved(box, res, "dsm") / target - 1) <= res.tol
     assert res.max_error <= res.tol and res.history.rows[-1]["kind"] == "verify"
 
@@ -67,7 +67,7 @@ def test_ranges_widen_towards_a_target_the_runs_do_not_reach(box, E_now, f, wide
     """Without a closed form the ranges start at the initial value (x/2 .. 2x) and widen by 4 on the target's side,
     adding runs there; each round is in the notes and in info["ranges"]."""
     target = f * E_now["ste"]
-    res = cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", model=_no_closed_form(box))
+    res = cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", solver=_no_closed_form(box))
     assert res.converged, res.notes
     ranges = res.info["ranges"]
     assert ranges[0]["from"] == "the initial values" and ranges[0]["lower"] == [0.5e9] and ranges[0]["upper"] == [2e9]
@@ -91,7 +91,7 @@ def test_two_default_parameters_on_two_scenes(box):
     true = {**default_params(two), "bond_E": jnp.array([1.37e9, 12e9])}
     targets = [Target("youngs_modulus", jaxbpm.solve(two, scenes[k], "ste", params=true).youngs_modulus, scene=k)
                for k in scenes]
-    res = cal.calibrate(two, scenes, targets, method="surrogate", model="ste",
+    res = cal.calibrate(two, scenes, targets, method="surrogate", solver="ste",
                         parameters=[Parameter("bond_E", 0), Parameter("bond_E", 1)], verify=True)
     assert res.converged and res.max_error <= res.tol, res.errors
     assert res.info["ranges"][0]["from"] == "the closed-form estimate"
@@ -104,7 +104,7 @@ def test_explicit_bounds_are_kept_and_the_error_names_the_reached_range(box, E_n
     with pytest.raises(CalibrationError, match=r"no parameter combination is admissible .*youngs_modulus: the runs "
                                                r"reach \[[-+.e0-9]+, [-+.e0-9]+\], the target is [-+.e0-9]+ "
                                                r"\(outside\)"):
-        cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", model="ste",
+        cal.calibrate(box, SCENE, {"youngs_modulus": target}, method="surrogate", solver="ste",
                       parameters=[Parameter("bond_E", bounds=(0.5e9, 2e9))], n_runs=40, n_trees=50, L_s=300)
     space = ParameterSpace([Parameter("bond_E", bounds=(0.5e9, 4e9))], cal.base_params(box, ["bond_E"], SCENE))
     pb = Problem(cal.forward_model(box, SCENE, "ste"), [Target("youngs_modulus", target)], space)

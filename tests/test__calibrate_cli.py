@@ -1,0 +1,103 @@
+"""The ``jaxbpm calibrate`` command: a calibration end to end, the config and the options that override it."""
+
+import json
+
+import numpy as np
+import pytest
+
+import jaxbpm
+from jaxbpm import cli, io
+from jaxbpm.io import save_sample
+from jaxbpm.sample import Domain, Sample
+from jaxbpm.scenes import UniaxialCompression
+
+pytestmark = pytest.mark.xdist_group("calibrate-module")
+
+
+@pytest.fixture(scope="module")
+def one():
+    return jaxbpm.generate.lattice("fcc", (3, 3, 4), 1e-3, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+
+
+def _modulus(sample, params):
+    return jaxbpm.solve(sample, UniaxialCompression(strain=0.002), "dsm", params=params).youngs_modulus
+
+
+def _run(capsys, *argv):
+    code = cli.main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _tiny():
+    return Sample.from_arrays(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0]]), 0.5, [[0, 1], [1, 2]],
+                              bond_radius_ratio=0.5, domain=Domain("box", (-0.5, -0.5, -0.5), (1.5, 1.5, 0.5)))
+
+
+def test_cli_calibrate(one, tmp_path, capsys):
+    path = save_sample(tmp_path / "s.h5", one)
+    target = 1.5 * _modulus(one, None)
+    assert cli.main(["calibrate", str(path), "--target-E", repr(target), "--method", "auto", "--tol", "0.01",
+                     "--history", str(tmp_path / "h.h5")]) == 0
+    out = capsys.readouterr().out
+    assert "bond_E" in out and "converged" in out and (tmp_path / "h.h5").exists()
+    cfg = tmp_path / "c.json"
+    cfg.write_text(json.dumps({"targets": [{"observable": "youngs_modulus", "value": 0.7 * target}],
+                               "tol": 0.01}))
+    assert cli.main(["calibrate", str(path), "--config", str(cfg), "--quiet"]) == 0
+    assert "converged (tol 1 %)" in capsys.readouterr().out
+    assert cli.main(["calibrate", str(path)]) == 2
+    assert "no target" in capsys.readouterr().err
+    cfg.write_text("{not json")
+    assert cli.main(["calibrate", str(path), "--config", str(cfg)]) == 2
+
+
+def test_calibrate_options_override_the_config(tmp_path, capsys, monkeypatch):
+    """defaults < --config < options given on the command line."""
+    import jaxbpm.calibrate
+    from jaxbpm.errors import JaxbpmError
+
+    calls = []
+
+    def fake_calibrate(sample, scene, targets, **kw):
+        calls.append({k: kw[k] for k in ("method", "solver", "tol")})
+        raise JaxbpmError("stop after the options")
+
+    monkeypatch.setattr(jaxbpm.calibrate, "calibrate", fake_calibrate)
+    sample = io.save_sample(tmp_path / "s.h5", _tiny())
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({"method": "adam", "solver": "ste", "tol": 0.02}))
+    for argv, expected in (
+            ([], {"method": "auto", "solver": "dsm", "tol": 0.05}),  # the defaults
+            (["--config", config], {"method": "adam", "solver": "ste", "tol": 0.02}),  # the config over them
+            (["--config", config, "--solver", "dem", "--tol", 0.1], {"method": "adam", "solver": "dem", "tol": 0.1}),
+            (["--method", "surrogate", "--config", config], {"method": "surrogate", "solver": "ste", "tol": 0.02}),
+            (["--solver", "dsm", "--config", config], {"method": "adam", "solver": "dsm", "tol": 0.02})):  # = default
+        code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, *argv)
+        assert code == 2 and "stop after the options" in err
+        assert calls[-1] == expected, argv
+
+
+def test_old_solver_option_and_config_key_still_read(tmp_path, capsys, monkeypatch):
+    """``--model`` and the config key ``"model"`` are the old names of ``--solver`` and ``"solver"``: still read,
+    with a warning that names the new one."""
+    import jaxbpm.calibrate
+    from jaxbpm.errors import JaxbpmError
+
+    calls = []
+
+    def fake_calibrate(sample, scene, targets, **kw):
+        calls.append(kw["solver"])
+        raise JaxbpmError("stop after the options")
+
+    monkeypatch.setattr(jaxbpm.calibrate, "calibrate", fake_calibrate)
+    sample = io.save_sample(tmp_path / "s.h5", _tiny())
+    code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, "--model", "ste")
+    assert code == 2 and calls[-1] == "ste" and "--model is deprecated" in err and "--solver" in err
+    config = tmp_path / "config.json"
+    config.write_text(json.dumps({"model": "dem"}))
+    code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, "--config", config)
+    assert code == 2 and calls[-1] == "dem" and '"model" is deprecated' in err and '"solver"' in err
+    config.write_text(json.dumps({"model": "dem", "solver": "ste"}))
+    code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, "--config", config)
+    assert code == 2 and 'give "solver" only' in err
