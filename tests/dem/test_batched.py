@@ -2,7 +2,6 @@
 time step, loading time and chunk; a second batch of the same size compiles nothing; a member that blows up fails
 alone; scenes with contacts are refused."""
 
-import contextlib
 
 import jax
 import numpy as np
@@ -14,6 +13,8 @@ from jaxbpm.errors import InstabilityError, SceneError
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import ThreePointBending, UniaxialCompression
 
+from tests.dem._events import compilations
+
 R = 1e-3
 ELASTIC = UniaxialCompression(strain=0.002)
 FAILURE = UniaxialCompression.to_failure(strain=0.01, contacts=False)
@@ -24,22 +25,6 @@ UNBREAKABLE = UniaxialCompression(strain=0.002, breakage=False)
 def rock():
     return jaxbpm.generate.box(300, seed=0, mean_radius=R, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 5e6,
                                                                       "shear_strength": 1e7})
-
-
-@contextlib.contextmanager
-def compilations():
-    """The programs traced or compiled inside the block (JAX's monitoring events, as in test_dem_compile)."""
-    seen = []
-
-    def listener(name, duration, **kwargs):
-        if name in ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/backend_compile_duration"):
-            seen.append((name.rsplit("/", 1)[-1], kwargs.get("fun_name")))
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield seen
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
 
 
 def _single(sample, scene, params, batched):

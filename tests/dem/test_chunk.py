@@ -1,7 +1,6 @@
 """Compile once, answer fast (DEM): no jax-md for bonds-only runs, samples padded to size classes share the compiled
 programs without changing any result, a repeated solve compiles nothing, and wall = setup + compile + run."""
 
-import contextlib
 import subprocess
 import sys
 
@@ -14,24 +13,10 @@ import jaxbpm
 from jaxbpm.dem import chunk
 from jaxbpm.scenes import UniaxialCompression
 
+from tests.dem._events import compilations
+
 R = 1e-3
 ELASTIC = UniaxialCompression(strain=0.002)
-
-
-@contextlib.contextmanager
-def compilations():
-    """The programs traced or compiled inside the block (JAX's monitoring events)."""
-    seen = []
-
-    def listener(name, duration, **kwargs):
-        if name in ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/backend_compile_duration"):
-            seen.append((name.rsplit("/", 1)[-1], kwargs.get("fun_name")))
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield seen
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
 
 
 def _lattice(cells, **materials):
