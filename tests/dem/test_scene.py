@@ -189,19 +189,3 @@ def test_a_ctrl_c_swallowed_during_setup_still_stops_the_solve(weak, monkeypatch
         signal.signal(signal.SIGINT, previous)
     assert fired and ignored == [KeyboardInterrupt]  # it was swallowed where it arrived, and raised later
     assert read_records(tmp_path / "run.h5")[1]["status"] == "interrupted"  # the record says so
-
-
-def test_guard_lets_errors_through_when_interrupts_are_ignored():
-    # started with SIGINT ignored (`nohup`, `&` in a script): an error raised inside the guard is that error, not
-    # "generator didn't stop after throw()" (a SceneError is a ValueError, which the guard's set-up once caught)
-    import signal
-
-    from jaxbpm import _interrupt
-
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        with pytest.raises(SceneError, match="bad scene"):
-            with _interrupt.guard():
-                raise SceneError("bad scene")
-    finally:
-        signal.signal(signal.SIGINT, old)
