@@ -3,7 +3,8 @@
 Solvers never import one another; physics, the sample and the scenes never import a solver (scenes depend on
 physics, solvers on physics, sample and scenes, never the reverse). No import circle among jaxbpm's modules, no
 module taking another package's ``_private`` names, no module over 600 lines, no function over 100 lines (its
-docstring not counted). Every import counts, those inside functions too.
+docstring not counted). Every import counts, those inside functions too. The tests mirror the package: every module
+has a test file of its own.
 
 Each check is a function of a module graph or a source tree, tested on a small synthetic package as well, so that a
 check is known to catch what it looks for.
@@ -17,6 +18,7 @@ import pytest
 import jaxbpm
 
 ROOT = pathlib.Path(jaxbpm.__file__).parent
+TESTS = pathlib.Path(__file__).parent
 SOLVERS = ("dem", "dsm", "ste")
 MAX_MODULE_LINES = 600
 MAX_FUNCTION_LINES = 100
@@ -176,6 +178,26 @@ def long_functions(root: pathlib.Path = ROOT, limit: int = MAX_FUNCTION_LINES) -
     return out
 
 
+def own_test_files(path: pathlib.Path, root: pathlib.Path = ROOT, tests: pathlib.Path = TESTS) -> list[pathlib.Path]:
+    """The test files that may test the module at ``path``: ``a/b.py`` -> ``tests/a/test_b.py``; a private ``a/_b.py``
+    -> ``tests/a/test_b.py`` or ``tests/a/test__b.py``, only the latter where a public ``a/b.py`` takes the name."""
+    folder = tests / path.parent.relative_to(root)
+    stem = path.stem
+    if not stem.startswith("_"):
+        return [folder / f"test_{stem}.py"]
+    if path.with_name(f"{stem[1:]}.py").is_file():
+        return [folder / f"test_{stem}.py"]
+    return [folder / f"test_{stem[1:]}.py", folder / f"test_{stem}.py"]
+
+
+def untested_modules(root: pathlib.Path = ROOT, tests: pathlib.Path = TESTS) -> list[str]:
+    """Every module of the package at ``root`` with no test file of its own under ``tests`` (:func:`own_test_files`);
+    ``__init__``, ``__main__`` and ``_version`` need none."""
+    return [name for name, path in modules(root).items()
+            if path.name not in ("__init__.py", "__main__.py", "_version.py")
+            and not any(f.is_file() for f in own_test_files(path, root, tests))]
+
+
 def _solver(module: str):
     parts = module.split(".")
     return parts[1] if len(parts) > 1 and parts[1] in SOLVERS else None
@@ -221,6 +243,11 @@ def test_no_module_over_600_lines():
 def test_no_function_over_100_lines():
     bad = long_functions()
     assert not bad, f"functions over {MAX_FUNCTION_LINES} lines, docstrings not counted: {bad}"
+
+
+def test_every_module_has_its_test_file():
+    bad = untested_modules()
+    assert not bad, f"modules without a test file of their own (jaxbpm/a/b.py: tests/a/test_b.py): {bad}"
 
 
 # --- the checks on a synthetic package -------------------------------------------------------------------------------
@@ -296,3 +323,19 @@ def test_a_long_function_is_caught(tmp_path):
                                "g.py": f"{method}\n\n{nested}"})
     assert long_functions(root) == [("toy.f:long", 101), ("toy.g:C.m", 101), ("toy.g:outer", 103),
                                     ("toy.g:outer.inner", 101)]
+
+
+def test_a_module_without_its_test_file_is_caught(tmp_path):
+    root = _package(tmp_path, {**CLEAN, "__main__.py": "", "_version.py": "", "b/_hidden.py": "", "b/name.py": "",
+                               "b/_name.py": ""})
+    tests = tmp_path / "tests"
+    for rel in ("a/test_low.py", "a/test_high.py", "test_compile.py", "b/test_user.py", "test_c.py",
+                "b/test_name.py", "b/test__name.py"):
+        (tests / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tests / rel).write_text("")
+    assert untested_modules(root, tests) == ["toy.b._hidden"]
+    (tests / "b" / "test__hidden.py").write_text("")  # either name for a private module without a public twin
+    assert untested_modules(root, tests) == []
+    (tests / "b" / "test__name.py").unlink()  # `test_name.py` is public `name.py`'s, not `_name.py`'s
+    (tests / "test_c.py").rename(tests / "a" / "test_c.py")  # a test file in another folder is not the module's
+    assert untested_modules(root, tests) == ["toy.b._name", "toy.c"]
