@@ -6,7 +6,7 @@ evaluations (solves, the DEM check excluded), iterations, wall time and the fina
 
 Methods: Adam-FD on DEM (few iterations: a DEM run of this size costs seconds to tens of seconds), Adam-FD on DSM,
 Adam-autodiff on DSM (both with Qu et al.'s initial estimates, the closed-form shortcut off), the random-forest
-surrogate on DSM (a small run set, solved ``--chunk`` runs per ``vmap`` batch so that the batch's memory stays
+surrogate on DSM (a small run set, solved ``--batch-size`` runs per ``vmap`` batch so that the batch's memory stays
 bounded), and the multi-fidelity default (``method="auto"``: STE, then DSM where needed,
 closed form on each level). Goal: within 1 % of the target checked by DEM, <= 6 iterations, <= 8 evaluations.
 
@@ -32,7 +32,8 @@ def main(argv=None):
     ap.add_argument("--tol", type=float, default=0.01)
     ap.add_argument("--dem-iterations", type=int, default=3, dest="dem_iterations")
     ap.add_argument("--surrogate-runs", type=int, default=24, dest="surrogate_runs")
-    ap.add_argument("--chunk", type=int, default=4, help="surrogate runs solved per vmap batch (memory bound)")
+    ap.add_argument("--batch-size", "--chunk", type=int, default=4, dest="batch_size",
+                    help="surrogate runs solved per vmap batch (memory bound; --chunk: its former name)")
     ap.add_argument("--quick", action="store_true", help="500 particles (smoke test)")
     ap.add_argument("--out", default="results/calibration.json")
     args = ap.parse_args(argv)
@@ -66,7 +67,7 @@ def main(argv=None):
             "adam-autodiff/dsm": dict(method="adam", solver="dsm", shortcut=False, gradient="autodiff",
                                       max_iterations=6),
             "surrogate/dsm": dict(method="surrogate", solver="dsm", n_runs=args.surrogate_runs, n_trees=200,
-                                  L_s=500, it_max=20, I_e=0.2, chunk=args.chunk,
+                                  L_s=500, it_max=20, I_e=0.2, batch_size=args.batch_size,
                                   parameters=[cal.Parameter("bond_E", index=None,
                                                             ratio=ratio if len(ratio) > 1 else None,
                                                             bounds=(E0 / 10, E0 * 2))]),

@@ -9,8 +9,8 @@ The same call runs on a laptop CPU and on a multi-GPU node::
     batch = {"bond_E": E_values[:, None], "bond_nu": nu_values[:, None]}   # [B, n_materials] leaves
     K = jaxbpm.sweep.sweep(f, batch)                            # [B]
 
-A batch that does not divide evenly is padded with copies of its last set (their results are dropped). ``chunk``
-bounds memory: the batch is evaluated ``chunk`` sets per device at a time.
+A batch that does not divide evenly is padded with copies of its last set (their results are dropped).
+``batch_size`` bounds memory: the batch is evaluated ``batch_size`` sets per device at a time.
 """
 
 from __future__ import annotations
@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from jaxbpm._renamed import batch_size_keyword
 
 __all__ = ["sweep", "batch_size"]
 
@@ -47,29 +49,36 @@ def batch_size(batch) -> int:
     return sizes.pop()
 
 
-def sweep(fn: Callable, batch, *, devices: Sequence[Any] | None = None, chunk: int | None = None):
+_leading_size = batch_size  # sweep's keyword batch_size hides the function of that name
+
+
+def sweep(fn: Callable, batch, *, devices: Sequence[Any] | None = None, batch_size: int | None = None,
+          chunk: int | None = None):
     """``jax.vmap(fn)(batch)``, with the batch axis sharded over ``devices``.
 
     Args:
       fn: a pure JAX function of one parameter set (a pytree).
       batch: the same pytree with a leading batch axis on every leaf.
       devices: the devices to shard over (default: all of the default backend).
-      chunk: at most this many sets per device in one evaluation (default: the whole share).
+      batch_size: at most this many sets per device in one evaluation (default: the whole share).
+      chunk: deprecated name of ``batch_size`` (a :class:`DeprecationWarning`); removed in the next release.
 
     Returns:
       The stacked outputs (leading axis = batch size), as NumPy-compatible JAX arrays on the default device.
 
     Raises:
-      ValueError: a bad batch (see :func:`batch_size`), no devices, or a bad ``chunk``.
+      ValueError: a bad batch (see :func:`batch_size`), no devices, or a bad ``batch_size``.
+      TypeError: both ``batch_size`` and ``chunk``.
     """
-    size = batch_size(batch)
+    batch_size = batch_size_keyword(batch_size, chunk)
+    size = _leading_size(batch)
     devices = list(jax.devices() if devices is None else devices)
     if not devices:
         raise ValueError("sweep: no devices")
-    if chunk is not None and not (isinstance(chunk, (int, np.integer)) and chunk >= 1):
-        raise ValueError(f"sweep: chunk must be a positive whole number, got {chunk!r}")
+    if batch_size is not None and not (isinstance(batch_size, (int, np.integer)) and batch_size >= 1):
+        raise ValueError(f"sweep: batch_size must be a positive whole number, got {batch_size!r}")
     nd = len(devices)
-    per_round = nd * (chunk if chunk is not None else -(-size // nd))
+    per_round = nd * (batch_size if batch_size is not None else -(-size // nd))
     runner = _runner(fn, tuple(devices))
     outs = []
     for start in range(0, size, per_round):

@@ -23,10 +23,10 @@ def _batch(n):
     return {"E": jnp.asarray(rng.uniform(1, 2, n)), "w": jnp.asarray(rng.normal(size=(n, 3)))}
 
 
-@pytest.mark.parametrize("n, chunk", [(7, None), (8, 3), (1, None)])
-def test_sweep_equals_vmap_on_one_device(n, chunk):
+@pytest.mark.parametrize("n, batch_size", [(7, None), (8, 3), (1, None)])
+def test_sweep_equals_vmap_on_one_device(n, batch_size):
     batch = _batch(n)
-    out = sweep.sweep(_model, batch, chunk=chunk)
+    out = sweep.sweep(_model, batch, batch_size=batch_size)
     ref = jax.vmap(_model)(batch)
     np.testing.assert_allclose(out["k"], ref["k"], rtol=1e-14)
     np.testing.assert_allclose(out["g"], ref["g"], rtol=1e-14)
@@ -38,8 +38,19 @@ def test_bad_batches_are_named():
         sweep.sweep(_model, {"E": jnp.ones(3), "w": jnp.ones((4, 3))})
     with pytest.raises(ValueError, match="scalar"):
         sweep.sweep(_model, {"E": jnp.ones(()), "w": jnp.ones((4, 3))})
-    with pytest.raises(ValueError, match="chunk"):
-        sweep.sweep(_model, _batch(3), chunk=0)
+    with pytest.raises(ValueError, match="batch_size"):
+        sweep.sweep(_model, _batch(3), batch_size=0)
+
+
+def test_chunk_is_a_deprecated_name_of_batch_size():
+    batch = _batch(8)
+    new = sweep.sweep(_model, batch, batch_size=3)
+    with pytest.warns(DeprecationWarning, match="batch_size="):
+        old = sweep.sweep(_model, batch, chunk=3)
+    np.testing.assert_array_equal(old["k"], new["k"])
+    np.testing.assert_array_equal(old["g"], new["g"])
+    with pytest.raises(TypeError, match="batch_size= only"):
+        sweep.sweep(_model, batch, batch_size=3, chunk=3)
 
 
 def test_sweep_over_two_host_devices_matches_the_unsharded_result(tmp_path):

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._renamed import batch_size_keyword
 from jaxbpm.calibrate.forward import Forward
 from jaxbpm.calibrate.space import CalibrationError, ParameterSpace, as_targets
 
@@ -133,8 +134,8 @@ class Problem:
         return tvals, tscale, wel
 
     # -------------------------------------------------------------- evaluation
-    def outputs(self, values_batch, *, chunk: int | None = None, progress: bool = False,
-                on_row: Callable[[int, np.ndarray], None] | None = None) -> np.ndarray:
+    def outputs(self, values_batch, *, batch_size: int | None = None, progress: bool = False,
+                on_row: Callable[[int, np.ndarray], None] | None = None, chunk: int | None = None) -> np.ndarray:
         """The forward's values of all target elements for a batch of parameter sets (``vmap`` when pure).
 
         A forward that is not batched (DEM, a plain function with ``pure=False``) solves the sets one after another, or,
@@ -142,23 +143,28 @@ class Problem:
 
         Args:
           values_batch: parameter values ``[B, n]``.
-          chunk: for a pure forward, solve at most this many sets in one ``vmap`` (bounds the memory of large batches:
-            each vmapped solve holds its own operator and workspace); the last chunk is padded so that every chunk
-            shares one compilation. ``None``: all at once.
-          progress: a bar of the sets solved (:mod:`jaxbpm.progress`) where they are solved in parts (chunks, or one at
-            a time).
+          batch_size: for a pure forward, solve at most this many sets in one ``vmap`` (bounds the memory of large
+            batches: each vmapped solve holds its own operator and workspace); the last batch is padded so that every
+            batch shares one compilation. ``None``: all at once.
+          progress: a bar of the sets solved (:mod:`jaxbpm.progress`) where they are solved in parts (batches, or one
+            at a time).
           on_row: called ``(index, row)`` as each set of a forward that is not batched finishes (in completion order),
             e.g. to store it.
+          chunk: deprecated name of ``batch_size`` (a :class:`DeprecationWarning`); removed in the next release.
 
         Returns:
           ``[B, m]``.
 
         Raises:
-          CalibrationError: a bad ``chunk``, a target the forward does not report, a solve that did not converge.
+          CalibrationError: a bad ``batch_size``, a target the forward does not report, a solve that did not
+            converge.
+          TypeError: both ``batch_size`` and ``chunk``.
         """
+        batch_size = batch_size_keyword(batch_size, chunk)
         vb = np.atleast_2d(np.asarray(values_batch, dtype=np.float64))
-        if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
-            raise CalibrationError(f"chunk must be a whole number >= 1, got {chunk!r}")
+        if batch_size is not None and (isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer))
+                                       or batch_size < 1):
+            raise CalibrationError(f"batch_size must be a whole number >= 1, got {batch_size!r}")
         if len(vb) == 1 and self._last is not None and np.array_equal(self._last[0], vb[0]):
             return self._last[1][None].copy()
         t0 = time.perf_counter()
@@ -171,17 +177,17 @@ class Problem:
                 if self._sweep_fn is None:
                     vector, space_base = self._compiled("vector"), base
                     self._sweep_fn = lambda v: vector(v, space_base)  # one function: sweep compiles it once
-                y = np.asarray(sweep(self._sweep_fn, jnp.asarray(vb), chunk=chunk))
-            elif chunk is not None and len(vb) > chunk > 1:
+                y = np.asarray(sweep(self._sweep_fn, jnp.asarray(vb), batch_size=batch_size))
+            elif batch_size is not None and len(vb) > batch_size > 1:
                 fn, parts, shown = self._compiled("batch"), [], _bar(progress, len(vb))
-                for a in range(0, len(vb), chunk):
-                    part = vb[a:a + chunk]
-                    pad = np.concatenate([part, np.repeat(part[-1:], chunk - len(part), axis=0)])
+                for a in range(0, len(vb), batch_size):
+                    part = vb[a:a + batch_size]
+                    pad = np.concatenate([part, np.repeat(part[-1:], batch_size - len(part), axis=0)])
                     parts.append(np.asarray(fn(jnp.asarray(pad), base))[:len(part)])
                     shown.update(len(part))
                 shown.close()
                 y = np.concatenate(parts)
-            elif chunk == 1 and len(vb) > 1:
+            elif batch_size == 1 and len(vb) > 1:
                 fn, shown, rows = self._compiled("vector"), _bar(progress, len(vb)), []
                 for v in vb:
                     rows.append(np.asarray(fn(jnp.asarray(v), base)))

@@ -127,7 +127,7 @@ def _widenings(problem, runs, reach, auto, logm, lo, hi, bounds_lo, bounds_hi):
     return sorted(moves)
 
 
-def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, path, info, previous=None) -> RunSet:
+def _solve_runs(problem: Problem, X, lower, upper, *, seed, batch_size, progress, path, info, previous=None) -> RunSet:
     """Solve the parameter sets ``X`` whose leading rows may be solved already: those of ``previous`` (a run set)
     and those in ``path``'s run set (same leading rows) are not solved again; each finished row is stored there as
     it arrives, like :func:`run_set`."""
@@ -137,7 +137,7 @@ def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, pat
     runs = RunSet(parameter_names=space.names, X=X, lower=np.asarray(lower, dtype=np.float64),
                   upper=np.asarray(upper, dtype=np.float64), output_names=problem.target_names, output_sizes=sizes,
                   Y=np.full((n, int(np.sum(sizes))), np.nan), solver=problem.forward.name,
-                  info={"seed": seed, "chunk": chunk, **info}, done=np.zeros(n, bool))
+                  info={"seed": seed, "batch_size": batch_size, **info}, done=np.zeros(n, bool))
     stored_rows = from_file = 0
     if path is not None and pathlib.Path(path).exists():
         stored = RunSet.load(path, partial=True)
@@ -158,7 +158,7 @@ def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, pat
     t0 = time.perf_counter()
     evals0 = problem.evaluations
 
-    run_missing(problem, runs, X, todo, path, chunk, progress)
+    run_missing(problem, runs, X, todo, path, batch_size, progress)
     runs.info.update(wall_time=time.perf_counter() - t0, evaluations=problem.evaluations - evals0,
                      resumed=from_file)
     if path is not None and len(todo) and n >= stored_rows:
@@ -166,7 +166,7 @@ def _solve_runs(problem: Problem, X, lower, upper, *, seed, chunk, progress, pat
     return runs
 
 
-def _default_run_set(problem: Problem, n_runs, *, seed, chunk, progress, path, widen, exclude, notes):
+def _default_run_set(problem: Problem, n_runs, *, seed, batch_size, progress, path, widen, exclude, notes):
     """The run set of a problem with defaulted parameter ranges: centred on a cheap estimate, a factor
     ``_START_FACTOR`` either side (in log space), then widened by ``_WIDEN_FACTOR`` on the side of each target the
     runs do not reach, with new runs there (all runs kept), ``widen`` rounds at most. Returns ``(runs, ranges)``."""
@@ -182,7 +182,7 @@ def _default_run_set(problem: Problem, n_runs, *, seed, chunk, progress, path, w
                  + (", sampled in log space" if logm.any() else ""))
     X = _lhs(n_runs, lo, hi, logm, seed=seed)
     info = {"ranges": "default", "centre": centre.tolist()}
-    runs = _solve_runs(problem, X, lo, hi, seed=seed, chunk=chunk, progress=progress, path=path, info=info)
+    runs = _solve_runs(problem, X, lo, hi, seed=seed, batch_size=batch_size, progress=progress, path=path, info=info)
     ranges = [{"round": 0, "lower": lo.tolist(), "upper": hi.tolist(), "runs": n_runs, "centre": centre.tolist(),
                "from": what, "widened": []}]
     n_new = max(n_runs // 2, 2)
@@ -218,7 +218,7 @@ def _default_run_set(problem: Problem, n_runs, *, seed, chunk, progress, path, w
                            for r in reach if not r["inside"])
         notes.append(f"widening round {rnd}: {missed}; widened {', '.join(said)} (+{n_new * len(moves)} runs)")
         lo, hi = new_lo, new_hi
-        runs = _solve_runs(problem, np.concatenate([runs.X] + parts), lo, hi, seed=seed, chunk=chunk,
+        runs = _solve_runs(problem, np.concatenate([runs.X] + parts), lo, hi, seed=seed, batch_size=batch_size,
                            progress=progress, path=path, info=info, previous=runs)
         ranges.append({"round": rnd, "lower": lo.tolist(), "upper": hi.tolist(), "runs": runs.n_runs,
                        "widened": [(space.names[i], "upper" if side > 0 else "lower") for i, side in moves]})

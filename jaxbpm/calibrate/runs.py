@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 
 import jaxbpm.calibrate._common as _common
+from jaxbpm._renamed import batch_size_keyword
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 
 __all__ = ["RunSet", "run_set", "latin_hypercube", "RUNSET_FORMAT"]
@@ -156,7 +157,7 @@ class RunSet:
                            lower=np.asarray(f["lower"]), upper=np.asarray(f["upper"]),
                            output_names=json.loads(f.attrs["output_names"]),
                            output_sizes=json.loads(f.attrs["output_sizes"]), Y=np.asarray(f["Y"]),
-                           solver=str(f.attrs["model"]), info=json.loads(f.attrs["info"]),
+                           solver=str(f.attrs["model"]), info=_info(json.loads(f.attrs["info"])),
                            done=np.asarray(f["done"], dtype=bool) if "done" in f else None)
         except OSError as exc:
             raise CalibrationError(f"{path}: not a readable run set file ({exc})") from exc
@@ -167,8 +168,17 @@ class RunSet:
         return runs
 
 
+def _info(info: dict) -> dict:
+    """A stored run set's ``info`` with the key ``"chunk"`` of older files read as ``"batch_size"``."""
+    if "chunk" in info:
+        info = dict(info)
+        batch_size = info.pop("chunk")
+        info.setdefault("batch_size", batch_size)
+    return info
+
+
 def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=None,
-            chunk: int | None = None, progress: bool = False, path=None) -> RunSet:
+            batch_size: int | None = None, progress: bool = False, path=None, chunk: int | None = None) -> RunSet:
     """Solve ``n_runs`` Latin-hypercube parameter sets of ``problem`` and record the outputs its targets need.
 
     The runs of a forward that is not batched (DEM) go one after another, or to the problem's ``executor`` (e.g. a
@@ -181,17 +191,20 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
       n_runs: parameter sets (at least 2).
       seed: the Latin hypercube's seed.
       lower, upper: the ranges ``[n]`` (default: the parameters' bounds).
-      chunk: solve in batches of this many (``None``: one batch; see :meth:`Problem.outputs`).
+      batch_size: solve in batches of this many (``None``: one batch; see :meth:`Problem.outputs`).
       progress: a bar of the runs solved (where they are solved in parts).
       path: an HDF5 file that holds the run set.
+      chunk: deprecated name of ``batch_size`` (a :class:`DeprecationWarning`); removed in the next release.
 
     Returns:
-      The :class:`RunSet`.
+      The :class:`RunSet` (``info["batch_size"]`` records ``batch_size``).
 
     Raises:
       CalibrationError: bad ranges or ``n_runs``, or a file at ``path`` that holds a different run set (other
         parameters, ranges, seed or outputs; never overwritten).
+      TypeError: both ``batch_size`` and ``chunk``.
     """
+    batch_size = batch_size_keyword(batch_size, chunk)
     n_runs = _common.check_count("n_runs", n_runs, 2)
     space = problem.space
     lower = space.lower if lower is None else np.asarray(lower, dtype=np.float64)
@@ -204,13 +217,13 @@ def run_set(problem: Problem, n_runs: int, *, seed: int = 0, lower=None, upper=N
     sizes = [t.size for t in problem.targets]
     runs = RunSet(parameter_names=space.names, X=X, lower=lower, upper=upper, output_names=problem.target_names,
                   output_sizes=sizes, Y=np.full((n_runs, int(np.sum(sizes))), np.nan), solver=problem.forward.name,
-                  info={"seed": seed, "chunk": chunk}, done=np.zeros(n_runs, bool))
+                  info={"seed": seed, "batch_size": batch_size}, done=np.zeros(n_runs, bool))
     if path is not None and pathlib.Path(path).exists():
         runs = _resumable(path, runs)
     todo = np.flatnonzero(~runs.done) if runs.done is not None else np.zeros(0, int)
     resumed = n_runs - len(todo)
 
-    run_missing(problem, runs, X, todo, path, chunk, progress)
+    run_missing(problem, runs, X, todo, path, batch_size, progress)
     runs.info.update(wall_time=time.perf_counter() - t0, evaluations=problem.evaluations - evals0,
                      resumed=resumed)
     if path is not None and len(todo):
@@ -239,7 +252,7 @@ def _resumable(path, planned: RunSet) -> RunSet:
     return stored
 
 
-def run_missing(problem, runs: RunSet, X, todo, path, chunk, progress) -> None:
+def run_missing(problem, runs: RunSet, X, todo, path, batch_size, progress) -> None:
     """Run the rows ``todo`` of ``X`` into ``runs.Y``; ``runs.done`` is cleared at the end.
 
     Args:
@@ -249,7 +262,7 @@ def run_missing(problem, runs: RunSet, X, todo, path, chunk, progress) -> None:
       todo: the indices of the rows to solve.
       path: an HDF5 file each row is stored in as it arrives (so that an interrupted run set resumes without
         repeating them), or None.
-      chunk: solve in batches of this many.
+      batch_size: solve in batches of this many.
       progress: a bar of the runs solved.
     """
     def store(k, row):
@@ -257,6 +270,6 @@ def run_missing(problem, runs: RunSet, X, todo, path, chunk, progress) -> None:
         runs.save(path)
 
     if len(todo):
-        Y = problem.outputs(X[todo], chunk=chunk, progress=progress, on_row=None if path is None else store)
+        Y = problem.outputs(X[todo], batch_size=batch_size, progress=progress, on_row=None if path is None else store)
         runs.Y[todo] = np.asarray(Y)
     runs.done = None

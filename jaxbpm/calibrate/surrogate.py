@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 import jaxbpm.calibrate._common as _common
+from jaxbpm._renamed import batch_size_keyword
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.result import CalibrationResult, History
 from jaxbpm.calibrate.ranges import _default_run_set, _defaulted, _describe_reach, _lhs, _log_mask, _reach, _trim
@@ -146,8 +147,9 @@ def _predict_one(model, X) -> np.ndarray:
 def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100, I_e: float = 0.2, L_s: int = 1000,
               it_max: int = 50, n_trees: int = 500, max_features: float = 1 / 3, exclude: float = 0.05,
               normalize: bool = True, importance_threshold: float | None = None, resample_runs: int | None = None,
-              seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, chunk: int | None = None,
-              regressor=None, runs_file=None, progress=None, widen: int = 3) -> CalibrationResult:
+              seed: int = 0, tol: float = 0.05, verify: bool = False, n_jobs=None, batch_size: int | None = None,
+              regressor=None, runs_file=None, progress=None, widen: int = 3, chunk: int | None = None
+              ) -> CalibrationResult:
     """Calibrate with the random-forest surrogate of Irazabal et al. 2023 (see the module docstring).
 
     Ranges: a parameter with explicit ``bounds`` is sampled within them. A parameter without (the space's default
@@ -175,7 +177,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
       tol: relative tolerance on every target.
       verify: solve once at the answer and report the measured errors (else the surrogate's prediction).
       n_jobs: parallel jobs of the forests or of the regressor where it takes them.
-      chunk: solve the runs in batches of this many (bounds the memory of a ``vmap`` of large solves; ``None``:
+      batch_size: solve the runs in batches of this many (bounds the memory of a ``vmap`` of large solves; ``None``:
         one batch).
       regressor: a scikit-learn regressor instance (e.g. ``ExtraTreesRegressor(n_estimators=200)``,
         ``KNeighborsRegressor(5)``) fitted instead of the forests, cloned per fit (see :func:`fit_forests`;
@@ -185,6 +187,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
       progress: True (a bar of the run set and a line per iteration), a callable
         ``(row, parameter_names, target_names)`` or None.
       widen: widening rounds at most for default ranges.
+      chunk: deprecated name of ``batch_size`` (a :class:`DeprecationWarning`); removed in the next release.
 
     Returns:
       A :class:`CalibrationResult` at the median of the last admissible combinations, ``band`` their ranges.
@@ -196,7 +199,9 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     Raises:
       CalibrationError: an option out of range, a run set that does not fit the problem, or no admissible
         combination at the initial error ``I_e`` (the message gives the outputs the runs reach).
+      TypeError: both ``batch_size`` and ``chunk``.
     """
+    batch_size = batch_size_keyword(batch_size, chunk)
     t_start = time.perf_counter()
     tol, L_s, it_max, n_trees, widen = _check_options(tol=tol, L_s=L_s, it_max=it_max, n_trees=n_trees, I_e=I_e,
                                                       exclude=exclude, max_features=max_features,
@@ -206,7 +211,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     evals0 = problem.evaluations
     notes = []
     space = problem.space
-    runs, ranges = _training_runs(problem, runs, runs_file=runs_file, n_runs=n_runs, seed=seed, chunk=chunk,
+    runs, ranges = _training_runs(problem, runs, runs_file=runs_file, n_runs=n_runs, seed=seed, batch_size=batch_size,
                                   show_runs=show_runs, widen=widen, exclude=exclude, notes=notes)
     fit = dict(n_trees=n_trees, max_features=max_features, seed=seed, n_jobs=n_jobs, regressor=regressor)
     forests, r2, imp = fit_forests(runs.X, _errors(problem, runs, normalize), **fit)
@@ -214,7 +219,7 @@ def surrogate(problem: Problem, *, runs: RunSet | None = None, n_runs: int = 100
     dropped = []
     if importance_threshold is not None:
         runs, model, r2, imp, dropped = _drop_unimportant(problem, runs, model, r2, imp, importance_threshold,
-                                                          resample_runs, normalize=normalize, chunk=chunk,
+                                                          resample_runs, normalize=normalize, batch_size=batch_size,
                                                           show_runs=show_runs, fit=fit, notes=notes)
     active, fixed = model.active, model.fixed
     history = History(space.names, problem.target_names)
@@ -261,7 +266,7 @@ def _check_options(*, tol, L_s, it_max, n_trees, I_e, exclude, max_features, reg
     return tol, L_s, it_max, n_trees, widen
 
 
-def _training_runs(problem: Problem, runs, *, runs_file, n_runs, seed, chunk, show_runs, widen, exclude, notes):
+def _training_runs(problem: Problem, runs, *, runs_file, n_runs, seed, batch_size, show_runs, widen, exclude, notes):
     """The training run set: ``runs`` (stored) as given, else solved (default ranges centred and widened, see
     :func:`_default_run_set`). Returns ``(runs, ranges)``, ``ranges`` None unless the ranges were defaulted."""
     space = problem.space
@@ -269,10 +274,10 @@ def _training_runs(problem: Problem, runs, *, runs_file, n_runs, seed, chunk, sh
         raise CalibrationError("give runs (a stored run set) or runs_file (where to solve and store one), not both")
     if runs is None and _defaulted(space).any():
         n_runs = _common.check_count("n_runs", n_runs, 2)
-        return _default_run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs, path=runs_file,
+        return _default_run_set(problem, n_runs, seed=seed, batch_size=batch_size, progress=show_runs, path=runs_file,
                                 widen=widen, exclude=exclude, notes=notes)
     if runs is None:
-        return run_set(problem, n_runs, seed=seed, chunk=chunk, progress=show_runs, path=runs_file), None
+        return run_set(problem, n_runs, seed=seed, batch_size=batch_size, progress=show_runs, path=runs_file), None
     if not isinstance(runs, RunSet):
         raise CalibrationError(f"runs must be a RunSet, got {type(runs).__name__}")
     if runs.parameter_names != space.names:
@@ -297,7 +302,7 @@ class _Surrogate:
 
 
 def _drop_unimportant(problem: Problem, runs, model: _Surrogate, r2, imp, threshold, resample_runs, *, normalize,
-                      chunk, show_runs, fit, notes):
+                      batch_size, show_runs, fit, notes):
     """Drop the parameters whose mean importance is below ``threshold`` (held at their initial values); with
     ``resample_runs``, solve that many new runs on the others and refit. Returns ``(runs, model, r2, imp,
     dropped)``."""
@@ -318,7 +323,7 @@ def _drop_unimportant(problem: Problem, runs, model: _Surrogate, r2, imp, thresh
     sub = space.subspace([n for n, a in zip(space.names, active) if a], fixed)
     sub_problem = Problem(problem.forward, problem.targets, sub, executor=problem.executor, retries=problem.retries)
     sub_problem.evaluations = problem.evaluations
-    sub_runs = run_set(sub_problem, resample_runs, seed=fit["seed"] + 1, chunk=chunk, progress=show_runs,
+    sub_runs = run_set(sub_problem, resample_runs, seed=fit["seed"] + 1, batch_size=batch_size, progress=show_runs,
                        lower=runs.lower[active], upper=runs.upper[active])
     problem.evaluations = sub_problem.evaluations
     X_full = np.repeat(fixed[None, :], sub_runs.n_runs, axis=0)

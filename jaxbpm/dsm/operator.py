@@ -138,12 +138,20 @@ def bond_subset(model: Model, idx) -> Model:
 
 
 def over_bonds(fn, model: Model, block: int | None = None):
-    """``fn(model)`` for a per-bond function whose outputs have the bond axis last, run over chunks of bonds
-    (:func:`~jaxbpm.physics.blocks.fold_blocks`; each chunk's outputs written in place) when the model has more:
-    each chunk's temporaries (the bond law's forward-mode derivatives, tens of numbers per bond) are then reused
-    from chunk to chunk instead of being allocated for every bond at once -- on a million-particle sample that
-    allocation cost more than the arithmetic (82 s against 6 s in chunks). Within a chunk the model holds that
-    chunk's bonds only (:func:`bond_subset`; the last chunk's padding repeats the last bond)."""
+    """``fn(model)`` for a per-bond function whose outputs have the bond axis last, run over blocks of bonds
+    (:func:`~jaxbpm.physics.blocks.fold_blocks`; each block's outputs written in place) when the model has more
+    bonds than one block: each block's temporaries (the bond law's forward-mode derivatives, tens of numbers per
+    bond) are then reused from block to block instead of being allocated for every bond at once. Within a block the
+    model holds that block's bonds only (:func:`bond_subset`; the last block's padding repeats the last bond).
+
+    Args:
+      fn: a function of a :class:`~jaxbpm.physics.model.Model` whose outputs (a pytree) have the bond axis last.
+      model: the model over all bonds.
+      block: the largest block length (default :data:`~jaxbpm.physics.blocks.BLOCK`).
+
+    Returns:
+      ``fn(model)``: the outputs over all bonds.
+    """
     nb = model.bonds.shape[0]
     length = block_length(nb, block)
     if nb <= length:
@@ -152,7 +160,7 @@ def over_bonds(fn, model: Model, block: int | None = None):
     shapes = jax.eval_shape(lambda: fn(bond_subset(model, jnp.arange(length))))
     out = jax.tree_util.tree_map(lambda t: jnp.zeros(t.shape[:-1] + (size,), t.dtype), shapes)
 
-    def step(acc, idx, _):  # idx[0]: the chunk's first bond
+    def step(acc, idx, _):  # idx[0]: the block's first bond
         return jax.tree_util.tree_map(lambda o, r: jax.lax.dynamic_update_slice_in_dim(o, r, idx[0], axis=o.ndim - 1),
                                       acc, fn(bond_subset(model, idx)))
 
@@ -160,7 +168,7 @@ def over_bonds(fn, model: Model, block: int | None = None):
     return jax.tree_util.tree_map(lambda o: o[..., :nb], out) if size != nb else out
 
 
-def _geometry_chunk(model: Model):
+def _geometry_block(model: Model):
     zero = jnp.zeros_like(model.bond_length)
     # the stiffness at two Poisson ratios separates the modulus part from the shear part: k = k_E + s k_G
     k0, s0 = _unit_stiffnesses(model, zero)
@@ -176,7 +184,7 @@ def _geometry_chunk(model: Model):
 
 @setup_jit
 def _geometry_parts(model: Model):
-    reduced, mismatch, scale = over_bonds(_geometry_chunk, model)
+    reduced, mismatch, scale = over_bonds(_geometry_block, model)
     err = jnp.max(jnp.max(mismatch, axis=1) / jnp.maximum(jnp.max(scale, axis=1), jnp.finfo(reduced.dtype).tiny))
     return reduced, err
 

@@ -26,7 +26,7 @@ _MAX_PRECOMPUTED_BYTES = 2 ** 30  # memory for the preconditioner's parts; above
 
 @setup_jit(static_argnames=("n_materials",))
 def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
-    """Block diagonals and coarse matrices per (material, part) of :class:`BondGeometry` (over chunks of bonds on
+    """Block diagonals and coarse matrices per (material, part) of :class:`BondGeometry` (over blocks of bonds on
     large samples)."""
     def one(mp):
         m, part = mp // 2, mp % 2

@@ -189,7 +189,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     free = est.relaxing[:, None, None]  # clamped and singular particles follow the affine field
     neighbours = not est.first_neighbour
 
-    def chunk_of(idx, keep):
+    def block_of(idx, keep):
         """The pairs ``idx`` (all: ``None``): their ends, vectors and stiffness (zero on padding)."""
         p, dc, kc = (pairs, d, K) if idx is None else (pairs[idx], d[idx], K[idx])
         if keep is not None:
@@ -198,7 +198,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
 
     def sums(carry, idx, keep):
         acc, gram = carry
-        i, j, dc, kc = chunk_of(idx, keep)
+        i, j, dc, kc = block_of(idx, keep)
         kd = (kc[:, :, None] * dc[:, None, :]).reshape(-1, 27)  # K[a, l] d_k
         wi, wj = w[i][:, None], w[j][:, None]
         # on i: (K, K d, N^i -= w^j K d); on j, where d^nm = -d: (K, -K d, N^j += w^i K d)
@@ -216,7 +216,7 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     phi = gamma
     if neighbours:
         def neighbour_sums(hat, idx, keep):
-            i, j, _, kc = chunk_of(idx, keep)
+            i, j, _, kc = block_of(idx, keep)
             k3 = kc.reshape(-1, 3, 3)
             return hat.at[i].add(_mul(k3, gamma[j])).at[j].add(_mul(k3, gamma[i]))
 

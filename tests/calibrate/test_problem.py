@@ -35,3 +35,17 @@ def test_problem_errors(one, dsm_forward):
         Problem(dsm_forward, [Target("strength", 1e6)], space).outputs([[1e9]])
     with pytest.raises(CalibrationError, match="scene 'x'"):
         Problem(dsm_forward, [Target("stiffness", 1.0, scene="x")], space)
+
+
+def test_chunk_is_a_deprecated_name_of_batch_size():
+    pb = _analytic_problem([Target("youngs_modulus", 30.0), Target("stiffness", 12.0)], n=2)
+    X = [[1.0, 1.0], [2.0, 1.0], [1.0, 2.0], [3.0, 0.5], [0.5, 3.0]]
+    new = pb.outputs(X, batch_size=2)
+    np.testing.assert_allclose(new, pb.outputs(X), rtol=1e-14)  # batches of two: the answer of one batch
+    with pytest.warns(DeprecationWarning, match="batch_size="):
+        old = pb.outputs(X, chunk=2)
+    np.testing.assert_array_equal(old, new)
+    with pytest.raises(TypeError, match="batch_size= only"):
+        pb.outputs(X, batch_size=2, chunk=2)
+    with pytest.raises(CalibrationError, match="batch_size must be"):
+        pb.outputs(X, batch_size=0)

@@ -116,3 +116,15 @@ def test_surrogate_errors(one, dsm_forward):
     pb = Problem(dsm_forward, [Target("youngs_modulus", 1e8)], space)
     with pytest.raises(CalibrationError, match="I_e"):
         cal.surrogate(pb, I_e=0.0)
+
+
+def test_chunk_is_a_deprecated_name_of_batch_size():
+    pb = _curve_problem(2.2, 1.1)
+    kw = dict(n_runs=20, n_trees=30, L_s=100, it_max=3, I_e=0.5, seed=1)
+    new = cal.surrogate(pb, batch_size=8, **kw)
+    with pytest.warns(DeprecationWarning, match="batch_size="):
+        old = cal.surrogate(pb, chunk=8, **kw)
+    assert old.values == new.values
+    np.testing.assert_array_equal(old.info["runs"].Y, new.info["runs"].Y)
+    with pytest.raises(TypeError, match="batch_size= only"):
+        cal.surrogate(pb, batch_size=8, chunk=8, **kw)

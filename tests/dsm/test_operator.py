@@ -95,21 +95,21 @@ def test_bond_geometry_reproduces_the_jacobians_and_the_preconditioner(packing, 
 
 
 @pytest.mark.parametrize("dofs", [3, 6])
-def test_setup_over_bond_chunks_equals_the_whole_sample(packing, dofs, monkeypatch):
-    # large samples build the bonds' geometric parts chunk by chunk (lax.map over padded chunks): same numbers as
+def test_setup_over_bond_blocks_equals_the_whole_sample(packing, dofs, monkeypatch):
+    # large samples build the bonds' geometric parts block by block (lax.map over padded blocks): same numbers as
     # one pass over all bonds, the padding cut off
-    chunk = blocks.BLOCK
-    assert blocks.block_length(7 * chunk) == chunk and blocks.block_length(11 * chunk // 4) == chunk // 4
-    assert blocks.block_length(7 * chunk + 1) == chunk  # no divisor: padded
+    block = blocks.BLOCK
+    assert blocks.block_length(7 * block) == block and blocks.block_length(11 * block // 4) == block // 4
+    assert blocks.block_length(7 * block + 1) == block  # no divisor: padded
     model = UniaxialCompression(strain=0.002).model(packing, rotations=dofs == 6)
     nb = model.bonds.shape[0]
-    whole = jax.jit(dsm.operator._geometry_chunk)(model)
-    chunked = jax.jit(lambda m: dsm.operator.over_bonds(dsm.operator._geometry_chunk, m, block=97))(model)
+    whole = jax.jit(dsm.operator._geometry_block)(model)
+    blocked = jax.jit(lambda m: dsm.operator.over_bonds(dsm.operator._geometry_block, m, block=97))(model)
     assert nb % blocks.block_length(nb, 97) != 0 and nb > 2 * 97  # padded
-    for a, b in zip(whole, chunked):
+    for a, b in zip(whole, blocked):
         assert a.shape == b.shape and a.shape[-1] == nb
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-14 * float(jnp.abs(a).max()))
-    # the preconditioner's parts, sums over bonds and over the coupling bonds, chunk by chunk
+    # the preconditioner's parts, sums over bonds and over the coupling bonds, block by block
     s = jaxbpm.generate.mix_materials(packing, [0.5, 0.5], seed=2, materials={"E": [1e9, 3e9], "nu": [0.2, 0.35]})
     model = UniaxialCompression(strain=0.002).model(s, rotations=dofs == 6)
     free = dsm.free_mask(model, UniaxialCompression(strain=0.002), s)[0]

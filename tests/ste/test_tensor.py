@@ -1,5 +1,5 @@
 """The STE's tensors (:mod:`jaxbpm.ste.tensor`): lattice closed forms, symmetries, rotation, isotropy, the pair and edge
-forms, chunked sums.
+forms, sums over blocks of pairs.
 """
 
 import jax
@@ -135,8 +135,8 @@ def test_pair_form_matches_edge_form(packing):
 
 
 @pytest.mark.parametrize("first_neighbour", [False, True])
-def test_pair_sums_over_chunks_equal_one_pass(packing, monkeypatch, first_neighbour):
-    # large samples fold the pair sums over chunks of pairs (padding weighed zero): the same tensor and gradient as
+def test_pair_sums_over_blocks_equal_one_pass(packing, monkeypatch, first_neighbour):
+    # large samples fold the pair sums over blocks of pairs (padding weighed zero): the same tensor and gradient as
     # one pass over all pairs, bonds and contacts
     scene = UniaxialCompression(strain=0.002, contacts=True)
     est = ste.estimator(packing, scene, first_neighbour=first_neighbour)
@@ -149,7 +149,7 @@ def test_pair_sums_over_chunks_equal_one_pass(packing, monkeypatch, first_neighb
     one, g_one = jax.jit(tensor_and_grad)(est, p)
     pairs = est.pairs.shape[0]
     monkeypatch.setattr(blocks, "BLOCK", 97)
-    assert pairs > 2 * 97 and pairs % blocks.block_length(pairs) != 0  # several chunks, the last padded
+    assert pairs > 2 * 97 and pairs % blocks.block_length(pairs) != 0  # several blocks, the last padded
     folded, g_folded = jax.jit(lambda e, q: tensor_and_grad(e, q))(est, p)  # a new function: traced again
     np.testing.assert_allclose(folded, one, rtol=0, atol=1e-12 * float(jnp.abs(one).max()))
     for name in ("bond_E", "bond_nu"):
