@@ -10,7 +10,7 @@ import numpy as np
 
 from jaxbpm.status import Status
 
-__all__ = ["Result", "STATUSES", "Status", "timed_result", "settle"]
+__all__ = ["Result", "STATUSES", "Status", "Timings", "timed_result", "settle"]
 
 STATUSES = tuple(s.value for s in Status)
 """The values ``Result.status`` can take (:class:`~jaxbpm.status.Status` says what each means)."""
@@ -130,27 +130,85 @@ class Result:
                 f"youngs_modulus={self.youngs_modulus:.6g}, wall_time={self.wall_time:.3g}{status})")
 
 
-def timed_result(method: str, t0: float, *, stiffness: float, gauge_length: float, area: float, displacement,
-                 force, compile_time: float, setup_time: float | None = None, run_time: float | None = None,
-                 youngs_modulus: float | None = None, stats: dict | None = None, state: Any = None,
-                 interrupted: bool = False, status: Status | str = Status.CONVERGED) -> Result:
-    """A :class:`Result` of a solve that started at ``t0`` (``time.perf_counter()``), its timings made to add up.
+@dataclasses.dataclass(frozen=True)
+class Timings:
+    """What a solve cost [s]: ``wall_time = setup_time + compile_time + run_time`` (see :class:`Result`).
 
-    The wall time is ``now - t0``. Give the solver's ``setup_time`` (then ``run_time = wall - setup - compile``) or
-    its ``run_time`` (then ``setup_time = max(wall - compile - run, 0)``: all that is neither compiling nor running
-    counts as setup), not both.
+    Attributes:
+      wall_time: the whole call.
+      setup_time: the host's work before and around the solver's programs.
+      compile_time: tracing and compiling.
+      run_time: the solver's programs.
+    """
+
+    wall_time: float
+    setup_time: float
+    compile_time: float
+    run_time: float
+
+    @classmethod
+    def since(cls, t0: float, compile_time: float, *, setup_time: float | None = None,
+              run_time: float | None = None) -> Timings:
+        """The timings of a solve that started at ``t0`` (``time.perf_counter()``), made to add up.
+
+        The wall time is ``now - t0``. Give the solver's ``setup_time`` (then ``run_time = wall - setup - compile``)
+        or its ``run_time`` (then ``setup_time = max(wall - compile - run, 0)``: all that is neither compiling nor
+        running counts as setup), not both.
+
+        Args:
+          t0: when the solve started [s, ``time.perf_counter()``].
+          compile_time: seconds spent tracing and compiling.
+          setup_time: seconds spent on the host before the solve (or ``None``, see above).
+          run_time: seconds spent in the solver's programs (or ``None``, see above).
+
+        Returns:
+          The :class:`Timings`.
+
+        Raises:
+          ValueError: both or neither of ``setup_time`` and ``run_time``.
+        """
+        if (setup_time is None) == (run_time is None):
+            raise ValueError("timed_result: give setup_time or run_time, not both (the other is what is left)")
+        wall = time.perf_counter() - t0
+        if run_time is None:
+            run_time = wall - setup_time - compile_time
+        else:
+            setup_time = max(wall - compile_time - run_time, 0.0)
+        return cls(wall_time=wall, setup_time=setup_time, compile_time=compile_time, run_time=run_time)
+
+    def share(self, n: int) -> Timings:
+        """One of ``n`` equal shares (a member of a batch of ``n`` runs that one program ran together).
+
+        Args:
+          n: the number of shares.
+
+        Returns:
+          Each time divided by ``n``.
+        """
+        return Timings(wall_time=self.wall_time / n, setup_time=self.setup_time / n,
+                       compile_time=self.compile_time / n, run_time=self.run_time / n)
+
+
+def timed_result(method: str, t0: float | None = None, *, stiffness: float, gauge_length: float, area: float,
+                 displacement, force, compile_time: float | None = None, setup_time: float | None = None,
+                 run_time: float | None = None, timings: Timings | None = None, youngs_modulus: float | None = None,
+                 stats: dict | None = None, state: Any = None, interrupted: bool = False,
+                 status: Status | str = Status.CONVERGED) -> Result:
+    """A :class:`Result` with its timings: those of a solve that started at ``t0`` (:meth:`Timings.since` with
+    ``compile_time`` and ``setup_time`` or ``run_time``), or the given ``timings``.
 
     Args:
       method: the solver's name (``"dem"``, ``"dsm"``, ``"ste"``).
-      t0: when the solve started [s, ``time.perf_counter()``].
+      t0: when the solve started [s, ``time.perf_counter()``]; ``None`` with ``timings``.
       stiffness: K [N/m].
       gauge_length: l [m].
       area: A [m^2].
       displacement: ``[m]`` the loading curve's displacements [m].
       force: ``[m]`` its forces [N].
-      compile_time: seconds spent tracing and compiling.
-      setup_time: seconds spent on the host before the solve (or ``None``, see above).
-      run_time: seconds spent in the solver's programs (or ``None``, see above).
+      compile_time: seconds spent tracing and compiling (with ``t0``).
+      setup_time: seconds spent on the host before the solve (with ``t0``; or ``None``, see :meth:`Timings.since`).
+      run_time: seconds spent in the solver's programs (with ``t0``; or ``None``, see :meth:`Timings.since`).
+      timings: the :class:`Timings` measured already (in place of ``t0`` and the times).
       youngs_modulus: E [Pa]; default ``K l / A``.
       stats: the solver's details.
       state: the solver's final state.
@@ -159,20 +217,23 @@ def timed_result(method: str, t0: float, *, stiffness: float, gauge_length: floa
 
     Returns:
       The :class:`Result`.
+
+    Raises:
+      ValueError: both or neither of ``t0`` and ``timings``, times given with ``timings``, or both or neither of
+        ``setup_time`` and ``run_time`` with ``t0``.
     """
-    if (setup_time is None) == (run_time is None):
-        raise ValueError("timed_result: give setup_time or run_time, not both (the other is what is left)")
-    wall = time.perf_counter() - t0
-    if run_time is None:
-        run_time = wall - setup_time - compile_time
-    else:
-        setup_time = max(wall - compile_time - run_time, 0.0)
+    if timings is None:
+        if t0 is None or compile_time is None:
+            raise ValueError("timed_result: give t0 and compile_time, or the timings")
+        timings = Timings.since(t0, compile_time, setup_time=setup_time, run_time=run_time)
+    elif not (t0 is None and compile_time is None and setup_time is None and run_time is None):
+        raise ValueError("timed_result: give t0 and the times, or the timings, not both")
     if youngs_modulus is None:
         youngs_modulus = stiffness * gauge_length / area
     return Result(method=method, stiffness=stiffness, youngs_modulus=youngs_modulus, gauge_length=gauge_length,
-                  area=area, displacement=displacement, force=force, wall_time=wall, setup_time=setup_time,
-                  compile_time=compile_time, run_time=run_time, stats={} if stats is None else stats, state=state,
-                  interrupted=interrupted, status=status)
+                  area=area, displacement=displacement, force=force, wall_time=timings.wall_time,
+                  setup_time=timings.setup_time, compile_time=timings.compile_time, run_time=timings.run_time,
+                  stats={} if stats is None else stats, state=state, interrupted=interrupted, status=status)
 
 
 def settle(result: Result, throw: bool) -> Result:

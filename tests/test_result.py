@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from jaxbpm.errors import ConvergenceError, NotFiniteError
-from jaxbpm.result import Result, settle, STATUSES, timed_result
+from jaxbpm.result import Result, settle, STATUSES, timed_result, Timings
 from jaxbpm.status import Status
 
 
@@ -29,6 +29,22 @@ def test_the_times_add_up_to_the_wall_time():
     assert _result(time.perf_counter(), run_time=10.0).setup_time == 0.0
     with pytest.raises(ValueError, match="setup_time or run_time"):
         _result(t0, setup_time=0.5, run_time=1.0)
+
+
+def test_given_timings_and_their_shares():
+    """A result of timings measured already (a batch member's share of the batch's): taken as they are."""
+    t = Timings(wall_time=4.0, setup_time=1.0, compile_time=2.0, run_time=1.0)
+    assert t.share(4) == Timings(wall_time=1.0, setup_time=0.25, compile_time=0.5, run_time=0.25)
+    r = timed_result("dem", timings=t.share(2), stiffness=2.0, gauge_length=0.5, area=0.25,
+                     displacement=np.array([0.0, 1e-3]), force=np.array([0.0, 2e-3]), youngs_modulus=3.0)
+    assert (r.wall_time, r.setup_time, r.compile_time, r.run_time) == (2.0, 0.5, 1.0, 0.5)
+    assert r.youngs_modulus == 3.0 and r.method == "dem"
+    measured = Timings.since(time.perf_counter() - 2.0, 0.25, setup_time=0.5)
+    assert measured.run_time == pytest.approx(measured.wall_time - 0.75, abs=1e-12) and measured.wall_time >= 2.0
+    with pytest.raises(ValueError, match="not both"):
+        _result(time.perf_counter(), setup_time=0.5, timings=t)
+    with pytest.raises(ValueError, match="t0 and compile_time, or the timings"):
+        timed_result("dem", stiffness=2.0, gauge_length=0.5, area=0.25, displacement=np.zeros(1), force=np.zeros(1))
 
 
 def test_the_modulus_defaults_to_k_l_over_a():

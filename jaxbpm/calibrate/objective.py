@@ -25,6 +25,7 @@ from typing import Mapping
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._options import options_class
 from jaxbpm.calibrate.forward import STRENGTH_OBSERVABLES, Forward, _solve_one
 from jaxbpm.calibrate.problem import Problem
 from jaxbpm.calibrate.space import (as_targets, CalibrationError, DEFAULT_SCENE, ELASTIC_OBSERVABLES, Parameter,
@@ -97,7 +98,8 @@ def forward_model(sample, scenes, solver: str = "dsm", *, model: str | None = No
     ``"ucs"`` and a beam for ``"tpb"``). scenes: a scene or a mapping ``{key: scene}``. Each solve gets the sample's
     own parameters (``bond_E``, ``bond_nu``) overridden by the entries of the parameter pytree it is given. When
     ``jaxbpm.<solver>`` has a ``stiffness_function`` and every scene is linear (bonds only, clamped layers), elastic
-    targets use that pure function (batched and differentiable). ``solve_options`` go to ``jaxbpm.solve`` only.
+    targets use that pure function (batched and differentiable) with the solver's default options (``jaxbpm.DSM()``,
+    ``jaxbpm.STE()``). ``solve_options`` go to ``jaxbpm.solve`` only.
     Forwards are cached: the same samples, scenes, solver and options give the same object (and its compiled
     functions).
 
@@ -181,7 +183,7 @@ def _forward_model(sample_map, scene_map, solver, solve_options) -> Forward:
     if factory is not None:
         for key, sc in scene_map.items():
             length, area = sc.geometry(sample_map[key])
-            fns[key] = (factory(sample_map[key], sc), length / area)
+            fns[key] = (factory(sample_map[key], sc, options_class(solver)()), length / area)
 
     def pure(params):
         out = {}

@@ -39,7 +39,7 @@ from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import unpad_state
 from jaxbpm.dem.stepper import _start
 from jaxbpm.errors import SceneError, SimulationInterrupted, SolveError
-from jaxbpm.result import Result, settle
+from jaxbpm.result import Result, settle, timed_result, Timings
 from jaxbpm.sample import Sample
 from jaxbpm.status import Status
 
@@ -217,11 +217,7 @@ def _run_batch(t0, compiling, sample, scene, members, vectorize, options) -> lis
     t_loop, setup_compile = time.perf_counter(), compiling.seconds
     ran = _run_chunks_until_done(the_plan, pre, state, vectorize, report, t0, compiling, len(members))
     # the members' results; the timings are each member's share of the batch's
-    wall = time.perf_counter() - t0
-    compile_time = compiling.seconds
-    setup = t_loop - t0 - setup_compile
-    timing = {"setup_time": setup, "compile_time": compile_time, "run_time": wall - setup - compile_time,
-              "wall_time": wall}
+    timing = Timings.since(t0, compiling.seconds, setup_time=t_loop - t0 - setup_compile)
     host = jax.tree_util.tree_map(np.asarray, ran.done)
     results = [_member_result(sample, scene, the_plan, ran, host, b, timing, vectorize, options.max_records)
                for b in range(len(members))]
@@ -271,7 +267,7 @@ def _check_members(ran: _Chunks, rec, finite, the_plan: Plan, r_min: float) -> N
                 f"estimate = {the_plan.dt_crit[b]:.4g} s. Use a smaller time step (or a smaller safety factor)."))
 
 
-def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, timing: dict, vectorize: bool,
+def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, timing: Timings, vectorize: bool,
                    max_records: int) -> Result:
     """Member ``b``'s result: its records up to its failure, if any, and its share of the batch's timings."""
     n_batch, chunk, kernel = len(ran.failure), the_plan.chunk, ran.kernel
@@ -288,7 +284,9 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
     disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records,
                                          strict=not ran.interrupted and status == Status.CONVERGED)
     per_chunk = float(np.median(kernel)) if kernel else float("nan")
-    stats = {**{k: v / n_batch for k, v in timing.items()}, "kernel_time": float(np.sum(kernel)) / n_batch,
+    share = timing.share(n_batch)
+    stats = {"setup_time": share.setup_time, "compile_time": share.compile_time, "run_time": share.run_time,
+             "wall_time": share.wall_time, "kernel_time": float(np.sum(kernel)) / n_batch,
              "steps": completed * chunk, "steps_per_second": chunk / per_chunk, "reallocations": 0,
              "contact_capacity": 0}
     if message is not None:
@@ -298,12 +296,10 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
     stats.update(plan_stats(the_plan, the_plan.dt_crit[b], ran.interrupted))
     stats.update(peak_stats(scene, sample, rec, disp, force, keep, the_plan.breakage))
     stats["batch"] = {"size": n_batch, "index": b, "vectorize": vectorize, "dt": the_plan.dt,
-                      "loading_time": the_plan.loading_time, "chunk": chunk, "wall_time": timing["wall_time"],
-                      "compile_time": timing["compile_time"], "kernel_time": float(np.sum(kernel))}
+                      "loading_time": the_plan.loading_time, "chunk": chunk, "wall_time": timing.wall_time,
+                      "compile_time": timing.compile_time, "kernel_time": float(np.sum(kernel))}
     length, area = the_plan.gauge_length, the_plan.area
-    return Result(method="dem", stiffness=stiffness, youngs_modulus=scene.modulus(stiffness, sample),
-                  gauge_length=length, area=area, displacement=disp[keep], force=force[keep],
-                  wall_time=timing["wall_time"] / n_batch, setup_time=timing["setup_time"] / n_batch,
-                  compile_time=timing["compile_time"] / n_batch, run_time=timing["run_time"] / n_batch, stats=stats,
-                  state=member_state, interrupted=ran.interrupted,
-                  status=Status.INTERRUPTED if ran.interrupted else status)
+    return timed_result("dem", timings=share, stiffness=stiffness, youngs_modulus=scene.modulus(stiffness, sample),
+                        gauge_length=length, area=area, displacement=disp[keep], force=force[keep], stats=stats,
+                        state=member_state, interrupted=ran.interrupted,
+                        status=Status.INTERRUPTED if ran.interrupted else status)

@@ -101,6 +101,10 @@ def test_second_batch_of_the_same_size_compiles_nothing(rock):
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a.force, b.force)
     np.testing.assert_allclose(sum(r.wall_time for r in again), again[0].stats["batch"]["wall_time"], rtol=1e-9)
+    for r in again:  # each member's times are its share of the batch's, adding up like a single run's
+        assert r.wall_time == r.stats["wall_time"] and r.run_time == r.stats["run_time"]
+        assert r.setup_time == r.stats["setup_time"] > 0 and r.run_time > 0
+        np.testing.assert_allclose(r.setup_time + r.compile_time + r.run_time, r.wall_time, rtol=1e-12)
 
 
 def test_a_member_that_blows_up_fails_alone(rock):

@@ -48,7 +48,7 @@ def test_nonlinear_dsm_is_a_pure_differentiable_function(packing):
     equilibrium) equal to central finite differences with respect to the bond and the contact modulus; the same K
     as jaxbpm.solve."""
     scene = UniaxialCompression(strain=0.002, contacts=True)
-    f = dsm.stiffness_function(packing, scene, dofs=3, nonlinear_tol=1e-10, load_steps=2)
+    f = dsm.stiffness_function(packing, scene, jaxbpm.DSM(dofs=3, tol=1e-10, load_steps=2))
     p = dict(default_params(packing), contact_E=jnp.asarray(float(packing.particle_material.E)))
     k = float(f(p))
     compiled = dsm.newton.newton_program.compilations
@@ -95,3 +95,29 @@ def test_vmap_over_the_two_level_preconditioner_never_hangs(tmp_path):
     res = subprocess.run([sys.executable, "-c", _VMAP_REPEATS, str(path)], capture_output=True, text=True,
                          timeout=240)
     assert res.returncode == 0 and res.stdout.startswith("ok"), res.stderr[-2000:]
+
+
+def test_deprecated_keywords_map_onto_the_options(column):
+    """The former keywords still work for one release, each with a DeprecationWarning naming the DSM field it sets,
+    and give the function of the options object (``tol`` was the CG's ``linear_tol``); bad options are refused."""
+    import pytest
+
+    scene = UniaxialCompression(strain=0.002)
+    p = default_params(column)
+    k = float(dsm.stiffness_function(column, scene, jaxbpm.DSM(linear_tol=1e-9, stiffness_tol=None))(p))
+    with pytest.warns(DeprecationWarning) as record:
+        f = dsm.stiffness_function(column, scene, tol=1e-9, stiffness_tol=None)
+    messages = sorted(str(w.message) for w in record if w.category is DeprecationWarning)
+    assert len(messages) == 2 and "jaxbpm.DSM(stiffness_tol=...)" in messages[0]
+    assert messages[1].startswith("stiffness_function(tol=...)") and "jaxbpm.DSM(linear_tol=...)" in messages[1]
+    assert float(f(p)) == k
+    np.testing.assert_allclose(k, 9 * KN / 5, rtol=1e-6)
+    with pytest.warns(DeprecationWarning, match=r"DSM\(tol="):
+        dsm.functions._options_from(None, {"nonlinear_tol": 1e-8})
+    assert dsm.functions._options_from(jaxbpm.DSM(dofs=3), {}) == jaxbpm.DSM(dofs=3)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'linear_tol'"):
+        dsm.stiffness_function(column, scene, linear_tol=1e-9)
+    with pytest.raises(jaxbpm.errors.OptionsError, match="geometric_correction"):
+        dsm.stiffness_function(column, scene, jaxbpm.DSM(geometric_correction=True))
+    with pytest.raises(jaxbpm.errors.OptionsError, match="jaxbpm.DSM options"):
+        dsm.stiffness_function(column, scene, jaxbpm.STE())
