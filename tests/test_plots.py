@@ -14,7 +14,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from jaxbpm import cli, io
-from jaxbpm.calibrate.result import History, plot_history
+from jaxbpm.calibrate.history import History, plot_history
 
 
 def _history():

@@ -38,7 +38,7 @@ from jaxbpm.calibrate.lab import LAB_TARGETS, LabResult, lab
 from jaxbpm.calibrate.multifidelity import calibrate_level, default_levels, multifidelity
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem, Target,
                                         as_targets, base_params, forward_model)
-from jaxbpm.calibrate.result import CalibrationResult, History, load_history, plot_history
+from jaxbpm.calibrate.history import CalibrationResult, History, load_history, plot_history
 from jaxbpm.calibrate.strength import (STRENGTH_KEYS, STRENGTH_SCHEMES, calibrate_strength, format_strength_table,
                                        strength_table)
 from jaxbpm.calibrate.runs import RunSet, run_set

@@ -10,7 +10,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from jaxbpm.calibrate.space import CalibrationError
-from jaxbpm.calibrate.result import CalibrationResult, History
+from jaxbpm.calibrate.history import CalibrationResult, History
 
 # parameter key -> observables measured in the same units (Qu et al. 2020, Eq. 14: the macroscopic value is a first
 # estimate of the microscopic one)
@@ -119,7 +119,7 @@ def record(history: History, problem, progress, *, kind, values, errors, time, l
     """Append one evaluated point to ``history`` and report it to ``progress``.
 
     Args:
-      history: the calibration's :class:`~jaxbpm.calibrate.result.History`.
+      history: the calibration's :class:`~jaxbpm.calibrate.history.History`.
       problem: the :class:`~jaxbpm.calibrate.objective.Problem` (its loss, per-target errors and solve count).
       progress: a callable ``(row, parameter_names, target_names)``, or None.
       kind: what the point is (``"initial"``, ``"adam"``, ``"narrow"``, ...).
@@ -142,7 +142,7 @@ def record(history: History, problem, progress, *, kind, values, errors, time, l
 def make_result(problem, history: History, values, errors, *, method: str, tol: float, wall_time: float,
                 evaluations: int, notes=(), info=None, band=None, converged=None,
                 iterations: int | None = None) -> CalibrationResult:
-    """The :class:`~jaxbpm.calibrate.result.CalibrationResult` of a calibrator's answer.
+    """The :class:`~jaxbpm.calibrate.history.CalibrationResult` of a calibrator's answer.
 
     Args:
       problem: the :class:`~jaxbpm.calibrate.objective.Problem`.

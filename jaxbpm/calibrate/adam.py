@@ -38,7 +38,7 @@ import optax
 
 import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
-from jaxbpm.calibrate.result import CalibrationResult, History
+from jaxbpm.calibrate.history import CalibrationResult, History
 
 __all__ = ["GRADIENTS", "adam", "loss_and_gradient"]
 

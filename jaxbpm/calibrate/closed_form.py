@@ -19,7 +19,7 @@ import numpy as np
 
 import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
-from jaxbpm.calibrate.result import CalibrationResult, History
+from jaxbpm.calibrate.history import CalibrationResult, History
 
 __all__ = ["closed_form"]
 

@@ -13,7 +13,7 @@ from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.multifidelity import multifidelity
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem, as_targets,
                                         base_params, forward_model)
-from jaxbpm.calibrate.result import CalibrationResult
+from jaxbpm.calibrate.history import CalibrationResult
 from jaxbpm.calibrate.surrogate import surrogate
 
 __all__ = ["METHODS", "calibrate", "default_parameters"]

@@ -27,7 +27,7 @@ import numpy as np
 
 import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Parameter, ParameterSpace, Problem, Target, forward_model
-from jaxbpm.calibrate.result import CalibrationResult, History
+from jaxbpm.calibrate.history import CalibrationResult, History
 
 __all__ = ["calibrate_elastic"]
 

@@ -339,7 +339,7 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1 sigma_c, so
     Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
     from jaxbpm.calibrate.objective import Parameter, ParameterSpace, Problem, Target, base_params, forward_model
-    from jaxbpm.calibrate.result import History
+    from jaxbpm.calibrate.history import History
 
     t_start = time.perf_counter()
     tie = {}

@@ -20,7 +20,7 @@ import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.adam import adam
 from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.objective import CalibrationError, Forward, ParameterSpace, Problem, forward_model
-from jaxbpm.calibrate.result import CalibrationResult, History
+from jaxbpm.calibrate.history import CalibrationResult, History
 
 __all__ = ["default_levels", "calibrate_level", "multifidelity"]
 

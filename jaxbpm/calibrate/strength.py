@@ -28,7 +28,7 @@ import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.adam import adam
 from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, ParameterSpace, Problem,
                                         Target)
-from jaxbpm.calibrate.result import CalibrationResult
+from jaxbpm.calibrate.history import CalibrationResult
 
 __all__ = ["STRENGTH_KEYS", "STRENGTH_SCHEMES", "calibrate_strength", "strength_table", "format_strength_table"]
 

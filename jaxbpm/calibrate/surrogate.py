@@ -25,7 +25,7 @@ import numpy as np
 import jaxbpm.calibrate._common as _common
 from jaxbpm._renamed import batch_size_keyword
 from jaxbpm.calibrate.objective import CalibrationError, Problem
-from jaxbpm.calibrate.result import CalibrationResult, History
+from jaxbpm.calibrate.history import CalibrationResult, History
 from jaxbpm.calibrate.ranges import _default_run_set, _defaulted, _describe_reach, _lhs, _log_mask, _reach, _trim
 from jaxbpm.calibrate.runs import RunSet, latin_hypercube, run_set
 
