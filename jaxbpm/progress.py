@@ -23,14 +23,30 @@ def _tqdm():
 
 
 def bar(desc: str, total: int | None = None, unit: str = "step", leave: bool = True, disable: bool = False):
-    """A progress bar on stderr (``total=None``: a counter with its rate); update it with ``.update(n)``, set
-    ``.set_postfix_str(...)`` for the quantity that tells how far the work is, and ``.close()`` it. ``disable``:
-    a bar that shows nothing (the same calls, no output)."""
+    """A progress bar on stderr.
+
+    Update it with ``.update(n)``, set ``.set_postfix_str(...)`` for the quantity that tells how far the work is, and
+    ``.close()`` it.
+
+    Args:
+      desc: the label in front of the bar.
+      total: the count the bar fills up to (``None``: a counter with its rate).
+      unit: the name of one counted item.
+      leave: keep the finished bar on screen.
+      disable: a bar that shows nothing (the same calls, no output).
+
+    Returns:
+      The ``tqdm`` bar (``tqdm.auto`` in a notebook with ipywidgets, text elsewhere).
+    """
     return _tqdm()(total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave, dynamic_ncols=True,
                    mininterval=0.5, smoothing=0.1, disable=disable)
 
 
 def say(message: str) -> None:
-    """Print ``message`` on its own line of stderr, above any open bar."""
+    """Print ``message`` on its own line of stderr, above any open bar.
+
+    Args:
+      message: the text to print.
+    """
     _tqdm().write(message, file=sys.stderr)
     sys.stderr.flush()

@@ -91,7 +91,14 @@ class Plan:
         return dataclasses.replace(self, start=state, steps_done=int(steps_done))
 
     def progress(self, progress):
-        """The progress callback of the run: ``True`` gives a bar with the strain, anything else is kept."""
+        """The progress callback of the run.
+
+        Args:
+            progress: ``True`` for a bar with the strain; anything else (``False``, ``None``, a callable) is kept.
+
+        Returns:
+            The callback (a :func:`progress_printer` for ``True``), else ``progress`` itself.
+        """
         if progress is True:
             return progress_printer(strain_per_step=self.speed * self.dt / self.gauge_length)
         return progress

@@ -164,7 +164,7 @@ CORRECTION_POINTS = 4
 def geometric_stiffness(sample, scene, params, u, *, rotations=None, operator="auto", preconditioner="auto",
                         aggregate_size=None, pad=True):
     """The stiffness of the bonds-only scene with the bonds' geometric nonlinearity, to second order, from the
-    linear solution ``u`` ``[n, nd]``: ``(K, forces [L], fractions [L], compile_time, run_time)``.
+    linear solution.
 
     The displacement field of the linear solve is kinematically admissible and off the nonlinear equilibrium by
     a first-order amount; the potential energy along the scaled field ``s u`` is then off by a second-order amount,
@@ -172,7 +172,27 @@ def geometric_stiffness(sample, scene, params, u, *, rotations=None, operator="a
     reaction at load fraction ``s`` (``f_int``: the exact, nonlinear bond law). ``K`` is the scene's least-squares
     slope of those reactions over its fit range (``CORRECTION_POINTS`` fractions), the measure the DEM and the
     nonlinear DSM use. The model and its compiled program are the linear solve's (the same setup and size
-    class)."""
+    class).
+
+    Args:
+      sample: the bonded sample.
+      scene: the scene.
+      params: the parameters (``None``: the sample's own).
+      u: ``[n, nd]`` the linear solution's DOFs (displacements [m], then rotations [rad]).
+      rotations: rotational DOFs (``None``: the model's choice), as in the linear solve.
+      operator: the linear solve's operator option.
+      preconditioner: the linear solve's preconditioner option.
+      aggregate_size: the linear solve's coarse aggregate size.
+      pad: pad the model to its size class, as the linear solve does.
+
+    Returns:
+      ``(K, forces, fractions, compile_time, run_time)``: the stiffness [N/m], ``[L]`` the reactions [N] at
+      ``[L]`` the load fractions, and the seconds spent compiling and running.
+
+    Raises:
+      SceneError: a scene that does not fit the sample (the linear solve's own checks).
+      ValueError: an unknown ``preconditioner``, or an ``aggregate_size`` below 1.
+    """
     from jaxbpm.physics.model import default_params
 
     params = default_params(sample) if params is None else params
@@ -189,10 +209,26 @@ def geometric_stiffness(sample, scene, params, u, *, rotations=None, operator="a
 
 
 def with_geometric_correction(result, sample, scene, params, **setup_options):
-    """``result`` of the linear bonds-only DSM with its stiffness corrected for the bonds' geometric nonlinearity
-    (:func:`geometric_stiffness`): the force-displacement points along the path, ``stats["stiffness_linear"]`` (the
-    linear solve's K) and ``stats["geometric_correction"]`` (``K / K_linear - 1``); the correction's compile and run
-    count in the result's times."""
+    """The result of the linear bonds-only DSM with its stiffness corrected for the bonds' geometric nonlinearity.
+
+    The correction is :func:`geometric_stiffness`'s; the correction's compile and run count in the result's times.
+
+    Args:
+      result: the :class:`~jaxbpm.result.Result` of the linear solve (its ``state``: the DOFs ``[n, nd]``).
+      sample: the bonded sample.
+      scene: the scene.
+      params: the parameters (``None``: the sample's own).
+      **setup_options: the linear solve's setup options (:func:`geometric_stiffness`'s keywords).
+
+    Returns:
+      The corrected result: its stiffness and modulus, the force-displacement points along the path,
+      ``stats["stiffness_linear"]`` (the linear solve's K), ``stats["geometric_correction"]`` (``K / K_linear -
+      1``) and ``stats["correction_fractions"]``.
+
+    Raises:
+      SceneError: a scene that does not fit the sample (the linear solve's own checks).
+      ValueError: an unknown ``preconditioner``, or an ``aggregate_size`` below 1.
+    """
     t0 = time.perf_counter()
     k, forces, fractions, compile_time, run_time = geometric_stiffness(sample, scene, params, result.state,
                                                                        **setup_options)
@@ -272,10 +308,23 @@ def _contacts_outputs(model, params, free, u_p, tol, stiffness_tol, coarse, cont
 
 
 def pad_candidates(lin, sample, axis):
-    """The linearised contacts' candidates (and their coarse couplings) padded to a :func:`capacity`, so that samples
-    and reaches with about as many candidates share the compiled solve: the padding pairs join the two particles
-    farthest apart along ``axis``, which never touch (no stiffness). Left as they are when those two are not far
-    enough apart."""
+    """The linearised contacts' candidates (and their coarse couplings) padded to a :func:`capacity`.
+
+    Samples and reaches with about as many candidates then share the compiled solve: the padding pairs join the two
+    particles farthest apart along ``axis``, which never touch (no stiffness). Left as they are when those two are
+    not far enough apart.
+
+    Args:
+      lin: ``(pairs [C, 2], field, fraction, coarse)`` the linearised contacts: the candidates, ``[n, nd]`` the
+        affine field they are linearised along, the load fraction, and the
+        :class:`~jaxbpm.dsm.preconditioner.CoarseSpace` whose ``bonds`` index the candidates that couple its modes
+        (or ``None``).
+      sample: the sample.
+      axis: the load axis (0, 1 or 2).
+
+    Returns:
+      ``lin`` with ``pairs`` (and the coarse space's ``bonds``) padded, as a list; ``lin`` itself when not padded.
+    """
     pairs = np.asarray(lin[0])
     pos, rad = np.asarray(sample.positions)[:, axis], np.asarray(sample.radii)
     i, j = int(np.argmin(pos)), int(np.argmax(pos))

@@ -251,10 +251,23 @@ _equilibrium.defvjp(_equilibrium_fwd, _equilibrium_bwd)
 
 
 def newton_outputs(prob: NewtonProblem, params, tol, linear_tol, fractions=(1.0,), stiffness_tol=None):
-    """The nonlinear solve as a pure function of the parameters: ``(u, reactions [L], diagnostics)`` at the load
-    fractions ``fractions [L]`` (a static tuple), with ``diagnostics = (converged [L], steps [L], residual [L],
-    history [L, newton_maxiter + 1])`` (floats). Differentiable with respect to ``params`` (and the problem's
-    arrays) through each load step's equilibrium (:func:`_equilibrium`, reverse mode)."""
+    """The nonlinear solve as a pure function of the parameters, load step by load step.
+
+    Differentiable with respect to ``params`` (and the problem's arrays) through each load step's equilibrium
+    (:func:`_equilibrium`, reverse mode).
+
+    Args:
+      prob: the :class:`NewtonProblem` (:func:`newton_problem`).
+      params: the parameters.
+      tol: the Newton tolerance on the residual.
+      linear_tol: the tolerance of the linear solve that gives the start.
+      fractions: ``[L]`` the load fractions, increasing (a static tuple).
+      stiffness_tol: the inner solves' stiffness tolerance (static; ``None``: the residual test alone).
+
+    Returns:
+      ``(u, reactions, diagnostics)``: ``[n, nd]`` the DOFs at the last fraction, ``[L]`` the reactions [N], and
+      ``(converged [L], steps [L], residual [L], history [L, newton_maxiter + 1])`` (floats).
+    """
     sys = _system(prob, params)
     dtype = prob.model.positions0.dtype
     frac0 = fractions[0]
@@ -308,8 +321,31 @@ def _newton(model, params, free, u_p, pairs, walls, scene, tol, linear_tol, maxi
 
 def newton_problem(model, free, u_p, pairs, walls, scene, maxiter, newton_maxiter, driven, delta,
                    preconditioner="auto", aggregate_size=None, slip=True) -> NewtonProblem:
-    """The :class:`NewtonProblem` of a scene (host-side setup: contact candidates in, the start's held particles
-    with walls, the bonds' coarse space)."""
+    """The :class:`NewtonProblem` of a scene.
+
+    The host-side setup: contact candidates in, the start's held particles with walls, the bonds' coarse space.
+
+    Args:
+      model: the model.
+      free: ``[n, nd]`` boolean mask of the free DOFs.
+      u_p: ``[n, nd]`` the prescribed DOFs at full load [m].
+      pairs: ``[C, 2]`` the contact candidates (``None`` or empty: no contacts).
+      walls: ``(points, normals)`` of the walls (``None``: no walls).
+      scene: the scene (its ``axis``).
+      maxiter: GMRES iterations per Newton step (``None`` or 0: 10).
+      newton_maxiter: the Newton steps per load step, at most.
+      driven: ``[n]`` boolean mask of the driven particles.
+      delta: the load's travel [m].
+      preconditioner: ``"auto"``, ``"two-level"`` or ``"jacobi"`` (no coarse space with walls).
+      aggregate_size: the coarse aggregates' size (``None``: the default).
+      slip: Coulomb sliding of the contacts on.
+
+    Returns:
+      The :class:`NewtonProblem`.
+
+    Raises:
+      ValueError: an unknown ``preconditioner``, or an ``aggregate_size`` below 1.
+    """
     model_c = dataclasses.replace(model, contacts=pairs is not None and len(pairs) > 0)
     # with slip, the tangential spring of a contact is its whole relative tangential displacement since rest, capped by
     # Coulomb (|F_t| <= mu F_n): path-independent, so one residual function of u, and equal to the DEM's incremental

@@ -51,7 +51,19 @@ def _pair_dofs(model: Model, pairs, u):
 
 
 def internal_forces(model: Model, params, u, contacts=None, walls=None):
-    """Generalised forces ``[n, 3 or 6]`` (forces, then moments) at the DOF state ``u``."""
+    """Generalised forces (forces, then moments) at the DOF state ``u``.
+
+    Args:
+      model: the model.
+      params: the parameters.
+      u: ``[n, 3 or 6]`` the DOF state: displacements [m] (then rotation vectors [rad]).
+      contacts: ``(pairs [C, 2], valid [C])`` the contact candidates (``None``: no contacts).
+      walls: ``(points, normals)`` of the walls (``None``: no walls).
+
+    Returns:
+      ``(forces, parts)``: ``[n, 3 or 6]`` the generalised forces [N] (and moments [N m]), and the ``parts`` dict of
+      :meth:`~jaxbpm.physics.model.Model.forces`.
+    """
     x, q = _configuration(model, u)
     con = None
     if contacts is not None:
@@ -67,9 +79,19 @@ def internal_forces(model: Model, params, u, contacts=None, walls=None):
 
 
 def reduced_jacobians(model: Model, params, u=None) -> jnp.ndarray:
-    """Per-bond force Jacobians ``[ni, no, nb]`` in the reduced form the solver stores
-    (:func:`jaxbpm.physics.tangent.bond_reduced`, the tangent the STE uses too): at rest, or with a DOF state ``u``
-    ``[n, nd]`` at that state (the tangent of a deformed configuration)."""
+    """Per-bond force Jacobians in the reduced form the solver stores.
+
+    The form of :func:`jaxbpm.physics.tangent.bond_reduced`, the tangent the STE uses too.
+
+    Args:
+      model: the model.
+      params: the parameters, or a :class:`~jaxbpm.physics.bond.BondStiffness`
+        (:meth:`~jaxbpm.physics.model.Model.stiffness`).
+      u: ``[n, nd]`` a DOF state to linearise at (the tangent of a deformed configuration); ``None``: at rest.
+
+    Returns:
+      ``[ni, no, nb]`` (``ni = no = 9`` with rotations, else 3).
+    """
     z0 = None if u is None else _pair_dofs(model, model.bonds, u)
     return tangent.bond_reduced(model.r0, model.stiffness(params), model.rotations, z0)
 
@@ -78,9 +100,17 @@ full_jacobians = tangent.full
 
 
 def bond_jacobians(model: Model, params) -> jnp.ndarray:
-    """Per-bond tangent stiffness ``[nb, 12, 12]`` (or ``[nb, 6, 6]`` without rotations) at rest, in the global
-    frame, DOF order (u_i, theta_i, u_j, theta_j): forward-mode derivatives of the same bond law
-    (:func:`reduced_jacobians`), minus sign (stiffness)."""
+    """Per-bond tangent stiffness at rest, in the global frame.
+
+    Forward-mode derivatives of the same bond law (:func:`reduced_jacobians`), minus sign (stiffness).
+
+    Args:
+      model: the model.
+      params: the parameters.
+
+    Returns:
+      ``[nb, 12, 12]`` in the DOF order (u_i, theta_i, u_j, theta_j), or ``[nb, 6, 6]`` without rotations.
+    """
     return full_jacobians(reduced_jacobians(model, params))
 
 
@@ -131,7 +161,15 @@ _BOND_FIELDS = ("bonds", "r0", "bond_material", "bond_area", "bond_I", "bond_J",
 
 
 def bond_subset(model: Model, idx) -> Model:
-    """The model with the bonds ``idx`` only (``None``: all of them); its bond keys are not the sample's."""
+    """The model with some of its bonds only; its bond keys are not the sample's.
+
+    Args:
+      model: the model.
+      idx: ``[m]`` the bonds to keep (indices or a mask); ``None``: all of them.
+
+    Returns:
+      The :class:`~jaxbpm.physics.model.Model` with those bonds.
+    """
     if idx is None:
         return model
     return dataclasses.replace(model, **{k: getattr(model, k)[idx] for k in _BOND_FIELDS})
@@ -190,8 +228,16 @@ def _geometry_parts(model: Model):
 
 
 def material_weights(params):
-    """``[M, 2]``: each material's weights ``(E, E s)`` of :class:`BondGeometry`'s two parts (the preconditioner's
-    per-material sums are exact only for the material count they were built with)."""
+    """Each material's weights ``(E, E s)`` of :class:`BondGeometry`'s two parts.
+
+    The preconditioner's per-material sums are exact only for the material count they were built with.
+
+    Args:
+      params: the parameters, with ``"bond_E"`` [Pa] and ``"bond_nu"``, ``[M]`` each.
+
+    Returns:
+      ``[M, 2]`` the weights [Pa].
+    """
     e = jnp.asarray(params["bond_E"])
     return jnp.stack([e, e * _shear_factor(jnp.asarray(params["bond_nu"]).astype(e.dtype))], axis=1)
 
@@ -208,8 +254,17 @@ def _uses_geometry(geometry, params) -> bool:
 
 
 def geometric_jacobians(model: Model, params, geometry: BondGeometry):
-    """Reduced and packed Jacobians of the bonds at rest from :class:`BondGeometry` and the parameters (the reduced
-    ones ``None`` when the geometry no longer holds them)."""
+    """Reduced and packed Jacobians of the bonds at rest from :class:`BondGeometry` and the parameters.
+
+    Args:
+      model: the model.
+      params: the parameters, with ``"bond_E"`` and ``"bond_nu"`` per material.
+      geometry: the model's :class:`BondGeometry`.
+
+    Returns:
+      ``(reduced, packed, (a, b))``: ``[ni, no, nb]`` (``None`` when the geometry no longer holds the reduced
+      form), ``[np, nb]`` (:func:`packed_jacobians`), and the per-bond weights ``[nb]`` of the two parts.
+    """
     a, b = _bond_factors(model, params)
     jr = None if geometry.reduced is None else a[None, None] * geometry.reduced[0] + b[None, None] * geometry.reduced[1]
     jp = a[None] * geometry.packed[0] + b[None] * geometry.packed[1]
@@ -242,11 +297,21 @@ def _weighted_product_jvp(primals, tangents):
 
 
 def stiffness_product(model: Model, jr, v):
-    """``K v`` for the whole sample from the reduced per-bond Jacobians ``jr`` (:func:`reduced_jacobians`, or their
-    packed symmetric form at rest, :func:`packed_jacobians`), element by element: gather both ends of every bond, ``ni
-    x no`` multiply-adds per bond on ``[nb]`` arrays, one scatter
-    of both ends' rows (padded to 4 or 8 numbers, which XLA on CPU scatters fastest). No global matrix is formed;
-    ``K`` is the positive (stiffness) sign of the force Jacobian."""
+    """``K v`` for the whole sample from the per-bond Jacobians, element by element.
+
+    Gather both ends of every bond, ``ni x no`` multiply-adds per bond on ``[nb]`` arrays, one scatter of both ends'
+    rows (padded to 4 or 8 numbers, which XLA on CPU scatters fastest). No global matrix is formed; ``K`` is the
+    positive (stiffness) sign of the force Jacobian.
+
+    Args:
+      model: the model.
+      jr: ``[ni, no, nb]`` the reduced Jacobians (:func:`reduced_jacobians`), or ``[np, nb]`` their packed symmetric
+        form at rest (:func:`packed_jacobians`).
+      v: ``[n, nd]`` the DOF vector.
+
+    Returns:
+      ``[n, nd]`` the product.
+    """
     b = model.bonds
     z = _pair_dofs(model, b, v)
     return _scatter_pairs(model, b[:, 0], b[:, 1], _apply_packed(jr, z) if jr.ndim == 2 else _apply(jr, z))
@@ -256,14 +321,21 @@ _UPPER3 = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def packed_jacobians(jr) -> jnp.ndarray:
-    """The reduced Jacobians at rest (:func:`reduced_jacobians`) in the packed form the linear solve streams through
-    at every CG iteration, ``[45, nb]`` (``[6, nb]`` with 3 DOF per particle): the bond stiffness is symmetric at rest
-    (the bond law has a potential there), so of the 9 x 9 numbers ``J = d (f_i, m_i, m_j) / d (d, theta_i,
-    theta_j)`` only the upper triangles of ``d f_i / d d``, ``d m_i / d theta_i``, ``d m_j / d theta_j`` and the full
-    ``d f_i / d theta_i``, ``d f_i / d theta_j``, ``d m_i / d theta_j`` are kept (``d m_i / d d = -(d f_i /
-    d theta_i)^T``, ``d m_j / d d = -(d f_i / d theta_j)^T``, ``d m_j / d theta_i = (d m_i / d theta_j)^T``). The
-    product reads 56 % of the memory of the 9 x 9 form (the product is memory-bound on CPU). Not for a deformed
-    state, whose tangent need not be symmetric."""
+    """The reduced Jacobians at rest in the packed form the linear solve streams through at every CG iteration.
+
+    The bond stiffness is symmetric at rest (the bond law has a potential there), so of the 9 x 9 numbers ``J = d
+    (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` only the upper triangles of ``d f_i / d d``, ``d m_i / d theta_i``,
+    ``d m_j / d theta_j`` and the full ``d f_i / d theta_i``, ``d f_i / d theta_j``, ``d m_i / d theta_j`` are kept
+    (``d m_i / d d = -(d f_i / d theta_i)^T``, ``d m_j / d d = -(d f_i / d theta_j)^T``, ``d m_j / d theta_i = (d
+    m_i / d theta_j)^T``). The product reads 45 / 81 (56 %) of the memory of the 9 x 9 form (the product is
+    memory-bound on CPU). Not for a deformed state, whose tangent need not be symmetric.
+
+    Args:
+      jr: ``[9, 9, nb]`` or ``[3, 3, nb]`` the reduced Jacobians at rest (:func:`reduced_jacobians`).
+
+    Returns:
+      ``[45, nb]`` (``[6, nb]`` with 3 DOF per particle).
+    """
     def blk(ro, co, upper):
         idx = _UPPER3 if upper else tuple((a, b) for a in range(3) for b in range(3))
         return [jr[co + c, ro + o] for o, c in idx]
@@ -278,8 +350,16 @@ _packed_all = setup_jit(jax.vmap(packed_jacobians))
 
 
 def symmetrised(jr) -> jnp.ndarray:
-    """The reduced Jacobians ``[ni, no, P]`` of the symmetric part of each pair's stiffness (for a preloaded contact
-    linearised at an overlap, whose tangent is symmetric only up to its small geometric terms)."""
+    """The reduced Jacobians of the symmetric part of each pair's stiffness.
+
+    For a preloaded contact linearised at an overlap, whose tangent is symmetric only up to its small geometric terms.
+
+    Args:
+      jr: ``[ni, no, P]`` the reduced Jacobians (``ni = no = 9`` or 3).
+
+    Returns:
+      ``[ni, no, P]`` those of the symmetric part.
+    """
     J = [[jr[c, o] for c in range(jr.shape[0])] for o in range(jr.shape[1])]  # J[o][c]
     out = [[None] * len(J) for _ in J]
     blocks = [(0, 0)] if len(J) == 3 else [(0, 0), (3, 3), (6, 6)]
@@ -383,13 +463,24 @@ def _scatter_pairs(model: Model, i, j, y):
 
 
 def contact_jacobians(model: Model, pairs, u, d0=None, normal=False) -> jnp.ndarray:
-    """Force Jacobians of the contact candidates ``pairs [C, 2]`` at the DOF state ``u`` in the reduced form of
-    :func:`reduced_jacobians`, ``[ni, no, C]``: ``d (f_i [, m_i, m_j]) / d (u_j - u_i [, theta_i, theta_j])``, by
-    jvps of the same contact law the DEM runs (the tangential spring is the contact points' relative tangential
-    displacement since rest, :func:`_contact_slip`, as in :func:`internal_forces`). ``d0 [C, 3]``: the pair
-    vectors to linearise at instead of the rest positions (``u`` is then zero: the linearised contacts of the
-    linear solve). ``normal=True``: also the Jacobians of the normal force alone (the law without its tangential
-    spring: its moments vanish), ``(all, normal)``, from the same derivatives."""
+    """Force Jacobians of the contact candidates in the reduced form of :func:`reduced_jacobians`.
+
+    ``d (f_i [, m_i, m_j]) / d (u_j - u_i [, theta_i, theta_j])``, by jvps of the same contact law the DEM runs (the
+    tangential spring is the contact points' relative tangential displacement since rest, :func:`_contact_slip`, as
+    in :func:`internal_forces`).
+
+    Args:
+      model: the model.
+      pairs: ``[C, 2]`` the contact candidates.
+      u: ``[n, nd]`` the DOF state to linearise at (``None``: zero).
+      d0: ``[C, 3]`` the pair vectors [m] to linearise at instead of the rest positions (``u`` is then zero: the
+        linearised contacts of the linear solve).
+      normal: also the Jacobians of the normal force alone (the law without its tangential spring: its moments
+        vanish), from the same derivatives.
+
+    Returns:
+      ``[ni, no, C]``; with ``normal``, ``(all, normal)``, two such arrays.
+    """
     rot = model.rotations
     ni = 9 if rot else 3
     i, j = pairs[:, 0], pairs[:, 1]
@@ -445,8 +536,17 @@ def _contact_product(model: Model, pairs, jc, v):
 
 
 def block_diagonal(model: Model, params, jac=None) -> jnp.ndarray:
-    """Each particle's self-stiffness block ``[n, nd, nd]`` summed over its bonds (``jac``: the reduced Jacobians
-    of :func:`reduced_jacobians`)."""
+    """Each particle's self-stiffness block, summed over its bonds.
+
+    Args:
+      model: the model (its ``bonds`` may be any pairs, e.g. the linearised contacts).
+      params: the parameters (unused when ``jac`` is given).
+      jac: ``[ni, no, nb]`` the reduced Jacobians of :func:`reduced_jacobians` (``None``: computed from
+        ``params`` at rest).
+
+    Returns:
+      ``[n, nd, nd]`` the blocks (the translational part in [N/m]).
+    """
     jr = reduced_jacobians(model, params) if jac is None else jac
     J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
     if J.shape[1] == 3:

@@ -60,10 +60,23 @@ def _preconditioner_parts(model: Model, reduced, coarse, n_materials):
 
 def bond_geometry(model: Model, coarse: CoarseSpace | None = None, *, n_materials: int | None = None
                   ) -> BondGeometry | None:
-    """:class:`BondGeometry` of the model's bonds (``None`` without bonds). With ``n_materials`` (the length of
-    ``params["bond_E"]``; at most ``_MAX_PRECOMPUTED_MATERIALS``), the preconditioner's parts as well, for the
-    :class:`CoarseSpace` ``coarse`` (or block-Jacobi alone with ``None``), and then without the reduced form (which
-    nothing else reads)."""
+    """:class:`~jaxbpm.dsm.operator.BondGeometry` of the model's bonds.
+
+    With ``n_materials``, the preconditioner's parts as well, and then without the reduced form (which nothing else
+    reads).
+
+    Args:
+      model: the model.
+      coarse: the :class:`CoarseSpace` the preconditioner's parts are built for (``None``: block-Jacobi alone).
+      n_materials: the length of ``params["bond_E"]`` (at most ``_MAX_PRECOMPUTED_MATERIALS``, and within
+        ``_MAX_PRECOMPUTED_BYTES`` of memory, or the parts are not built); ``None``: no preconditioner's parts.
+
+    Returns:
+      The :class:`~jaxbpm.dsm.operator.BondGeometry`; ``None`` without bonds.
+
+    Raises:
+      RuntimeError: a bond stiffness law that is not of the form ``E (k_E + k_G / (2 (1 + nu)))``.
+    """
     if model.bonds.shape[0] == 0:
         return None
     reduced, err = _geometry_parts(model)
@@ -101,8 +114,20 @@ jax.tree_util.register_dataclass(CoarseSpace, data_fields=["labels", "basis", "b
 
 
 def coarse_space(model: Model, free, *, aggregate_size=None) -> CoarseSpace:
-    """Aggregates of about ``aggregate_size`` particles (default ``max(100, n / 250)``: at most ~1500 coarse DOFs,
-    whose dense Cholesky factor costs little) from a grid over the sample's bounding box."""
+    """Aggregates of particles from a grid of cells over the sample's bounding box, and their rigid modes.
+
+    Args:
+      model: the model.
+      free: ``[n, nd]`` boolean mask of the free DOFs (the modes are zero on the others).
+      aggregate_size: the particles per aggregate, about (default ``max(100, n / 250)``: at most ~1500 coarse
+        DOFs, whose dense Cholesky factor costs little).
+
+    Returns:
+      The :class:`CoarseSpace`.
+
+    Raises:
+      ValueError: ``aggregate_size`` below 1.
+    """
     pos = np.asarray(model.positions0)
     free = np.asarray(free)
     n, nd = free.shape
@@ -140,13 +165,30 @@ def coarse_space(model: Model, free, *, aggregate_size=None) -> CoarseSpace:
 
 
 def coarse_factor(model: Model, jac, coarse: CoarseSpace):
-    """Cholesky factor of the Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na] (:func:`coarse_matrix`)."""
+    """Cholesky factor of the Galerkin coarse matrix ``P^T K_ff P`` (:func:`coarse_matrix`).
+
+    Args:
+      model: the model.
+      jac: ``[ni, no, nb]`` the reduced Jacobians of every bond (:func:`~jaxbpm.dsm.operator.reduced_jacobians`).
+      coarse: the coarse space.
+
+    Returns:
+      ``[6 na, 6 na]`` the lower factor (``na``: the aggregates).
+    """
     return _factor_coarse(coarse_matrix(model, jac, coarse))
 
 
 def coarse_matrix(model: Model, jac, coarse: CoarseSpace):
-    """The Galerkin coarse matrix ``P^T K_ff P`` [6 na, 6 na], assembled bond by bond from the coupling bonds
-    (``jac``: reduced Jacobians of every bond, :func:`reduced_jacobians`)."""
+    """The Galerkin coarse matrix ``P^T K_ff P``, assembled bond by bond from the coupling bonds.
+
+    Args:
+      model: the model.
+      jac: ``[ni, no, nb]`` the reduced Jacobians of every bond (:func:`~jaxbpm.dsm.operator.reduced_jacobians`).
+      coarse: the coarse space (its ``bonds`` index ``jac``'s last axis).
+
+    Returns:
+      ``[6 na, 6 na]`` the matrix (``na``: the aggregates).
+    """
     na = coarse.count
     sel = coarse.bonds
     jb = full_jacobians(jac[:, :, sel])
@@ -183,12 +225,26 @@ def _coarse_for(model: Model, free, preconditioner, aggregate_size):
 
 def build_preconditioner(model: Model, params, free, jac=None, coarse: CoarseSpace | None = None,
                     geometry: BondGeometry | None = None, extra=None):
-    """Block-Jacobi: inverse of each particle's self-stiffness on its free DOFs (identity on the rest); with a
-    :class:`CoarseSpace`, plus the coarse correction ``P (P^T K_ff P)^-1 P^T`` (additive two-level). With a
+    """Block-Jacobi, plus the coarse correction ``P (P^T K_ff P)^-1 P^T`` with a coarse space (additive two-level).
+
+    Block-Jacobi is the inverse of each particle's self-stiffness on its free DOFs (identity on the rest). With a
     ``geometry`` that holds the preconditioner's parts (built for this ``coarse``), they are weighed by the
-    parameters instead of being assembled from the Jacobians. ``extra``: ``(pair_model, pair_jac, pair_coarse)``,
-    further springs (the linearised contacts: a model whose ``bonds`` are the pairs, their reduced Jacobians, and the
-    coarse space with ``bonds`` indexing the pairs that couple its modes) added to the blocks and coarse matrix."""
+    parameters instead of being assembled from the Jacobians.
+
+    Args:
+      model: the model.
+      params: the parameters.
+      free: ``[n, nd]`` boolean mask of the free DOFs.
+      jac: ``[ni, no, nb]`` the reduced Jacobians of the bonds (``None``: computed at rest when needed).
+      coarse: the :class:`CoarseSpace` (``None``: block-Jacobi alone).
+      geometry: the model's :class:`~jaxbpm.dsm.operator.BondGeometry` (``None``: none).
+      extra: ``(pair_model, pair_jac, pair_coarse)``, further springs added to the blocks and the coarse matrix
+        (the linearised contacts: a model whose ``bonds`` are the pairs, their reduced Jacobians, and the coarse
+        space with ``bonds`` indexing the pairs that couple its modes); ``None``: none.
+
+    Returns:
+      The :class:`Preconditioner`.
+    """
     precomputed = (_uses_geometry(geometry, params) and geometry.blocks is not None
                    and geometry.blocks.shape[0] == jnp.shape(params["bond_E"])[0]
                    and (coarse is None or geometry.coarse is not None))
@@ -256,6 +312,14 @@ class CholeskyBlocks:
 
     @classmethod
     def of(cls, factor):
+        """The blocks of a lower Cholesky factor.
+
+        Args:
+          factor: ``[m, m]`` the lower factor ``L``.
+
+        Returns:
+          The :class:`CholeskyBlocks`.
+        """
         m = factor.shape[0]
         e = list(range(0, m, cls.size)) + [m]
         eye = jnp.eye(cls.size, dtype=factor.dtype)
@@ -266,7 +330,14 @@ class CholeskyBlocks:
         return cls(inv_diag=inv_diag, rows=rows, cols_t=cols_t)
 
     def solve(self, r):
-        """``(L L^T)^-1 r``."""
+        """``(L L^T)^-1 r``.
+
+        Args:
+          r: ``[m]`` the right-hand side.
+
+        Returns:
+          ``[m]`` the solution.
+        """
         nb = len(self.inv_diag)
         ys = []
         for k in range(nb):

@@ -153,15 +153,38 @@ class Scene(Protocol):
         ...
 
     def modulus(self, stiffness: float, sample: Sample) -> float:
-        """The modulus [Pa] the stiffness ``stiffness`` [N/m] of ``sample`` gives (NaN where it gives none)."""
+        """The modulus the stiffness of ``sample`` gives.
+
+        Args:
+          stiffness: the fitted stiffness K [N/m].
+          sample: the specimen.
+
+        Returns:
+          The modulus [Pa] (NaN where the scene gives none).
+        """
         ...
 
     def strength(self, peak_force: float, sample: Sample) -> float:
-        """The strength [Pa] the peak force ``peak_force`` [N] on ``sample`` gives."""
+        """The strength the peak force on ``sample`` gives.
+
+        Args:
+          peak_force: the peak load [N].
+          sample: the specimen.
+
+        Returns:
+          The strength [Pa].
+        """
         ...
 
     def transit_length(self, sample: Sample) -> float:
-        """The length [m] the DEM's default loading time counts elastic-wave transits along."""
+        """The length the DEM's default loading time counts elastic-wave transits along.
+
+        Args:
+          sample: the specimen.
+
+        Returns:
+          The length [m].
+        """
         ...
 
     def lateral_strain(self, sample: Sample, displacement: np.ndarray) -> dict:
@@ -335,20 +358,47 @@ class BaseScene:
         return float(np.polyfit(displacement[sel], force[sel], 1)[0])
 
     def modulus(self, stiffness: float, sample: Sample) -> float:
-        """Young's modulus E = K l / A [Pa] (``l, A = geometry(sample)``)."""
+        """Young's modulus E = K l / A (``l, A = geometry(sample)``).
+
+        Args:
+          stiffness: the fitted stiffness K [N/m].
+          sample: the specimen.
+
+        Returns:
+          E [Pa].
+        """
         length, area = self.geometry(sample)
         return stiffness * length / area
 
     def strength(self, peak_force: float, sample: Sample) -> float:
-        """The peak force over the cross-section A of ``geometry`` [Pa]."""
+        """The peak force over the cross-section A of ``geometry``.
+
+        Args:
+          peak_force: the peak load [N].
+          sample: the specimen.
+
+        Returns:
+          The strength [Pa].
+        """
         return peak_force / self.geometry(sample)[1]
 
     def transit_length(self, sample: Sample) -> float:
-        """The length l of ``geometry``: the DEM's default loading time counts elastic-wave transits along it."""
+        """The length l of ``geometry``: the DEM's default loading time counts elastic-wave transits along it.
+
+        Args:
+          sample: the specimen.
+
+        Returns:
+          l [m].
+        """
         return self.geometry(sample)[0]
 
     def lateral_strain(self, sample: Sample, displacement) -> dict:
         """No lateral strain: a scene that measures one overrides this.
+
+        Args:
+          sample: the specimen.
+          displacement: ``[n, >=3]`` particle displacements [m].
 
         Raises:
           SceneError: always.

@@ -138,12 +138,32 @@ class ThreePointBending(BaseScene):
         return supports, punch
 
     def geometry(self, sample: Sample) -> tuple[float, float]:
-        """Beam height h (the deflection scale) and the cross-section b h [m^2]."""
+        """Beam height h (the deflection scale) and the cross-section b h.
+
+        Args:
+          sample: the beam.
+
+        Returns:
+          ``(h, b h)``: the height [m] and the cross-section [m^2].
+
+        Raises:
+          SceneError: a span that does not fit the beam (see :meth:`dimensions`).
+        """
         span, width, height = self.dimensions(sample)
         return height, width * height
 
     def transit_length(self, sample: Sample) -> float:
-        """The span: the DEM's default loading time counts elastic-wave transits along it."""
+        """The span: the DEM's default loading time counts elastic-wave transits along it.
+
+        Args:
+          sample: the beam.
+
+        Returns:
+          The span S [m].
+
+        Raises:
+          SceneError: a span that does not fit the beam (see :meth:`dimensions`).
+        """
         return self.dimensions(sample)[0]
 
     def loading(self, sample: Sample, speed: float) -> Loading:
@@ -162,11 +182,33 @@ class ThreePointBending(BaseScene):
         return _loading(supports | punch, vel)
 
     def modulus(self, stiffness: float, sample: Sample) -> float:
-        """Beam modulus E = K S^3 / (48 I), I = b h^3 / 12 [Pa] (Euler-Bernoulli, simply supported)."""
+        """Beam modulus E = K S^3 / (48 I), I = b h^3 / 12 (Euler-Bernoulli, simply supported).
+
+        Args:
+          stiffness: the fitted stiffness K [N/m] (punch force over deflection).
+          sample: the beam.
+
+        Returns:
+          E [Pa].
+
+        Raises:
+          SceneError: a span that does not fit the beam (see :meth:`dimensions`).
+        """
         span, b, h = self.dimensions(sample)
         return stiffness * span**3 / (48.0 * b * h**3 / 12.0)
 
     def strength(self, peak_force: float, sample: Sample) -> float:
-        """Flexural strength sigma_f = 3 F S / (2 b h^2) [Pa]."""
+        """Flexural strength sigma_f = 3 F S / (2 b h^2).
+
+        Args:
+          peak_force: the peak punch force F [N].
+          sample: the beam.
+
+        Returns:
+          sigma_f [Pa].
+
+        Raises:
+          SceneError: a span that does not fit the beam (see :meth:`dimensions`).
+        """
         span, b, h = self.dimensions(sample)
         return 3.0 * peak_force * span / (2.0 * b * h**2)

@@ -187,15 +187,44 @@ class BrazilianDisc(AxialScene):
         return d, t
 
     def geometry(self, sample: Sample) -> tuple[float, float]:
-        """The diameter D (the displacement scale: strain = u / D) and the diametral section D t [m^2]."""
+        """The diameter D (the displacement scale: strain = u / D) and the diametral section D t.
+
+        Args:
+          sample: the disc.
+
+        Returns:
+          ``(D, D t)``: the diameter [m] and the diametral section [m^2].
+
+        Raises:
+          SceneError: a disc whose size cannot be read (see :meth:`dimensions`).
+        """
         d, t = self.dimensions(sample)
         return d, d * t
 
     def modulus(self, stiffness: float, sample: Sample) -> float:
-        """NaN: the platen stiffness of a disc is mostly its contact flattening, not a measure of E."""
+        """NaN: the platen stiffness of a disc is mostly its contact flattening, not a measure of E.
+
+        Args:
+          stiffness: the fitted stiffness [N/m] (unused).
+          sample: the disc (unused).
+
+        Returns:
+          NaN.
+        """
         return float("nan")
 
     def strength(self, peak_force: float, sample: Sample) -> float:
-        """Brazilian tensile strength BTS = 2 F / (pi D t) [Pa]."""
+        """Brazilian tensile strength BTS = 2 F / (pi D t).
+
+        Args:
+          peak_force: the peak platen force F [N].
+          sample: the disc.
+
+        Returns:
+          BTS [Pa].
+
+        Raises:
+          SceneError: a disc whose size cannot be read (see :meth:`dimensions`).
+        """
         d, t = self.dimensions(sample)
         return 2.0 * peak_force / (np.pi * d * t)

@@ -122,7 +122,15 @@ def _inverse3(D):
 
 
 def coupling(est: Estimator, params) -> jnp.ndarray:
-    """``K^nm [P, 3, 3]`` of every pair (3 DOF): ``sum_s k_s G_s`` for the bonds, then the contacts."""
+    """The coupling ``K^nm`` of every pair (3 DOF): ``sum_s k_s G_s`` for the bonds, then the contacts.
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[P, 3, 3]`` one matrix [N/m] per pair, the ``n_bonds`` bonds first, then the ``n_contacts`` contacts.
+    """
     k = est.model.stiffness(params)
     ks = tuple(jnp.asarray(x).astype(est.d.dtype) for x in (k.kn, k.kt, k.ktw, k.kb))
     nb = est.n_bonds
@@ -274,8 +282,17 @@ def raw_body_tensor(est: Estimator, params) -> jnp.ndarray:
 
 
 def raw_body_tensor_edges(est: Estimator, params) -> jnp.ndarray:
-    """:func:`raw_body_tensor` through the per-edge forces, for any ``dofs`` (the 6-DOF path; with 3 DOF the
-    reference the pair form is checked against)."""
+    """:func:`raw_body_tensor` through the per-edge forces, for any ``dofs``.
+
+    The 6-DOF path; with 3 DOF the reference the pair form is checked against.
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[3, 3, 3, 3]`` the tensor ``C[i,j,k,l] = d sigma_ij / d G_lk`` [Pa], not symmetrised.
+    """
     e, f = _edge_forces(est, params)
     w = est.include[e.src].astype(f.dtype)
     t = jnp.einsum("ei,ejlk->ijkl", e.d * w[:, None], f)
@@ -322,6 +339,15 @@ _local_tensors_jit = jax.jit(local_tensors)
 
 
 def local_tensors_edges(est: Estimator, params) -> jnp.ndarray:
+    """:func:`local_tensors` through the per-edge forces, for any ``dofs`` (the 6-DOF path).
+
+    Args:
+      est: the estimator (:func:`~jaxbpm.ste.estimator`).
+      params: the bond parameters.
+
+    Returns:
+      ``[n, 6, 6]`` the minor-symmetrised Voigt tensors [Pa]; NaN for singular (skipped) particles.
+    """
     e, f = _edge_forces(est, params)
     vi = np.array([p[0] for p in VOIGT])
     vj = np.array([p[1] for p in VOIGT])
