@@ -84,6 +84,21 @@ def finite(name: str, arr: np.ndarray) -> None:
         raise SampleError(f"{name} contains {kind} values at indices {listed(rows)}")
 
 
+def _positive_per_item(name: str, value, count: int, shape: str, where: str) -> np.ndarray:
+    """``value`` as ``[count]`` float64 (a scalar repeated), finite and > 0; the messages say what ``name`` must
+    (``shape``: "have shape [n] ...") and ``where`` the items at fault are."""
+    arr = float_array(name, value)
+    if arr.ndim == 0:
+        arr = np.full(count, float(arr))
+    if arr.shape != (count,):
+        raise SampleError(f"{name} must {shape}, got {arr.shape}")
+    finite(name, arr)
+    bad = np.flatnonzero(arr <= 0)
+    if bad.size:
+        raise SampleError(f"{name} must be > 0; {where} {listed(bad)}")
+    return arr
+
+
 def checked_positions(positions) -> np.ndarray:
     """The particle centres, checked.
 
@@ -118,15 +133,8 @@ def checked_radii(radii, n: int) -> np.ndarray:
     Raises:
       SampleError: wrong shape, values not finite, not positive, or out of float64's range for the inertia.
     """
-    rad = float_array("radii", radii)
-    if rad.ndim == 0:
-        rad = np.full(n, float(rad))
-    if rad.shape != (n,):
-        raise SampleError(f"radii must have shape [{n}] (one per particle), got {rad.shape}")
-    finite("radii", rad)
-    bad = np.flatnonzero(rad <= 0)
-    if bad.size:
-        raise SampleError(f"radii must be > 0; non-positive radius at particles {listed(bad)}")
+    rad = _positive_per_item("radii", radii, n, f"have shape [{n}] (one per particle)",
+                             "non-positive radius at particles")
     with np.errstate(over="ignore", under="ignore"):
         bad = np.flatnonzero(~(np.isfinite(rad ** 5) & (rad ** 5 > 0)))
     if bad.size:
@@ -262,16 +270,8 @@ def checked_bond_radius(bond_radius, bond_radius_ratio, rad: np.ndarray, b: np.n
     if bond_radius_ratio is not None:
         return _ratio(bond_radius_ratio) * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
     nb = b.shape[0]
-    rb = float_array("bond_radius", bond_radius)
-    if rb.ndim == 0:
-        rb = np.full(nb, float(rb))
-    if rb.shape != (nb,):
-        raise SampleError(f"bond_radius must be a scalar or have shape [{nb}], got {rb.shape}")
-    finite("bond_radius", rb)
-    bad = np.flatnonzero(rb <= 0)
-    if bad.size:
-        raise SampleError(f"bond_radius must be > 0; non-positive at bonds {listed(bad)}")
-    return rb
+    return _positive_per_item("bond_radius", bond_radius, nb, f"be a scalar or have shape [{nb}]",
+                              "non-positive at bonds")
 
 
 def checked_bond_material(bond_material, nb: int, n_materials: int) -> np.ndarray:

@@ -436,6 +436,11 @@ class Sample:
         return int(np.shape(self.positions)[0])
 
     @property
+    def dim(self) -> int:
+        """The spatial dimension: positions are ``[n, dim]`` (3: spheres, three rotations each)."""
+        return int(np.shape(self.positions)[1])
+
+    @property
     def n_bonds(self) -> int:
         """The number of bonds ``nb``."""
         return int(np.shape(self.bonds)[0])

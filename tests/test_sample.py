@@ -28,6 +28,7 @@ def test_derived_quantities():
     np.testing.assert_allclose(s.mass, m)
     np.testing.assert_allclose(s.inertia, 0.4 * m * R**2)
     assert s.positions.dtype == np.float64 and s.bonds.dtype == np.int32
+    assert s.dim == 3 and s.positions.shape == (s.n_particles, s.dim)
 
 
 def test_bond_radius_ratio_uses_smaller_particle():

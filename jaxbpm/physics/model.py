@@ -110,6 +110,17 @@ class Model:
         """The number of particles."""
         return int(self.positions0.shape[0])
 
+    @property
+    def dim(self) -> int:
+        """The spatial dimension of the positions (``[n, dim]``), the sample's."""
+        return int(self.positions0.shape[1])
+
+    @property
+    def dofs(self) -> int:
+        """Degrees of freedom per particle: ``dim`` translations, and with :attr:`rotations` the rotations the
+        dimension has (three in 3D)."""
+        return self.dim + (self.dim * (self.dim - 1) // 2 if self.rotations else 0)
+
     def stiffness(self, params) -> bond_mod.BondStiffness:
         """Per-bond stiffnesses from the parameters.
 

@@ -49,6 +49,13 @@ def test_model_has_only_what_it_needs():
     assert m.contacts and not m.rotations and m.walls is None
 
 
+def test_dimension_and_dofs_are_the_samples():
+    # the spatial dimension is data (positions [n, dim]); DOF per particle: translations, plus rotations if any
+    s = pair()
+    assert build_model(s).dim == s.dim == 3
+    assert build_model(s).dofs == 6 and build_model(s, rotations=False).dofs == 3
+
+
 def test_float32_model_warns():
     s = pair()
     with jax.enable_x64(False):
