@@ -355,6 +355,42 @@ def hashable(value) -> bool:
     return True
 
 
+def content_key(value):
+    """A hashable stand-in for ``value`` that two equal values share: arrays by dtype, shape and a digest of their
+    bytes (as JAX keys its compilation cache), dataclasses (scenes) by type and fields, sequences and mappings by
+    their items.
+
+    Args:
+      value: a cache key, or part of one.
+
+    Returns:
+      A hashable value, or ``None`` where some part of ``value`` neither hashes nor is one of the above.
+    """
+    import dataclasses
+    import hashlib
+
+    if isinstance(value, (np.ndarray, jax.Array)):
+        arr = np.ascontiguousarray(np.asarray(value))
+        return ("array", arr.dtype.str, arr.shape, hashlib.sha1(arr.tobytes()).hexdigest())
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        parts = [(f.name, getattr(value, f.name)) for f in dataclasses.fields(value)]
+        head = type(value)
+    elif isinstance(value, (list, tuple)):
+        parts, head = list(enumerate(value)), type(value).__name__
+    elif isinstance(value, dict):
+        parts, head = sorted(((repr(k), v) for k, v in value.items()), key=lambda kv: kv[0]), "dict"
+    else:
+        return value if hashable(value) else None
+    keyed = []
+    for name, part in parts:
+        if not hashable(part):
+            part = content_key(part)
+            if part is None:
+                return None
+        keyed.append((name, part))
+    return (head, tuple(keyed))
+
+
 class SetupCache:
     """The last ``maxsize`` setups (estimators, bond geometry, preconditioner parts: everything a solver builds from a
     sample before it runs) by sample object and options, so that solving the same sample again (other parameters, a
@@ -367,19 +403,21 @@ class SetupCache:
         self.builds = 0
 
     def get(self, owner, key, build: Callable[[], Any]):
-        """The setup of ``owner`` under ``key`` (hashable options), built by ``build()`` when absent. An unhashable
-        key is built every time. A setup built in float64 is not one for float32 (and the other way round): JAX's
+        """The setup of ``owner`` under ``key`` (options), built by ``build()`` when absent. A key that does not
+        hash (a scene holding NumPy masks) is keyed by its content (:func:`content_key`), or built every time where it
+        has none. A setup built in float64 is not one for float32 (and the other way round): JAX's
         precision is part of the key.
 
         Args:
           owner: the object the setup belongs to (held weakly).
-          key: hashable options.
+          key: the options the setup depends on.
           build: makes the setup.
 
         Returns:
           The setup.
         """
-        if not hashable(key):
+        key = key if hashable(key) else content_key(key)
+        if key is None:  # (some part neither hashes nor has a content to key by)
             self.builds += 1
             return build()
         k = (id(owner), bool(jax.config.jax_enable_x64), key)

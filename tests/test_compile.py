@@ -9,7 +9,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import _compile, dsm, ste
-from jaxbpm._compile import Program, SetupCache, capacity, count_compilations, size_class
+from jaxbpm._compile import content_key, Program, SetupCache, capacity, count_compilations, size_class
 from jaxbpm.physics.model import default_params
 from jaxbpm.scenes import UniaxialCompression
 
@@ -145,8 +145,42 @@ def test_setup_cache_is_per_object_and_bounded():
     assert cache.get(a, ("k", np.zeros(2).tobytes()), lambda: 4) == 4
     assert cache.get(b, "k", lambda: 5) == 3          # still there
     assert cache.get(a, "k", lambda: 5) == 5          # the oldest entry was dropped (maxsize 2)
-    assert cache.get(a, ["unhashable"], lambda: 6) == 6
-    assert cache.get(a, ["unhashable"], lambda: 7) == 7  # never cached
+    assert cache.get(a, ["mask", np.zeros(3, bool)], lambda: 6) == 6
+    assert cache.get(a, ["mask", np.zeros(3, bool)], lambda: 7) == 6  # an equal array (a new object): by content
+    assert cache.get(a, ["mask", np.ones(3, bool)], lambda: 8) == 8
+    assert cache.get(a, ["mask", np.zeros(3, np.int8)], lambda: 9) == 9  # the same bytes, another dtype
+
+    class NoContent:
+        __hash__ = None
+
+    assert cache.get(a, [NoContent()], lambda: 10) == 10
+    assert cache.get(a, [NoContent()], lambda: 11) == 11  # nothing to key by: never cached
+
+
+def test_content_key_of_scenes_with_masks():
+    n = 10
+    fixed, driven = np.arange(n) < 3, np.arange(n) >= 7
+    a = UniaxialCompression(fixed=fixed, driven=driven)
+    b = UniaxialCompression(fixed=fixed.copy(), driven=driven.copy())
+    assert content_key(a) == content_key(b) and hash(content_key(a)) == hash(content_key(b))
+    assert content_key(a) != content_key(UniaxialCompression(fixed=driven, driven=fixed))
+    assert content_key(a) != content_key(UniaxialCompression(fixed=fixed, driven=driven, strain=0.003))
+    assert content_key({"x": [1, np.ones(2)]}) == content_key({"x": [1, np.ones(2)]})
+    assert content_key({"x": [1, object.__new__(type("NoHash", (), {"__hash__": None}))]}) is None
+
+
+@pytest.mark.parametrize("method", ["ste", "dsm"])
+def test_a_scene_with_masks_keeps_its_setup(packing, method):
+    # the clamped particles given as masks: a second solve, with a new but equal scene, builds and compiles nothing
+    z = np.asarray(packing.positions)[:, 2]
+    fixed, driven = z <= z.min() + 1.5e-3, z >= z.max() - 1.5e-3
+    setups = {"dsm": jaxbpm.dsm.linear._linear_setups, "ste": jaxbpm.ste.scene._setups}[method]
+    first = jaxbpm.solve(packing, UniaxialCompression(fixed=fixed, driven=driven), method=method)
+    built = setups.builds
+    with count_compilations() as n:
+        again = jaxbpm.solve(packing, UniaxialCompression(fixed=fixed.copy(), driven=driven.copy()), method=method)
+    assert setups.builds == built and n[0] == 0
+    assert again.stiffness == first.stiffness
 
 
 @pytest.mark.parametrize("options", [{}, {"dofs": 6}, {"layered": True}, {"first_neighbour": True},
