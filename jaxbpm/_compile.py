@@ -391,6 +391,24 @@ def content_key(value):
     return (head, tuple(keyed))
 
 
+_OWNER_KEYS: dict = {}  # id(owner) -> (weak reference to it, its key): an owner's content is digested once
+
+
+def _owner_key(owner) -> tuple:
+    """``("content", key)`` for a dataclass owner with a content key (a sample), else ``("id", id(owner))``."""
+    import dataclasses
+
+    hit = _OWNER_KEYS.get(id(owner))
+    if hit is not None and hit[0]() is owner:
+        return hit[1]
+    content = content_key(owner) if dataclasses.is_dataclass(owner) else None
+    who = ("id", id(owner)) if content is None else ("content", content)
+    _OWNER_KEYS[id(owner)] = (weakref.ref(owner), who)
+    while len(_OWNER_KEYS) > 64:
+        _OWNER_KEYS.pop(next(iter(_OWNER_KEYS)))
+    return who
+
+
 class SetupCache:
     """The last ``maxsize`` setups (estimators, bond geometry, preconditioner parts: everything a solver builds from a
     sample before it runs) by sample object and options, so that solving the same sample again (other parameters, a
@@ -403,13 +421,15 @@ class SetupCache:
         self.builds = 0
 
     def get(self, owner, key, build: Callable[[], Any]):
-        """The setup of ``owner`` under ``key`` (options), built by ``build()`` when absent. A key that does not
+        """The setup of ``owner`` under ``key`` (options), built by ``build()`` when absent. An owner that is a
+        dataclass of arrays (a :class:`~jaxbpm.Sample`) is known by its content, so that the same sample loaded again
+        finds its setup; any other owner by its identity. A key that does not
         hash (a scene holding NumPy masks) is keyed by its content (:func:`content_key`), or built every time where it
         has none. A setup built in float64 is not one for float32 (and the other way round): JAX's
         precision is part of the key.
 
         Args:
-          owner: the object the setup belongs to (held weakly).
+          owner: the object the setup belongs to (a sample; other objects are held weakly).
           key: the options the setup depends on.
           build: makes the setup.
 
@@ -420,9 +440,10 @@ class SetupCache:
         if key is None:  # (some part neither hashes nor has a content to key by)
             self.builds += 1
             return build()
-        k = (id(owner), bool(jax.config.jax_enable_x64), key)
+        who = _owner_key(owner)
+        k = (who, bool(jax.config.jax_enable_x64), key)
         hit = self._items.get(k)
-        if hit is not None and hit[0]() is owner:
+        if hit is not None and (who[0] == "content" or hit[0]() is owner):
             self._items.move_to_end(k)
             return hit[1]
         value = build()

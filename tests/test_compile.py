@@ -170,6 +170,23 @@ def test_content_key_of_scenes_with_masks():
 
 
 @pytest.mark.parametrize("method", ["ste", "dsm"])
+def test_the_same_sample_loaded_again_keeps_its_setup(packing, method, tmp_path):
+    # a new Sample object with the same arrays (the file loaded again) is known by its content: nothing is built
+    jaxbpm.io.save_sample(tmp_path / "s.h5", packing)
+    again = jaxbpm.io.load_sample(tmp_path / "s.h5")
+    assert again is not packing
+    setups = {"dsm": jaxbpm.dsm.linear._linear_setups, "ste": jaxbpm.ste.scene._setups}[method]
+    first = jaxbpm.solve(packing, SCENE, method=method)
+    built = setups.builds
+    with count_compilations() as n:
+        second = jaxbpm.solve(again, SCENE, method=method)
+    assert setups.builds == built and n[0] == 0 and second.stiffness == first.stiffness
+    moved = again.replace(positions=np.asarray(again.positions) * (1 + 1e-9))  # other content: built again
+    jaxbpm.solve(moved, SCENE, method=method)
+    assert setups.builds == built + 1
+
+
+@pytest.mark.parametrize("method", ["ste", "dsm"])
 def test_a_scene_with_masks_keeps_its_setup(packing, method):
     # the clamped particles given as masks: a second solve, with a new but equal scene, builds and compiles nothing
     z = np.asarray(packing.positions)[:, 2]
