@@ -33,6 +33,7 @@ import numbers
 import os
 from typing import Any, Callable, ClassVar
 
+from jaxbpm._text import shown
 from jaxbpm.errors import OptionsError
 
 __all__ = ["SolverOptions", "option", "shown", "options_class", "resolve_options", "METHODS", "positive", "fraction",
@@ -43,20 +44,6 @@ _REGISTRY = {"dem": "jaxbpm.dem.options:DEM", "dsm": "jaxbpm.dsm.options:DSM", "
 METHODS = tuple(_REGISTRY)
 
 Check = Callable[[str, Any], None]
-
-
-def shown(v) -> str:
-    """A value as an error message shows it: plain numbers (``0.5``, not ``np.float64(0.5)``), shortened.
-
-    Args:
-      v: the value.
-
-    Returns:
-      Its text.
-    """
-    from jaxbpm._text import shown as _shown
-
-    return _shown(v)
 
 
 # -- value checks: ``check(name, value)`` raises OptionsError naming the option, else returns None
