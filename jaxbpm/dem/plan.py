@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from jaxbpm._compile import size_class
+from jaxbpm._compile import SetupCache, size_class
 from jaxbpm.dem.integrator import progress_printer
 from jaxbpm.dem.state import DEMState, pad_loading
 from jaxbpm.dem.timestep import critical_time_step
@@ -137,7 +137,7 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
     size = None
     if pad and not scene.contacts and not scene.uses_walls:
         size = size_class(sample.n_particles, sample.n_bonds)
-    model = scene.model(sample, breakage=breaks, **({} if size is None else {"pad_to": size}))
+    model = _scene_setup(sample, scene, breaks, size)
     dt_crit = tuple(critical_time_step(model, p) for p in members)
     dt = float(_time_step(dt, safety, dt_crit, batch=not isinstance(params, Mapping)))
     length, area = scene.geometry(sample)
@@ -160,6 +160,18 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
     return Plan(model=model, size=size, breakage=breaks, dt=dt, dt_crit=dt_crit, damping=damping,
                 gauge_length=length, area=area, target=target, loading_time=float(loading_time), n_steps=n_steps,
                 chunk=chunk, speed=speed, load=load, attrs=attrs, start=state)
+
+
+_models = SetupCache()
+
+
+def _scene_setup(sample, scene, breaks: bool, size) -> Model:
+    """The scene's model of ``sample`` (padded to ``size``), kept for the next run of the same sample and scene: the
+    same sample loaded again and a scene holding the same masks find it (:class:`~jaxbpm._compile.SetupCache`, keyed
+    by content). It depends on no parameter: the time step and the loading speed are planned per run."""
+    overrides = {} if size is None else {"pad_to": size}
+    return _models.get(sample, ("dem-model", scene, breaks, size),
+                       lambda: scene.model(sample, breakage=breaks, **overrides))
 
 
 def _time_step(dt, safety, dt_crit: tuple, batch: bool) -> float:

@@ -9,7 +9,8 @@ Per step, time step dt::
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
 
 Damping ``F_d`` is local non-viscous damping as in PFC and MUSEN: ``F_d = -damping |F| sign(v)`` per component (and
-the same for moments). It removes kinetic energy where a particle accelerates, without slowing a uniform motion, which
+the same for moments), with ``v`` the velocity the undamped half kick gives (``v + dt F / 2m``, Yade's form), so that
+a particle starting from rest does not take the sign of a round-off. It removes kinetic energy where a particle accelerates, without slowing a uniform motion, which
 is what quasi-static loading needs; ``damping = 0`` gives undamped, energy-conserving dynamics.
 """
 
@@ -87,14 +88,19 @@ def _with_bond_springs(model: Model, state: DEMState) -> DEMState:
 
 
 
-def _damped(f, v, damping):
-    return f - damping * jnp.abs(f) * jnp.sign(v)
+def _damped(f, v, damping, kick):
+    """``f + F_d``, ``F_d = -damping |f| sign(v + kick f)``: the sign of the velocity the undamped half kick
+    (``kick = dt / 2m``) would give, as Yade's integrator takes it. A particle at rest, or moving at a speed of the
+    order of round-off, is damped by the force that starts it, whatever the last bit of its velocity: the run does not
+    depend on round-off (a translated or reordered sample gives the same answer)."""
+    return f - damping * jnp.abs(f) * jnp.sign(v + kick * f)
 
 
 def _drift(model: Model, load: Loading, state: DEMState, dt, damping):
     """The first half kick and the drift of :func:`step`: the half-step velocities, the new positions and time."""
     clamped = load.clamped[:, None]
-    v = state.velocities + 0.5 * dt * _damped(state.force, state.velocities, damping) * (1.0 / model.mass[:, None])
+    kick = 0.5 * dt / model.mass[:, None]
+    v = state.velocities + kick * _damped(state.force, state.velocities, damping, kick)
     v = jnp.where(clamped, load.velocity, v)
     t = state.time + dt
     x = jnp.where(clamped, model.positions0 + t * load.velocity, state.positions + dt * v)
@@ -128,7 +134,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, damping, orig
     inv_m, inv_i = 1.0 / model.mass[:, None], 1.0 / model.inertia[:, None]
     v, x, t = _drift(model, load, state, dt, damping)
     if model.rotations:
-        w = state.omegas + 0.5 * dt * _damped(state.moment, state.omegas, damping) * inv_i
+        w = state.omegas + 0.5 * dt * inv_i * _damped(state.moment, state.omegas, damping, 0.5 * dt * inv_i)
         w = jnp.where(clamped, 0.0, w)
         q = rotation.integrate(state.orientations, dt * w)
     else:
@@ -169,10 +175,10 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, damping, orig
     else:
         force, moment, parts = _evaluate(model, params, new, load, None, None)
         walls, spring, intact, broken = parts["walls"], state.spring, parts["intact"], parts["broken"]
-    v = v + 0.5 * dt * _damped(force, v, damping) * inv_m
+    v = v + 0.5 * dt * inv_m * _damped(force, v, damping, 0.5 * dt * inv_m)
     v = jnp.where(clamped, load.velocity, v)
     if model.rotations:
-        w = w + 0.5 * dt * _damped(moment, w, damping) * inv_i
+        w = w + 0.5 * dt * inv_i * _damped(moment, w, damping, 0.5 * dt * inv_i)
         w = jnp.where(clamped, 0.0, w)
     moving = clamped & jnp.any(load.velocity != 0, axis=1, keepdims=True)
     resting = clamped & ~moving

@@ -327,7 +327,7 @@ class BaseScene:
         return 0.5 * (reaction[:, 0, ax] - reaction[:, 1, ax])
 
     def fit_mask(self, displacement: np.ndarray, target: float) -> np.ndarray:
-        """The records within ``fit_range`` of the target displacement.
+        """The records within ``fit_range`` of the target displacement (its ends included, to 1e-9 relative).
 
         Args:
           displacement: ``[records]`` [m].
@@ -336,8 +336,10 @@ class BaseScene:
         Returns:
           ``[records]`` boolean mask.
         """
+        # both ends with a margin of 1e-9: a record that lies on an end (the run's records are evenly spaced, and
+        # the ends are round fractions) is in whatever the last bit of its displacement
         lo, hi = self.fit_range
-        return (displacement >= lo * target) & (displacement <= hi * target * (1 + 1e-9))
+        return (displacement >= lo * target * (1 - 1e-9)) & (displacement <= hi * target * (1 + 1e-9))
 
     def fit_stiffness(self, displacement: np.ndarray, force: np.ndarray, target: float) -> float:
         """The least-squares slope dF/du [N/m] over ``fit_range`` of the target displacement.

@@ -74,3 +74,26 @@ def test_the_time_step_is_checked(column):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert plan(column, ELASTIC, params, dt=0.9 * crit, transits=1).dt == 0.9 * crit
+
+
+def test_the_model_is_kept_for_the_same_sample_and_scene_by_content(column):
+    """A scene with masks, and the same sample built again, find the first plan's model: no build."""
+    from jaxbpm.dem import plan as plan_mod
+
+    fixed, driven = ELASTIC.layers(column)
+    masked = UniaxialCompression(strain=0.002, fixed=fixed, driven=driven)
+    params = default_params(column)
+    first = plan(column, masked, params, transits=10)
+    builds = plan_mod._models.builds
+    again = jaxbpm.generate.lattice("sc", (2, 2, 5), R, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    assert again is not column
+    second = plan(again, UniaxialCompression(strain=0.002, fixed=fixed.copy(), driven=driven.copy()), params,
+                  transits=10)
+    assert plan_mod._models.builds == builds and second.model is first.model
+    # the same masks as the layers give the same loading; other masks build a model of their own
+    np.testing.assert_array_equal(np.asarray(second.load.clamped), np.asarray(plan(column, ELASTIC, params).load.clamped))
+    fewer = driven.copy()
+    fewer[np.flatnonzero(driven)[0]] = False
+    other = UniaxialCompression(strain=0.002, fixed=fixed, driven=fewer)
+    plan(again, other, params, transits=10)
+    assert plan_mod._models.builds == builds + 1
