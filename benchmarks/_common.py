@@ -197,3 +197,78 @@ def cached_box(n: int, seed: int = 0, cache_dir: str | None = None):
         os.makedirs(cache_dir, exist_ok=True)
         jaxbpm.io.save_sample(path, sample)
     return sample, f"generate.box({n}, seed={seed}).largest_cluster()"
+
+
+def foreign_packing(n: int, seed: int, path: str, *, slab: float = 0.08, gap: float = 0.05) -> dict:
+    """Write a bonded random packing made WITHOUT jaxbpm to a LAMMPS data file, as a sample from another code arrives.
+
+    ``n`` spheres (radii uniform in [0.8, 1.2] mm) at random places in a cube sized for a solid fraction of 0.55, their
+    overlaps relaxed away by a plain NumPy/SciPy push-apart loop (not :mod:`jaxbpm.generate`), bonds between the pairs
+    closer than ``gap`` x the smaller radius, particles in a random order. Atom types mark the groups, as LAMMPS's
+    ``region`` + ``group`` would: 2 for the particles whose centre is within ``slab`` x the height of the lowest
+    centre, 3 within it of the highest, 1 elsewhere. Written ``atom_style bpm/sphere``, ``units si``, without
+    ``Bond Coeffs`` (read it with a bond radius ratio and a material table).
+
+    Args:
+      n: spheres.
+      seed: the random seed.
+      path: the data file to write.
+      slab: the depth of the end groups, a fraction of the height.
+      gap: the bonding distance, a fraction of the smaller radius.
+
+    Returns:
+      ``{"particles", "bonds", "types": counts per type, "seconds"}``.
+    """
+    import numpy as np
+    from scipy.spatial import cKDTree
+
+    t = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    r = rng.uniform(0.8e-3, 1.2e-3, n)
+    side = (4.0 / 3.0 * np.pi * np.sum(r**3) / 0.55) ** (1.0 / 3.0)
+    x = rng.uniform(0.0, side, (n, 3))
+    for _ in range(400):  # push overlapping pairs apart along their line of centres, walls keep the spheres inside
+        i, j = cKDTree(x).query_pairs(2.0 * r.max(), output_type="ndarray").T
+        d = x[j] - x[i]
+        dist = np.linalg.norm(d, axis=1)
+        over = r[i] + r[j] - dist
+        hit = over > 1e-4 * r.min()
+        if not hit.any():
+            break
+        push = 0.5 * (over[hit] / dist[hit])[:, None] * d[hit]
+        move = np.zeros_like(x)
+        np.add.at(move, i[hit], -push)
+        np.add.at(move, j[hit], push)
+        x = np.clip(x + move, r[:, None], side - r[:, None])
+    i, j = cKDTree(x).query_pairs(2.0 * r.max() * (1 + gap), output_type="ndarray").T
+    dist = np.linalg.norm(x[j] - x[i], axis=1)
+    bonded = dist < r[i] + r[j] + gap * np.minimum(r[i], r[j])
+    bonds = np.stack([i[bonded], j[bonded]], axis=1)
+    # keep the largest bonded cluster (a packing made for a test is one body), in a random order
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    _, label = connected_components(coo_matrix((np.ones(len(bonds)), bonds.T), shape=(n, n)), directed=False)
+    keep = label == np.bincount(label).argmax()
+    order = rng.permutation(np.flatnonzero(keep))
+    new = np.full(n, -1)
+    new[order] = np.arange(len(order))
+    x, r = x[order], r[order]
+    bonds = new[bonds[keep[bonds].all(axis=1)]]
+    z = x[:, 2]
+    height = z.max() - z.min()
+    types = np.ones(len(x), int)
+    types[z <= z.min() + slab * height] = 2
+    types[z >= z.max() - slab * height] = 3
+    lo, hi = (x - r[:, None]).min(axis=0), (x + r[:, None]).max(axis=0)
+    lines = ["LAMMPS data file: a bonded random packing (push-apart relaxation), groups as atom types", "",
+             f"{len(x)} atoms", "3 atom types", f"{len(bonds)} bonds", "1 bond types", ""]
+    lines += [f"{float(a)!r} {float(b)!r} {c}lo {c}hi" for a, b, c in zip(lo, hi, "xyz")]
+    lines += ["", "Atoms # bpm/sphere", ""]
+    lines += [f"{k + 1} 1 {types[k]} {float(2 * r[k])!r} 2500.0 " + " ".join(repr(float(c)) for c in x[k]) for k in range(len(x))]
+    lines += ["", "Bonds", ""]
+    lines += [f"{k + 1} 1 {a + 1} {b + 1}" for k, (a, b) in enumerate(bonds)]
+    with open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return {"particles": len(x), "bonds": len(bonds), "types": {int(k): int((types == k).sum()) for k in (1, 2, 3)},
+            "seconds": time.perf_counter() - t}

@@ -434,7 +434,8 @@ class SetupCache:
           build: makes the setup.
 
         Returns:
-          The setup.
+          The setup, computed: its arrays are ready (JAX dispatches work asynchronously; a setup still being computed
+          would be paid, and timed, by the first program that reads it).
         """
         key = key if hashable(key) else content_key(key)
         if key is None:  # (some part neither hashes nor has a content to key by)
@@ -446,7 +447,7 @@ class SetupCache:
         if hit is not None and (who[0] == "content" or hit[0]() is owner):
             self._items.move_to_end(k)
             return hit[1]
-        value = build()
+        value = _ready(build())
         self.builds += 1
         self._items[k] = (weakref.ref(owner), value)
         while len(self._items) > self.maxsize:
@@ -456,6 +457,27 @@ class SetupCache:
     def clear(self) -> None:
         """Drop every cached setup."""
         self._items.clear()
+
+
+def _ready(value, depth: int = 0):
+    """``value`` once every JAX array in it (a pytree, a dataclass, a mapping, a sequence, an object's attributes; a
+    few levels deep) is computed."""
+    import dataclasses
+
+    if isinstance(value, jax.Array):
+        value.block_until_ready()
+    elif depth < 4:
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            parts = [getattr(value, f.name, None) for f in dataclasses.fields(value)]
+        elif isinstance(value, dict):
+            parts = list(value.values())
+        elif isinstance(value, (list, tuple)):
+            parts = list(value)
+        else:
+            parts = list(getattr(value, "__dict__", {}).values())
+        for part in parts:
+            _ready(part, depth + 1)
+    return value
 
 
 _LOWERING_EVENT = "/jax/core/compile/jaxpr_to_mlir_module_duration"
