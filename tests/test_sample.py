@@ -41,7 +41,7 @@ def test_bond_radius_ratio_uses_smaller_particle():
 def test_is_a_pytree_and_jittable():
     s = chain(3)
     leaves, tree = jax.tree_util.tree_flatten(s)
-    assert len(leaves) == 11 + 4 + 5
+    assert len(leaves) == 11 + 4 + 5 + 1  # the arrays, the two material tables, the particle types
     s2 = jax.tree_util.tree_unflatten(tree, leaves)
     assert s2.bond_contact == s.bond_contact
     total = jax.jit(lambda smp: smp.mass.sum() + smp.materials.E.sum())(s)
