@@ -12,7 +12,8 @@ other programs) are read as they are. To accept an intended hand edit, delete th
 
 LAMMPS data (:func:`write_lammps_data`, :func:`read_lammps_data`)
     ``atom_style bpm/sphere`` (``id mol type diameter density x y z``; ``sphere``: ``id type diameter density x y
-    z``; optional image flags; the atom types are ``Sample.types``, written from it by default), ``Bonds`` (``id type atom1 atom2``) and a ``Bond Coeffs # bpm/rotational`` section
+    z``; optional image flags; the atom types are ``Sample.types``, written from it by default), ``Bonds`` (``id
+    type atom1 atom2``) and a ``Bond Coeffs # bpm/rotational`` section
     (``type Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b``, see :mod:`jaxbpm.interop.conventions`). LAMMPS
     can only define ``bond_style bpm/rotational`` after the box exists, so read the file in LAMMPS with
     ``read_data FILE nocoeff`` followed by the ``bond_style``/``bond_coeff`` lines of :func:`write_lammps_coeffs`.
