@@ -22,7 +22,8 @@ class VTUSeries:
     particle and a ``line`` cell per bond (broken bonds stay, with ``intact`` 0, so every step has the same cells).
     Point data: ``radius``, ``displacement`` [m], ``broken_bonds`` (count per particle), ``coordination`` (intact
     bonds), ``type`` (``Sample.types``), then ``point_data`` (e.g. velocity, force, local stiffness). Cell data per
-    bond: ``intact``, ``material``, then ``bond_data`` (e.g. force, break_mode); vertex cells carry NaN (-1 for integers).
+    bond: ``intact``, ``material``, then ``bond_data`` (e.g. force, break_mode); vertex cells carry NaN (-1 for
+    integers).
     """
 
     def __init__(self, pvd_path, sample: Sample):
