@@ -10,7 +10,7 @@ from jaxbpm._text import shown
 from jaxbpm.errors import SampleError
 
 __all__ = ["MAX_LISTED", "listed", "array", "float_array", "finite", "checked_positions", "checked_radii",
-           "checked_bonds", "bond_lengths", "checked_bond_radius", "checked_bond_material"]
+           "checked_bonds", "bond_lengths", "checked_bond_radius", "checked_bond_material", "checked_types"]
 
 MAX_LISTED = 10  # how many offending indices an error message lists
 
@@ -305,3 +305,37 @@ def checked_bond_material(bond_material, nb: int, n_materials: int) -> np.ndarra
             f"unknown material index (the table has {n_materials} components, 0..{n_materials - 1}) at bonds "
             f"{listed(bad)}, e.g. index {bm[bad[0]]}")
     return bm
+
+
+def checked_types(types, n: int) -> np.ndarray:
+    """The integer type of each particle (LAMMPS atom types, another code's material or group column).
+
+    Args:
+      types: ``[n]`` or scalar whole numbers >= 0 (floats that are whole numbers are accepted, as text files give
+        them), or ``None`` (every particle type 1, LAMMPS's first atom type).
+      n: the number of particles.
+
+    Returns:
+      ``[n]`` int32.
+
+    Raises:
+      SampleError: wrong shape, booleans, numbers that are not whole, or types below 0 or beyond int32.
+    """
+    if types is None:
+        return np.ones(n, dtype=np.int32)
+    t = array("types", types)
+    if t.ndim == 0:
+        t = np.full(n, t)
+    if t.shape != (n,):
+        raise SampleError(f"types must have shape [{n}] (one per particle), got {t.shape}")
+    if t.dtype == bool or not (np.issubdtype(t.dtype, np.integer) or np.issubdtype(t.dtype, np.floating)):
+        raise SampleError(f"types must hold whole numbers (one per particle), got dtype {t.dtype}")
+    if np.issubdtype(t.dtype, np.floating):
+        bad = np.flatnonzero(~np.isfinite(t) | (t != np.round(t)))
+        if bad.size:
+            raise SampleError(f"types must be whole numbers; not at particles {listed(bad)}, e.g. {t[bad[0]]!r}")
+    bad = np.flatnonzero((t < 0) | (t > np.iinfo(np.int32).max))
+    if bad.size:
+        raise SampleError(f"types must lie in 0..{np.iinfo(np.int32).max}; not at particles {listed(bad)}, "
+                          f"e.g. {t[bad[0]]!r}")
+    return t.astype(np.int32)

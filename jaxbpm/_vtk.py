@@ -53,6 +53,11 @@ def user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
     return out
 
 
+def _types(sample: Sample) -> np.ndarray:
+    """The particle types as int32 (1 where the sample has none)."""
+    return np.ones(sample.n_particles, np.int32) if sample.types is None else np.asarray(sample.types, np.int32)
+
+
 def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = None,
                bond_data: Mapping[str, Any] | None = None) -> pathlib.Path:
     """Write particles and bonds to a VTK file for ParaView, atomically.
@@ -61,7 +66,8 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
     order) and ``line`` (one cell per bond, in bond order; left out when the sample has no bonds, since legacy
     VTK cannot hold an empty block).
 
-    Point data: ``radius`` [m], ``mass`` [kg], ``coordination`` (bonds per particle), then ``point_data``.
+    Point data: ``radius`` [m], ``mass`` [kg], ``coordination`` (bonds per particle), ``type`` (``Sample.types``),
+    then ``point_data``.
     Cell data, per bond: ``bond_radius`` [m], ``material`` (component index), ``length`` [m] (initial bond
     length), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
     the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for ``material``.
@@ -96,6 +102,7 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
         "radius": np.asarray(sample.radii, dtype=np.float64),
         "mass": np.asarray(sample.mass, dtype=np.float64),
         "coordination": np.asarray(sample.coordination(), dtype=np.int32),
+        "type": _types(sample),
     }
     pdata.update(user_data("point_data", point_data, n, "particle", set(pdata)))
     bdata = {

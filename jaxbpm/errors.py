@@ -9,6 +9,7 @@ __all__ = [
     "NotFiniteError",
     "SolveError",
     "SceneError",
+    "GroupError",
     "OptionsError",
     "SimulationInterrupted",
 ]
@@ -28,6 +29,18 @@ class SampleFileError(JaxbpmError, OSError):
 
 class SceneError(JaxbpmError, ValueError):
     """A scene (boundary conditions, loading) does not fit the sample or is ill-posed."""
+
+
+class GroupError(SceneError):
+    """A boundary group (the particles a scene clamps or moves) selects nothing, overlaps another, is cut off from it
+    by the bonds, or does not fit the sample. A :class:`SceneError`. ``group``: the group's name (``"fixed"``,
+    ``"driven"``, ...); ``particles``: the indices of the particles at fault (empty where none are).
+    """
+
+    def __init__(self, message: str, group: str = "", particles=()):
+        super().__init__(message)
+        self.group = group
+        self.particles = tuple(int(i) for i in particles)
 
 
 class OptionsError(SceneError):

@@ -20,6 +20,8 @@ name                            shape        units       meaning
 ``/bonds``                      ``[nb, 2]``  1           particle indices of each bond (i < j), int32
 ``/bond_radius``                ``[nb]``     m           bond radius
 ``/bond_material``              ``[nb]``     1           material component of each bond, int32
+``/types``                      ``[n]``      1           each particle's type, int32 (files without it:
+                                                         every particle type 1)
 ``/materials/E``                ``[nm]``     Pa          bond Young's modulus per component
 ``/materials/nu``               ``[nm]``     1           bond Poisson ratio
 ``/materials/tensile_strength`` ``[nm]``     Pa          (``inf`` = unbreakable)
@@ -30,6 +32,8 @@ name                            shape        units       meaning
                                                          bond_J, coordination: for external readers;
                                                          recomputed on load and checked against these
 ==============================  ===========  ==========  =============================================
+
+A file written before ``/types`` existed loads with every particle type 1 and verifies as before.
 
 Root attributes: ``format``, ``format_version``, ``jaxbpm_version``, ``units`` (a note), ``bond_contact``, and
 ``domain_kind`` / ``domain_lo`` / ``domain_hi`` [m] when the sample has a domain (absent otherwise).
@@ -105,6 +109,7 @@ def _write_inputs(f, sample: Sample) -> None:
     dtypes = {"bonds": np.int32, "bond_material": np.int32}
     for name, units in _INPUTS:
         _dataset(f, name, np.asarray(getattr(sample, name), dtype=dtypes.get(name, np.float64)), units)
+    _dataset(f, "types", _types(sample), "1")
     mats = f.create_group("materials")
     mats.attrs["description"] = "bond material table, one entry per component (index = /bond_material)"
     for name, units in _MATERIALS:
@@ -114,11 +119,18 @@ def _write_inputs(f, sample: Sample) -> None:
         _dataset(pm, name, np.float64(getattr(sample.particle_material, name)), units)
 
 
+def _types(sample: Sample) -> np.ndarray:
+    """The sample's particle types as int32 (type 1 where it has none)."""
+    t = sample.types
+    return np.ones(sample.n_particles, np.int32) if t is None else np.asarray(t, dtype=np.int32)
+
+
 def _inputs_crc32(sample: Sample) -> int:
     """CRC-32 (zlib) of everything ``sample`` is built from, in a fixed order: ``positions``, ``radii`` (float64),
     ``bonds``, ``bond_material`` (int32), ``bond_radius``, the material table ``E``, ``nu``, ``tensile_strength``,
     ``shear_strength`` and the particle material's scalars (float64), each array preceded by its shape (int64),
-    little-endian; then ``bond_contact`` and the domain (``kind``, ``lo``, ``hi``; ``none`` without one)."""
+    little-endian; then ``bond_contact`` and the domain (``kind``, ``lo``, ``hi``; ``none`` without one); then the
+    particle ``types`` (int32) where any is not 1 (so files written before types existed keep their CRC)."""
     crc = 0
 
     def add(arr, dtype):
@@ -140,6 +152,9 @@ def _inputs_crc32(sample: Sample) -> int:
     crc = zlib.crc32(b"none" if d is None else str(d.kind).encode("utf-8", "surrogatepass"), crc)
     if d is not None:
         add([d.lo, d.hi], np.float64)
+    types = _types(sample)
+    if np.any(types != 1):
+        add(types, np.int32)
     return crc
 
 
@@ -283,6 +298,7 @@ def _read_inputs(f, path: pathlib.Path, limit: int) -> dict:
     """What :meth:`Sample.from_arrays` needs, read from the open file as plain NumPy values and strings."""
     _check_header(f, path)
     data = {name: _read(f, name, path, limit) for name, _ in _INPUTS}
+    data["types"] = _read(f, "types", path, limit) if "types" in f else None  # (older files: every particle type 1)
     for group_name in ("materials", "particle_material"):
         if group_name not in f or not hasattr(f[group_name], "keys"):
             raise SampleFileError(f"{path}: missing field '/{group_name}' (group)")
@@ -373,7 +389,8 @@ def load_sample(path, *, verify: bool = True) -> Sample:
         sample = Sample.from_arrays(
             data["positions"], data["radii"], data["bonds"], data["bond_radius"],
             bond_material=data["bond_material"], materials=data["materials"],
-            particle_material=data["particle_material"], bond_contact=data["bond_contact"], domain=data["domain"])
+            particle_material=data["particle_material"], bond_contact=data["bond_contact"], domain=data["domain"],
+            types=data["types"])
     except SampleError as exc:
         raise SampleError(f"{path}: {exc}") from exc
     if derived is not None:

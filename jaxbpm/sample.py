@@ -19,7 +19,7 @@ import numpy as np
 from jaxbpm._spatial import morton_order
 from jaxbpm._text import shown
 from jaxbpm._validate import (bond_lengths, checked_bond_material, checked_bond_radius, checked_bonds,
-                              checked_positions, checked_radii, listed)
+                              checked_positions, checked_radii, checked_types, listed)
 from jaxbpm.errors import SampleError
 
 __all__ = ["Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSummary"]
@@ -209,6 +209,7 @@ class SampleSummary:
     radius_max: float
     total_mass: float
     bond_contact: str
+    types: tuple[tuple[int, int], ...] = ()
 
     def __str__(self) -> str:
         lo = ", ".join(f"{v:.4g}" for v in self.bbox_lo)
@@ -225,6 +226,7 @@ class SampleSummary:
             f"bounding box [m]     ({lo}) .. ({hi})",
             f"total mass [kg]      {self.total_mass:.4g}",
             f"bonded pairs         contact forces {self.bond_contact}d",
+            f"particle types       {', '.join(f'{t}: {c}' for t, c in self.types)}  (type: particles)",
         ]
         return "\n".join(lines)
 
@@ -242,6 +244,8 @@ class Sample:
     component index, ``bond_length [nb]`` initial length L m, ``bond_area [nb]`` A = pi r_b^2,
     ``bond_I [nb]`` I = pi r_b^4 / 4, ``bond_J [nb]`` J = pi r_b^4 / 2.
     ``materials``: :class:`BondMaterials` (per component). ``particle_material``: :class:`ParticleMaterial`.
+    ``types [n]`` int32: each particle's type (LAMMPS atom types, another code's material or group column; default
+    1), which boundary groups can select (:class:`jaxbpm.scenes.groups.Type`); no solver reads it.
     Static: ``bond_contact`` (``"superimpose"``: bonded pairs also feel contact forces, or ``"replace"``: they do
     not), ``domain`` (the generated region, or ``None``).
 
@@ -263,6 +267,7 @@ class Sample:
     particle_material: ParticleMaterial
     bond_contact: str = "superimpose"
     domain: Domain | None = None
+    types: Any = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -280,6 +285,7 @@ class Sample:
         particle_material: Mapping[str, Any] | ParticleMaterial | None = None,
         bond_contact: str = "superimpose",
         domain: Domain | None = None,
+        types=None,
     ) -> "Sample":
         """Build and validate a sample from plain arrays.
 
@@ -296,6 +302,8 @@ class Sample:
           particle_material: mapping or :class:`ParticleMaterial` (contact E, nu, friction, restitution).
           bond_contact: ``"superimpose"`` or ``"replace"`` (do bonded pairs also feel contact forces?).
           domain: the region the sample fills (used for its packing fraction), optional.
+          types: ``[n]`` (or a scalar) whole numbers >= 0, each particle's type (default 1, LAMMPS's first atom
+            type); carried through subsets, renumbering and files, read by no solver.
 
         Returns:
           The sample, with its derived per-particle and per-bond quantities.
@@ -315,6 +323,7 @@ class Sample:
         if not isinstance(bond_contact, str) or bond_contact not in _BOND_CONTACT:
             raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {shown(bond_contact)}")
         domain = _checked_domain(domain)
+        ty = checked_types(types, n)
 
         mass = pm.density * 4.0 / 3.0 * np.pi * rad**3
         return cls(
@@ -333,6 +342,7 @@ class Sample:
             particle_material=pm,
             bond_contact=bond_contact,
             domain=domain,
+            types=ty,
         )
 
     def replace(self, **changes) -> "Sample":
@@ -341,7 +351,7 @@ class Sample:
         Args:
           **changes: keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
             ``bond_radius_ratio``, ``bond_material``, ``materials``, ``density``, ``particle_material``,
-            ``bond_contact``, ``domain``). New ``bonds`` need a new ``bond_radius`` or ``bond_radius_ratio``.
+            ``bond_contact``, ``domain``, ``types``). New ``bonds`` need a new ``bond_radius`` or ``bond_radius_ratio``.
 
         Returns:
           The sample, its derived quantities recomputed.
@@ -351,7 +361,8 @@ class Sample:
         """
         kw = dict(positions=self.positions, radii=self.radii, bonds=self.bonds, bond_radius=self.bond_radius,
                   bond_material=self.bond_material, materials=self.materials,
-                  particle_material=self.particle_material, bond_contact=self.bond_contact, domain=self.domain)
+                  particle_material=self.particle_material, bond_contact=self.bond_contact, domain=self.domain,
+                  types=self.types)
         if "bond_radius_ratio" in changes:
             kw.pop("bond_radius")
         if "bonds" in changes and "bond_radius" not in changes and "bond_radius_ratio" not in changes:
@@ -384,11 +395,7 @@ class Sample:
         new_index = np.cumsum(keep) - 1
         b = np.asarray(self.bonds)
         kb = keep[b[:, 0]] & keep[b[:, 1]]
-        return Sample.from_arrays(np.asarray(self.positions)[keep], np.asarray(self.radii)[keep],
-                                  new_index[b[kb]], np.asarray(self.bond_radius)[kb],
-                                  bond_material=np.asarray(self.bond_material)[kb], materials=self.materials,
-                                  particle_material=self.particle_material, bond_contact=self.bond_contact,
-                                  domain=self.domain)
+        return self._rebuilt(keep, new_index[b[kb]], kb)
 
     def renumbered(self, order=None) -> "Sample":
         """The same sample with its particles renumbered.
@@ -415,10 +422,16 @@ class Sample:
         new_index[order] = np.arange(n)
         b = np.sort(new_index[np.asarray(self.bonds, np.int64).reshape(-1, 2)], axis=1)
         by = np.lexsort((b[:, 1], b[:, 0]))
-        return Sample.from_arrays(np.asarray(self.positions)[order], np.asarray(self.radii)[order], b[by],
-                                  np.asarray(self.bond_radius)[by], bond_material=np.asarray(self.bond_material)[by],
+        return self._rebuilt(order, b[by], by)
+
+    def _rebuilt(self, rows, bonds, bond_rows) -> "Sample":
+        """The particles ``rows`` of this sample (their types with them) and its bonds ``bond_rows``, now joining
+        ``bonds``, validated again."""
+        pick = lambda a, idx: None if a is None else np.asarray(a)[idx]  # noqa: E731
+        return Sample.from_arrays(pick(self.positions, rows), pick(self.radii, rows), bonds,
+                                  pick(self.bond_radius, bond_rows), bond_material=pick(self.bond_material, bond_rows),
                                   materials=self.materials, particle_material=self.particle_material,
-                                  bond_contact=self.bond_contact, domain=self.domain)
+                                  bond_contact=self.bond_contact, domain=self.domain, types=pick(self.types, rows))
 
     def largest_cluster(self) -> "Sample":
         """The sample without the particles outside its largest bonded cluster (loose particles and fragments).
@@ -518,6 +531,7 @@ class Sample:
             radius_max=float(rad.max()),
             total_mass=float(np.sum(self.mass)),
             bond_contact=self.bond_contact,
+            types=tuple((int(t), int(c)) for t, c in zip(*np.unique(np.asarray(self.types), return_counts=True))),
         )
 
     def __repr__(self) -> str:
@@ -528,7 +542,7 @@ class Sample:
 _register(
     Sample,
     ["positions", "radii", "mass", "inertia", "bonds", "bond_radius", "bond_material", "bond_length",
-     "bond_area", "bond_I", "bond_J", "materials", "particle_material"],
+     "bond_area", "bond_I", "bond_J", "materials", "particle_material", "types"],
     ["bond_contact", "domain"],
 )
 

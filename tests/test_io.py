@@ -332,3 +332,31 @@ def test_scalars_and_attributes_changed_after_writing_are_an_error(tmp_path, edi
     with h5py.File(path, "a") as f:
         del f["derived"].attrs["inputs_crc32"]
     assert changed(io.load_sample(path))
+
+
+def test_particle_types_round_trip(tmp_path):
+    typed = _chain(types=[1, 4, 4, 2, 0, 7])
+    loaded = io.load_sample(io.save_sample(tmp_path / "t.h5", typed))
+    _assert_same(typed, loaded)
+    assert loaded.types.dtype == np.int32 and loaded.types.tolist() == [1, 4, 4, 2, 0, 7]
+    with h5py.File(tmp_path / "t.h5", "r") as f:
+        assert f["types"].dtype == np.int32 and f["types"].attrs["units"] == "1"
+
+
+def test_a_file_without_types_loads_with_type_1_and_verifies(tmp_path):
+    # a file written before /types existed: its inputs' CRC-32 did not cover types, and still verifies
+    path = _without_header(io.save_sample(tmp_path / "s.h5", _multi()))
+    with h5py.File(path, "a") as f:
+        del f["types"]
+    loaded = io.load_sample(path)
+    assert loaded.types.tolist() == [1] * 6
+    _assert_same(_multi(), loaded)
+
+
+def test_types_changed_after_writing_are_an_error(tmp_path):
+    path = _without_header(io.save_sample(tmp_path / "s.h5", _chain(types=[1, 2, 2, 2, 1, 1])))
+    with h5py.File(path, "a") as f:
+        f["types"][0] = 3
+    with pytest.raises(SampleFileError, match=r"inputs_crc32"):
+        io.load_sample(path)
+    assert io.load_sample(path, verify=False).types[0] == 3

@@ -41,7 +41,7 @@ def test_bond_radius_ratio_uses_smaller_particle():
 def test_is_a_pytree_and_jittable():
     s = chain(3)
     leaves, tree = jax.tree_util.tree_flatten(s)
-    assert len(leaves) == 11 + 4 + 5
+    assert len(leaves) == 11 + 4 + 5 + 1  # the arrays, the two material tables, the particle types
     s2 = jax.tree_util.tree_unflatten(tree, leaves)
     assert s2.bond_contact == s.bond_contact
     total = jax.jit(lambda smp: smp.mass.sum() + smp.materials.E.sum())(s)
@@ -116,6 +116,12 @@ GOOD = dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [4e-3, 0, 0]], float), 
     (dict(radii=[1e-3, 1e-300, 1e-3]), r"mass and inertia are finite and > 0 .* particles \[1\]"),
     (dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [4e-3, 0, 0]]) + 1e12), r"too far from the origin.*recentre"),
     (dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [1e306, 0, 0]])), r"bonds must join neighbours.*\[1\]"),
+    (dict(types=[1, 2]), r"types must have shape \[3\] \(one per particle\), got \(2,\)"),
+    (dict(types=[1, -2, 3]), r"types must lie in 0\.\.2147483647; not at particles \[1\]"),
+    (dict(types=[1, 2.5, 3]), r"types must be whole numbers; not at particles \[1\]"),
+    (dict(types=[True, False, True]), r"types must hold whole numbers .* got dtype bool"),
+    (dict(types=[1, 2**40, 1]), r"types must lie in 0\.\.2147483647; not at particles \[1\]"),
+    (dict(types=["a", "b", "c"]), r"types must hold whole numbers"),
 ])
 def test_validation_errors(change, message):
     with pytest.raises(SampleError, match=message):
@@ -159,3 +165,26 @@ def test_renumbered_keeps_the_sample_and_generators_number_along_a_curve():
     np.testing.assert_allclose(k1, k0, rtol=1e-9)
     with pytest.raises(SampleError, match="permutation"):
         s.renumbered(np.zeros(s.n_particles, int))
+
+
+def test_particle_types_follow_their_particles():
+    """Types default to 1 (LAMMPS's first atom type), are int32, and go with their particles through replace,
+    subset, largest_cluster and renumbered; the pytree and the summary carry them."""
+    s = chain(5)
+    assert s.types.dtype == np.int32 and s.types.tolist() == [1] * 5
+    t = s.replace(types=np.array([3.0, 1.0, 4.0, 1.0, 5.0]))  # whole floats (a text file's column) accepted
+    assert t.types.dtype == np.int32 and t.types.tolist() == [3, 1, 4, 1, 5]
+    assert t.replace(radii=1.1 * R).types.tolist() == [3, 1, 4, 1, 5]
+    assert chain(5, types=7).types.tolist() == [7] * 5
+    assert t.subset(np.array([True, False, True, True, False])).types.tolist() == [3, 4, 1]
+    order = np.array([4, 2, 0, 1, 3])
+    r = t.renumbered(order)
+    assert r.types.tolist() == [5, 4, 3, 1, 1]
+    np.testing.assert_array_equal(np.asarray(r.positions), np.asarray(t.positions)[order])
+    cut = t.replace(bonds=[[0, 1], [1, 2], [3, 4]], bond_radius=0.5 * R)
+    assert cut.largest_cluster().types.tolist() == [3, 1, 4]
+    leaves, tree = jax.tree_util.tree_flatten(t)
+    assert any(leaf is t.types for leaf in leaves)
+    assert jax.tree_util.tree_unflatten(tree, leaves).types.tolist() == [3, 1, 4, 1, 5]
+    assert t.summary().types == ((1, 2), (3, 1), (4, 1), (5, 1))
+    assert "particle types       1: 2, 3: 1, 4: 1, 5: 1" in str(t.summary())

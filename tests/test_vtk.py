@@ -81,3 +81,9 @@ def test_export_vtk_is_atomic(tmp_path, monkeypatch):
 
 def test_io_exports_the_vtk_writer():
     assert io.export_vtk is _vtk.export_vtk
+
+
+def test_export_vtk_writes_the_particle_types(tmp_path):
+    sample = _chain(types=[5, 1, 1, 2, 2, 2])
+    mesh = meshio.read(io.export_vtk(tmp_path / "t.vtu", sample))
+    np.testing.assert_array_equal(mesh.point_data["type"], [5, 1, 1, 2, 2, 2])

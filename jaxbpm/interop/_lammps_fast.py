@@ -97,8 +97,8 @@ def _sections(lines: _Lines, counts: dict[str, int], i: int) -> dict[str, tuple[
 
 
 def _atoms(lines: _Lines, sections, atom_style):
-    """``(ids, dia, dens, pos)`` of the Atoms section sorted by ID, or ``None`` where it is not plainly well formed
-    (unknown style, comments, a bad value, duplicate IDs, more than one density)."""
+    """``(ids, dia, dens, pos, types)`` of the Atoms section sorted by ID, or ``None`` where it is not plainly well
+    formed (unknown style, comments, a bad value, duplicate IDs, more than one density)."""
     if "Atoms" not in sections:
         return None
     _, comment, rows = sections["Atoms"]
@@ -115,15 +115,15 @@ def _atoms(lines: _Lines, sections, atom_style):
     got = _table(text_rows, [(f"c{k}", "f8" if 2 + off <= k <= 6 + off else "i8") for k in range(ncols)])
     if got is None or len(got) != n:
         return None
-    ids, dia, dens = got["c0"], got[f"c{2 + off}"], got[f"c{3 + off}"]
+    ids, dia, dens, types = got["c0"], got[f"c{2 + off}"], got[f"c{3 + off}"], got[f"c{1 + off}"]
     pos = np.stack([got[f"c{k + 4 + off}"] for k in range(3)], axis=1)
     if not (np.all((dia > 0) & np.isfinite(dia)) and np.all(np.isfinite(pos))):
         return None
     order = np.argsort(ids, kind="stable")
-    ids, dia, dens, pos = ids[order], dia[order], dens[order], pos[order]
+    ids, dia, dens, pos, types = ids[order], dia[order], dens[order], pos[order], types[order]
     if np.any(np.diff(ids) == 0) or np.any(dens != dens[0]):
         return None
-    return ids, dia, dens, pos
+    return ids, dia, dens, pos, np.asarray(types, np.int64)
 
 
 def _bond_rows(lines: _Lines, sections):
@@ -207,8 +207,8 @@ def parse_fast(path, text: str, atom_style):
       atom_style: ``"bpm/sphere"``, ``"sphere"`` or ``None`` (from the Atoms comment or the column count).
 
     Returns:
-      ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, (types, coefficients))``, as the
-      line-by-line reader gives it, or ``None`` for any file that is not plainly well formed.
+      ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, (types, coefficients), atom
+      types)``, as the line-by-line reader gives it, or ``None`` for any file that is not plainly well formed.
 
     Raises:
       SampleFileError: a bad checksum field, metadata line or header line.
@@ -223,6 +223,6 @@ def parse_fast(path, text: str, atom_style):
     bonds = None if atoms is None else _bonds(lines, sections, atoms[0], counts)
     if bonds is None:
         return None
-    _, dia, dens, pos = atoms
+    _, dia, dens, pos, atom_types = atoms
     table = _coeffs(path, lines, sections)
-    return (crc, text[text.index("\n") + 1:], meta, pos, dia, dens, *bonds, table)
+    return (crc, text[text.index("\n") + 1:], meta, pos, dia, dens, *bonds, table, atom_types)

@@ -1,4 +1,5 @@
-"""CSV samples: ``NAME.csv`` (particles) and ``NAME_bonds.csv`` (bonds); see :mod:`jaxbpm.interop.formats`.
+"""CSV samples: ``NAME.csv`` (particles, with each particle's type) and ``NAME_bonds.csv`` (bonds); see
+:mod:`jaxbpm.interop.formats`.
 
 A particles file written by jaxbpm ends with the comment line ``# crc32=XXXXXXXX bonds_crc32=YYYYYYYY``: the CRC-32
 (zlib, 8 hex digits) of the particles file without that line, and of the whole bonds file. The reader checks both
@@ -43,8 +44,10 @@ def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     bpath = _bonds_path(path)
     meta = meta_of(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-    plines = [meta_line(meta), "id,x,y,z,radius"]
-    plines += [f"{i},{exact_text(pos[i, 0])},{exact_text(pos[i, 1])},{exact_text(pos[i, 2])},{exact_text(rad[i])}" for i in range(sample.n_particles)]
+    types = np.ones(sample.n_particles, np.int64) if sample.types is None else np.asarray(sample.types, np.int64)
+    plines = [meta_line(meta), "id,x,y,z,radius,type"]
+    plines += [f"{i},{exact_text(pos[i, 0])},{exact_text(pos[i, 1])},{exact_text(pos[i, 2])},{exact_text(rad[i])},"
+               f"{types[i]}" for i in range(sample.n_particles)]
     b, rb, bm = np.asarray(sample.bonds), np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
     m = sample.materials
     blines = ["i,j,bond_radius,material,E,nu,tensile_strength,shear_strength"]
@@ -123,8 +126,9 @@ def _column(path, header, rows, names, cast=float, required=True):
     return None, None
 
 
-def _particles(path, header, rows) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
-    """The particles file's centres ``[n, 3]``, radii ``[n]`` and ``{particle id: row index}``."""
+def _particles(path, header, rows) -> tuple[np.ndarray, np.ndarray, dict[int, int], np.ndarray | None]:
+    """The particles file's centres ``[n, 3]``, radii ``[n]``, ``{particle id: row index}`` and types ``[n]`` (a
+    ``type``, ``group`` or ``material`` column; ``None`` without one)."""
     pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
     rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
     if rname in ("diameter", "d"):
@@ -137,7 +141,8 @@ def _particles(path, header, rows) -> tuple[np.ndarray, np.ndarray, dict[int, in
         if int(ids[k]) in index:
             raise SampleFileError(f"{path}:{no}: duplicate particle id {ids[k]}")
         index[int(ids[k])] = k
-    return pos, rad, index
+    types, _ = _column(path, header, rows, ("type", "group", "material"), cast=int, required=False)
+    return pos, rad, index, types
 
 
 def _bond_pairs(path, bpath, bheader, brows, ends, index: dict[int, int]) -> np.ndarray:
@@ -198,8 +203,9 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     bpath = pathlib.Path(bonds_path) if bonds_path is not None else _bonds_path(path)
     if bonds_path is None and not bpath.exists() and meta and meta.get("bonds_file"):
         bpath = path.with_name(meta["bonds_file"])
-    pos, rad, index = _particles(path, header, rows)
+    pos, rad, index, types = _particles(path, header, rows)
     kw = dict(sample_kw)
+    kw.setdefault("types", types)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])

@@ -43,6 +43,19 @@ class DumpFrame:
                               f"xs ys zs); columns: {list(self.columns)}")
 
     @property
+    def types(self) -> np.ndarray:
+        """The atom types of an atoms frame (its ``type`` column) in the order of :attr:`ids`: ``[n]`` int64, as
+        ``Sample.types`` takes them (``Sample.from_arrays(frame.positions, ..., types=frame.types)``)."""
+        if "type" not in self.columns:
+            raise SampleFileError(f"dump frame at timestep {self.timestep} has no 'type' column; columns: "
+                                  f"{list(self.columns)}")
+        t = self.columns["type"]
+        if not np.all(np.isfinite(t) & (t == np.round(t))):
+            raise SampleFileError(f"dump frame at timestep {self.timestep}: the 'type' column holds values that are "
+                                  f"not whole numbers")
+        return t[np.argsort(self.columns["id"], kind="stable")].astype(np.int64)
+
+    @property
     def bond_atoms(self) -> np.ndarray:
         """The two atom IDs of each entry of a local (bond) frame: ``[nb, 2]`` int64."""
         names = list(self.columns)

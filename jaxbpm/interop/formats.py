@@ -12,7 +12,8 @@ other programs) are read as they are. To accept an intended hand edit, delete th
 
 LAMMPS data (:func:`write_lammps_data`, :func:`read_lammps_data`)
     ``atom_style bpm/sphere`` (``id mol type diameter density x y z``; ``sphere``: ``id type diameter density x y
-    z``; optional image flags), ``Bonds`` (``id type atom1 atom2``) and a ``Bond Coeffs # bpm/rotational`` section
+    z``; optional image flags; the atom types are ``Sample.types``, written from it by default), ``Bonds`` (``id
+    type atom1 atom2``) and a ``Bond Coeffs # bpm/rotational`` section
     (``type Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b``, see :mod:`jaxbpm.interop.conventions`). LAMMPS
     can only define ``bond_style bpm/rotational`` after the box exists, so read the file in LAMMPS with
     ``read_data FILE nocoeff`` followed by the ``bond_style``/``bond_coeff`` lines of :func:`write_lammps_coeffs`.
@@ -20,10 +21,12 @@ LAMMPS data (:func:`write_lammps_data`, :func:`read_lammps_data`)
     bond_radius material``), which LAMMPS ignores and which make jaxbpm -> LAMMPS data -> jaxbpm exact. Files
     without them are translated from the coefficients (one material component per distinct (E, nu, strengths)).
 LAMMPS dump (:func:`read_lammps_dump`)
-    text dumps: ``ITEM: ATOMS`` frames (positions from x/y/z, xu/yu/zu or scaled xs/ys/zs, any other columns) and
+    text dumps: ``ITEM: ATOMS`` frames (positions from x/y/z, xu/yu/zu or scaled xs/ys/zs, atom types from
+    ``type``: :attr:`DumpFrame.types`, any other columns) and
     ``ITEM: ENTRIES`` frames of ``dump local`` (bond lists from ``compute property/local batom1 batom2 btype``).
 CSV (:func:`write_csv`, :func:`read_csv`)
-    ``NAME.csv`` (particles: ``id,x,y,z,radius``) and ``NAME_bonds.csv`` (``i,j,bond_radius,material,E,nu,
+    ``NAME.csv`` (particles: ``id,x,y,z,radius,type``; foreign files: the type from a ``type``, ``group`` or
+    ``material`` column, else 1) and ``NAME_bonds.csv`` (``i,j,bond_radius,material,E,nu,
     tensile_strength,shear_strength``, i and j particle ids); a ``# jaxbpm {...}`` first line keeps what the columns
     cannot (particle material, material table, bond_contact, domain). Foreign files may use ``diameter`` instead of
     ``radius``, ``bond_diameter`` instead of ``bond_radius``, ``id1,id2`` instead of ``i,j``, and may leave out the

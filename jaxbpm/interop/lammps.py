@@ -162,7 +162,8 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
       path: the data file. Atom IDs are particle index + 1, bond IDs bond index + 1.
       sample: the sample.
       normalize: coefficients for ``bond_style bpm/rotational normalize yes`` (Kr, Ks multiplied by L).
-      atom_types: ``[n]`` LAMMPS atom type per particle (default all 1), e.g. to make groups.
+      atom_types: ``[n]`` LAMMPS atom type per particle, each >= 1 (default: ``sample.types``, so groups by type
+        travel with the file).
       bond_types: ``[nb]`` 1-based bond type per bond (default: bonds with identical coefficients share a type).
         Bonds forced into one type get the coefficients of its first bond (a warning states the largest
         difference).
@@ -200,9 +201,14 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
                 warnings.warn(f"bond types given to write_lammps_data merge bonds whose coefficients differ by up to "
                               f"{100 * off:.3g} %; each type gets its first bond's coefficients",
                               conventions.InexactTranslationWarning, stacklevel=2)
-    atype = np.ones(n, np.int64) if atom_types is None else np.asarray(atom_types).astype(np.int64).reshape(-1)
+    if atom_types is None:
+        atom_types = np.ones(n, np.int64) if sample.types is None else sample.types
+    atype = np.asarray(atom_types).astype(np.int64).reshape(-1)
     if atype.shape != (n,) or atype.min() < 1:
-        raise SampleError(f"atom_types must hold {n} types >= 1, got shape {atype.shape}")
+        where = "" if atype.shape != (n,) else (f" (type {int(atype.min())} at particles "
+                                                f"{np.flatnonzero(atype < 1)[:10].tolist()}; LAMMPS's atom types count "
+                                                f"from 1: write atom_types=sample.types + 1)")
+        raise SampleError(f"atom_types must hold {n} types >= 1, got shape {atype.shape}{where}")
     density = float(sample.particle_material.density)
     pad = 10.0 * rad.max()
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
@@ -242,7 +248,8 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
                      materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
     """Read a LAMMPS data file with spheres and bonds into a :class:`Sample`.
 
-    Particles are ordered by atom ID. Bond parameters come, in this order of preference, from jaxbpm's own comments
+    Particles are ordered by atom ID; their atom types become ``Sample.types`` (groups by type:
+    :class:`jaxbpm.scenes.groups.Type`). Bond parameters come, in this order of preference, from jaxbpm's own comments
     (exact, when they agree with the coefficients), from ``Bond Coeffs`` / ``coeffs`` translated by
     :func:`jaxbpm.interop.conventions.from_lammps`, or from ``bond_radius_ratio`` + ``materials`` (geometry only).
 
@@ -256,7 +263,8 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
       breaking: ``False`` ignores the failure thresholds (LAMMPS ``break no``).
       bond_radius_ratio, materials: ignore the coefficients; bond radius ratio and material table as in
         :meth:`Sample.from_arrays`.
-      **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ...).
+      **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ``types`` in
+        place of the atom types, ...).
 
     Returns:
       The sample, particles in the order of their atom IDs.
@@ -269,7 +277,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     path = pathlib.Path(path)
     text = read_text(path)
     got = parse_fast(path, text, atom_style)
-    crc, body, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table = \
+    crc, body, meta, pos, dia, dens, bonds, btype, rb_c, mat_c, table, atom_types = \
         got if got is not None else _parse_lines(path, text, atom_style)
     nb = len(bonds)
     if crc is not None:  # the file read well: is it the one jaxbpm wrote?
@@ -288,6 +296,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     if normalize is None:
         normalize = bool(meta.get("normalize", False)) if meta else False
     kw = dict(sample_kw)
+    kw.setdefault("types", atom_types)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])
@@ -395,9 +404,10 @@ def _atom_style(path, sections, atom_style) -> str | None:
 
 
 def _atom_rows(path, raw: list[str], rows: list[Line], style: str | None):
-    """``(ids, dia, dens, pos)`` of the Atoms rows in file order; errors name the line."""
+    """``(ids, dia, dens, pos, types)`` of the Atoms rows in file order; errors name the line."""
     n = len(rows)
-    ids, dia, dens, pos = np.zeros(n, np.int64), np.zeros(n), np.zeros(n), np.zeros((n, 3))
+    ids, types = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    dia, dens, pos = np.zeros(n), np.zeros(n), np.zeros((n, 3))
     for k, ln in enumerate(rows):
         st = style or {7: "sphere", 10: "sphere", 8: "bpm/sphere", 11: "bpm/sphere"}.get(len(ln.words))
         ncol = ATOM_COLUMNS.get(st)
@@ -407,7 +417,7 @@ def _atom_rows(path, raw: list[str], rows: list[Line], style: str | None):
                 f"diameter density x y z) or 7 (sphere: id type diameter density x y z), optionally + 3 image flags")
         off = ncol - 7
         try:
-            ids[k] = int(ln.words[0])
+            ids[k], types[k] = int(ln.words[0]), int(ln.words[1 + off])
             dia[k], dens[k] = float(ln.words[2 + off]), float(ln.words[3 + off])
             pos[k] = [float(w) for w in ln.words[4 + off:7 + off]]
         except (ValueError, OverflowError):
@@ -419,28 +429,28 @@ def _atom_rows(path, raw: list[str], rows: list[Line], style: str | None):
         if not np.all(np.isfinite(pos[k])):
             raise SampleFileError(f"{path}:{ln.no}: atom {ids[k]} has a coordinate that is not finite: "
                                   f"{raw[ln.no - 1].strip()!r}")
-    return ids, dia, dens, pos
+    return ids, dia, dens, pos, types
 
 
 def _atoms_by_line(path, raw: list[str], sections, atom_style):
-    """``(ids, dia, dens, pos)`` of the Atoms section sorted by ID: unique IDs, one density; errors name the
+    """``(ids, dia, dens, pos, types)`` of the Atoms section sorted by ID: unique IDs, one density; errors name the
     line."""
     style = _atom_style(path, sections, atom_style)
     _, rows = sections.get("Atoms", (None, []))
     if not rows:
         raise SampleFileError(f"{path}: the Atoms section is empty")
-    ids, dia, dens, pos = _atom_rows(path, raw, rows, style)
+    ids, dia, dens, pos, types = _atom_rows(path, raw, rows, style)
     order = np.argsort(ids, kind="stable")
     dup = np.flatnonzero(np.diff(ids[order]) == 0)
     if dup.size:
         raise SampleFileError(f"{path}:{rows[order[dup[0] + 1]].no}: duplicate atom ID {ids[order[dup[0]]]}")
-    ids, dia, dens, pos = ids[order], dia[order], dens[order], pos[order]
+    ids, dia, dens, pos, types = ids[order], dia[order], dens[order], pos[order], types[order]
     atom_line = np.array([rows[o].no for o in order])
     if np.any(dens != dens[0]):
         k = int(np.flatnonzero(dens != dens[0])[0])
         raise SampleFileError(f"{path}:{atom_line[k]}: atom density {float(dens[k])!r} differs from "
                               f"{float(dens[0])!r}; a jaxbpm sample has one particle density")
-    return ids, dia, dens, pos
+    return ids, dia, dens, pos, types
 
 
 def _bonds_by_line(path, raw: list[str], sections, ids: np.ndarray, counts: dict[str, int]):
@@ -492,16 +502,16 @@ def _coeffs_by_line(path, sections) -> tuple[np.ndarray, np.ndarray]:
 
 def _parse_lines(path, text: str, atom_style):
     """The content of a data file read line by line: ``(crc, checksummed text, meta, pos, dia, dens, bonds, btype,
-    rb_c, mat_c, (types, coefficients))``, particles sorted by ID. Errors name the line."""
+    rb_c, mat_c, (types, coefficients), atom types)``, particles sorted by ID. Errors name the line."""
     raw = text.splitlines()
     # jaxbpm's checksum ends the title line; the metadata line follows it (or is first, in a file without a title)
     crc, meta = head_meta(path, raw[:6])
     counts, body_start = header(path, enumerate(raw[1:], start=2))
     sections = _line_sections(path, raw, counts, body_start)
     _check_complete(path, text, raw, counts, sections)
-    ids, dia, dens, pos = _atoms_by_line(path, raw, sections, atom_style)
+    ids, dia, dens, pos, atom_types = _atoms_by_line(path, raw, sections, atom_style)
     bonds = _bonds_by_line(path, raw, sections, ids, counts)
-    return (crc, without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections))
+    return (crc, without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections), atom_types)
 
 
 def materials_from_bonds(bond: conventions.JaxbpmBond) -> tuple[dict, np.ndarray]:

@@ -4,14 +4,15 @@ LIGGGHTS (a LAMMPS derivative) writes LAMMPS data files with ``atom_style granul
 diameter density x y z``, optionally + 3 image flags: the columns of LAMMPS' ``sphere`` style) and LAMMPS text dumps
 (``dump custom``). :func:`read_liggghts_data` reads the particles and, when the file has one, its ``Bonds``
 section; LIGGGHTS' bond styles have no ``bpm/rotational`` coefficients, so bonded files need
-``bond_radius_ratio=`` (and optionally ``materials=``). :func:`read_liggghts_dump` reads dumps as
-:func:`jaxbpm.interop.dump.read_lammps_dump` does.
+``bond_radius_ratio=`` (and optionally ``materials=``). The atom types become ``Sample.types``.
+:func:`read_liggghts_dump` reads dumps as :func:`jaxbpm.interop.dump.read_lammps_dump` does.
 
 Yade's ``yade.export.textExt(filename, format=...)`` writes ``#format NAME`` on the first line, optional ``#``
 comment lines, then one sphere a line, tab-separated: ``x y z r`` (``x_y_z_r``), ``x y z r matId``
 (``x_y_z_r_matId``) or ``x y z r`` and more columns (``x_y_z_r_attrs``); ``yade.ymport.textExt`` reads them back.
-:func:`read_yade_text` reads particles only and bonds every pair closer than a surface gap, as
-:func:`jaxbpm.generate.random_packing` does; :func:`write_yade_text` writes ``x_y_z_r`` with exact decimals.
+:func:`read_yade_text` reads particles (a ``matId`` as the particle's type, ``Sample.types``) and bonds every pair
+closer than a surface gap, as :func:`jaxbpm.generate.random_packing` does; :func:`write_yade_text` writes
+``x_y_z_r`` with exact decimals (``x_y_z_r_matId`` with the particle types, where some type is not 1).
 
 These files have no suffix of their own (``.data``, ``.txt``), so :func:`jaxbpm.interop.formats.read_sample` does
 not choose them by suffix: call these functions, or pass ``format="liggghts"`` / ``format="yade"`` to
@@ -88,12 +89,14 @@ def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: fl
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``materials``, ``particle_material``, ...).
 
     Returns:
-      The sample, particles in file order.
+      The sample, particles in file order; in ``x_y_z_r_matId`` each particle's ``matId`` is its type
+      (``Sample.types``).
     """
     from jaxbpm.generate import bond_pairs
 
     path = pathlib.Path(path)
-    pos, rad = _yade_rows(path)
+    pos, rad, mat_ids = _yade_rows(path)
+    sample_kw.setdefault("types", mat_ids)
     bonds = np.zeros((0, 2), np.int64)
     if bond_gap is not None:
         if not (np.isfinite(bond_gap) and bond_gap >= 0):
@@ -102,9 +105,10 @@ def read_yade_text(path, *, bond_gap: float | None = 0.05, bond_radius_ratio: fl
     return Sample.from_arrays(pos, rad, bonds, bond_radius_ratio=bond_radius_ratio, **sample_kw)
 
 
-def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
-    """Centres ``[n, 3]`` and radii ``[n]`` of a textExt file; errors name the line."""
-    fmt, rows = "x_y_z_r", []
+def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Centres ``[n, 3]``, radii ``[n]`` and material ids ``[n]`` (``None`` but in ``x_y_z_r_matId``) of a textExt
+    file; errors name the line."""
+    fmt, rows, mats = "x_y_z_r", [], []
     for no, line in enumerate(read_text(path).splitlines(), start=1):
         words = line.split()
         if not words:
@@ -128,23 +132,31 @@ def _yade_rows(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray]:
         if not (np.all(np.isfinite(row)) and row[3] > 0):
             raise SampleFileError(f"{path}:{no}: a sphere needs a finite centre and radius > 0, got "
                                   f"{line.strip()!r}")
+        if fmt == "x_y_z_r_matId":
+            try:
+                mats.append(int(words[4]))
+            except ValueError:
+                raise SampleFileError(f"{path}:{no}: matId must be a whole number, got {words[4]!r}") from None
         rows.append(row)
     if not rows:
         raise SampleFileError(f"{path}: no spheres (not a Yade textExt file?)")
     arr = np.array(rows, np.float64)
-    return arr[:, :3], arr[:, 3]
+    return arr[:, :3], arr[:, 3], (np.array(mats, np.int64) if len(mats) == len(rows) else None)
 
 
-def write_yade_text(path, sample: Sample, *, comment: str | None = None) -> pathlib.Path:
-    """Write the particles of ``sample`` in Yade's ``export.textExt`` ``x_y_z_r`` layout, atomically.
+def write_yade_text(path, sample: Sample, *, comment: str | None = None,
+                    mat_ids: bool | None = None) -> pathlib.Path:
+    """Write the particles of ``sample`` in Yade's ``export.textExt`` ``x_y_z_r`` layout (or ``x_y_z_r_matId``, each
+    particle's type as its material id), atomically.
 
-    Tab-separated, exact decimals; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')``. Bonds are not
-    written (Yade makes its cohesive bonds from contacts).
+    Tab-separated, exact decimals; load it in Yade with ``ymport.textExt(path, format='x_y_z_r')`` (or
+    ``'x_y_z_r_matId'``). Bonds are not written (Yade makes its cohesive bonds from contacts).
 
     Args:
       path: the text file.
       sample: the sample.
       comment: a comment line written after the ``#format`` line.
+      mat_ids: write ``x_y_z_r_matId`` with ``Sample.types`` (``None``: where some type is not 1).
 
     Returns:
       ``path`` as a :class:`pathlib.Path`.
@@ -154,6 +166,10 @@ def write_yade_text(path, sample: Sample, *, comment: str | None = None) -> path
     if comment is not None and (comment.splitlines() != [comment]):
         raise SampleFileError(f"{path}: comment must be one line of text, got {comment!r}")
     pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
-    head = "#format x_y_z_r\n" + (f"# {comment}\n" if comment else "")
-    body = "".join(f"{exact_text(x)}\t{exact_text(y)}\t{exact_text(z)}\t{exact_text(r)}\n" for (x, y, z), r in zip(pos.tolist(), rad.tolist()))
+    types = np.ones(len(rad), np.int64) if sample.types is None else np.asarray(sample.types, np.int64)
+    with_ids = bool(np.any(types != 1)) if mat_ids is None else bool(mat_ids)
+    head = f"#format x_y_z_r{'_matId' if with_ids else ''}\n" + (f"# {comment}\n" if comment else "")
+    ends = [f"\t{t}\n" for t in types.tolist()] if with_ids else ["\n"] * len(rad)
+    body = "".join(f"{exact_text(x)}\t{exact_text(y)}\t{exact_text(z)}\t{exact_text(r)}{e}"
+                   for (x, y, z), r, e in zip(pos.tolist(), rad.tolist(), ends))
     return atomic_write(path, lambda tmp: pathlib.Path(tmp).write_text(head + body, encoding="utf-8"))

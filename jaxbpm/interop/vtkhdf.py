@@ -6,7 +6,7 @@ a ``vertex`` cell per particle, then a ``line`` cell per bond (``Offsets``, ``Co
 data array per step. ``/VTKHDF/Steps`` says where each step starts: ``Values`` (the times), ``PointOffsets``,
 ``PointDataOffsets/<name>``, ``CellDataOffsets/<name>``; ``CellOffsets``, ``ConnectivityIdOffsets`` and
 ``PartOffsets`` are 0 for every step, so every step reuses the one topology. Arrays that do not change
-(``radius``, ``material``) are stored once too (their offsets stay 0). A broken bond keeps its line cell, with
+(``radius``, ``type``, ``material``) are stored once too (their offsets stay 0). A broken bond keeps its line cell, with
 ``intact`` 0, so breaking needs no topology change. The datasets are compressed with HDF5's gzip filter (which
 VTK's reader, like every HDF5 program, reads).
 
@@ -29,7 +29,7 @@ __all__ = ["VTKHDFSeries", "SUFFIXES"]
 
 SUFFIXES = (".vtkhdf", ".hdf")  # the suffixes ParaView opens with its VTKHDF reader
 _VERTEX, _LINE = 1, 3  # VTK cell types
-_STATIC = {"radius", "material"}  # arrays written once (offset 0 at every step)
+_STATIC = {"radius", "material", "type"}  # arrays written once (offset 0 at every step)
 _PACK = {"compression": "gzip", "compression_opts": 4, "shuffle": True}  # HDF5's own filters: VTK reads them
 
 

@@ -2,9 +2,9 @@
 
 XDMF 3 describes heavy data that stays in HDF5: ``write_xdmf("sample.h5")`` writes ``sample.xdmf`` next to it, one
 uniform grid whose points are the particle centres (``/positions``) and whose cells are the bonds (``/bonds``, a
-two-node polyline each), with per-particle ``radius``, ``mass`` and ``coordination`` and per-bond ``bond_radius``,
-``material`` and ``length`` attributes: nothing is copied. In ParaView open the ``.xdmf`` file (reader "XDMF
-Reader" / "Xdmf3ReaderS"), glyph the points with spheres scaled by ``radius`` and show the lines as tubes.
+two-node polyline each), with per-particle ``radius``, ``mass``, ``coordination`` and ``type`` and per-bond
+``bond_radius``, ``material`` and ``length`` attributes: nothing is copied. In ParaView open the ``.xdmf`` file
+(reader "XDMF Reader" / "Xdmf3ReaderS"), glyph the points with spheres scaled by ``radius`` and show the lines as tubes.
 
 XDMF was chosen over H5MD because it is the format ParaView, VisIt and meshio all read without plug-ins and it needs no
 change to the sample file (H5MD would need its own group layout, and ParaView reads it only through a plug-in).
@@ -22,7 +22,8 @@ from jaxbpm.errors import SampleError, SampleFileError
 __all__ = ["write_xdmf"]
 
 # (attribute name, dataset in the sample file, centre): what the grid shows besides positions and bonds
-_POINT = [("radius", "/radii"), ("mass", "/derived/mass"), ("coordination", "/derived/coordination")]
+_POINT = [("radius", "/radii"), ("mass", "/derived/mass"), ("coordination", "/derived/coordination"),
+          ("type", "/types")]  # (files written before /types existed: no type)
 _CELL = [("bond_radius", "/bond_radius"), ("material", "/bond_material"), ("length", "/derived/bond_length")]
 
 

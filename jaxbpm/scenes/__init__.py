@@ -10,14 +10,18 @@ scene. The scenes of the package:
   flexural strength. DEM and DSM.
 * :class:`BrazilianDisc` (:mod:`~jaxbpm.scenes.brazilian`): a disc squeezed across a diameter; Brazilian tensile
   strength. DEM only.
+
+Each scene's clamped groups take a mask, particle indices, a type, a region or a layer (:mod:`~jaxbpm.scenes.groups`:
+:class:`Ids`, :class:`Type`, :class:`Region`, :class:`Layer`).
 """
 
 from jaxbpm.scenes.base import (
     METHODS, AxialScene, BaseScene, Scene, _build_model, _check_failure_rule, _is_axis, _loading, lateral_stats,
     sample_breaks)
 from jaxbpm.scenes.bending import ThreePointBending
+from jaxbpm.scenes.groups import Group, Ids, Layer, Region, Type
 from jaxbpm.scenes.brazilian import BrazilianDisc
 from jaxbpm.scenes.uniaxial import UniaxialCompression
 
 __all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "Scene", "BaseScene", "AxialScene", "METHODS",
-           "sample_breaks", "lateral_stats"]
+           "sample_breaks", "lateral_stats", "Group", "Ids", "Type", "Region", "Layer"]

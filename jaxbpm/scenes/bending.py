@@ -7,6 +7,7 @@ E = K S^3 / (48 I) and the flexural strength sigma_f = 3 F_peak S / (2 b h^2).
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 
@@ -14,6 +15,7 @@ from jaxbpm.errors import SceneError
 from jaxbpm.physics.loading import Loading
 from jaxbpm.sample import Sample
 from jaxbpm.scenes.base import BaseScene, _check_failure_rule, _check_fit_range, _extent, _is_axis, _loading
+from jaxbpm.scenes.groups import _spec, clamped_groups
 
 __all__ = ["ThreePointBending"]
 
@@ -44,6 +46,9 @@ class ThreePointBending(BaseScene):
       rotations: rotational DOFs (``None``: the Model decides).
       fit_range: the part of the loading (fractions of the target deflection) over which K is fitted.
       breakage, failure_rule: as in :class:`~jaxbpm.scenes.UniaxialCompression`.
+      supports, punch: the held and the pressed particles, in place of those found from the widths (give both or
+        neither): each a boolean mask ``[n]``, a list of particle indices, a type, a region or a combination (see
+        :mod:`jaxbpm.scenes.groups`; a :class:`~jaxbpm.scenes.groups.Layer` measures along ``axis``). Kept as given.
 
     Raises:
       SceneError: an argument out of its range.
@@ -61,6 +66,8 @@ class ThreePointBending(BaseScene):
     fit_range: tuple[float, float] = (0.02, 0.1)
     breakage: bool | None = None
     failure_rule: str = "separate"
+    supports: Any = None
+    punch: Any = None
 
     #: the solvers that model this scene (the STE models uniaxial compression only)
     methods = ("dem", "dsm")
@@ -80,6 +87,11 @@ class ThreePointBending(BaseScene):
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise SceneError(f"{name} must be positive [m], got {v!r}")
+        if (self.supports is None) != (self.punch is None):
+            raise SceneError("give both supports and punch, or neither")
+        for group in (self.supports, self.punch):
+            if group is not None:
+                _spec(group)  # a group of no known form is an error here, not at the solve
 
     @property
     def uses_walls(self) -> bool:
@@ -113,11 +125,15 @@ class ThreePointBending(BaseScene):
           sample: the beam.
 
         Returns:
-          ``(supports [n], punch [n])``: boolean masks.
+          ``(supports [n], punch [n])``: boolean masks (of the groups given, or found from the widths).
 
         Raises:
-          SceneError: no particle under a support or under the punch.
+          SceneError: no particle under a support or under the punch; for groups given, a
+            :class:`~jaxbpm.errors.GroupError` naming the group and the particles.
         """
+        if self.supports is not None:
+            return clamped_groups(sample, self.supports, self.punch, axis=self.axis,
+                                  layer_thickness=self.layer_thickness, names=("supports", "punch"))
         pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
         d = 2.0 * float(np.mean(rad))
         t = self.layer_thickness if self.layer_thickness is not None else 0.5 * d

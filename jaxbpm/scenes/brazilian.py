@@ -7,13 +7,14 @@ tensile strength BTS = 2 F_peak / (pi D t).
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from jaxbpm.errors import SceneError
 from jaxbpm.sample import Sample
 from jaxbpm.scenes.base import AxialScene, _check_failure_rule, _check_fit_range, _extent, _is_axis
+from jaxbpm.scenes.groups import _spec, clamped_groups
 
 __all__ = ["BrazilianDisc"]
 
@@ -68,6 +69,9 @@ class BrazilianDisc(AxialScene):
         flattened discs give.
       layer_thickness: [m], the depth of the strips (default one mean radius).
       failure_rule: as in :class:`~jaxbpm.scenes.UniaxialCompression`.
+      fixed, driven: the held and the moved particles, in place of the strips (give both or neither; they imply
+        clamped platens, as ``platens="strips"``): each a boolean mask ``[n]``, a list of particle indices, a type, a
+        region or a combination (see :mod:`jaxbpm.scenes.groups`). Kept as given.
 
     Raises:
       SceneError: an argument out of its range.
@@ -76,7 +80,8 @@ class BrazilianDisc(AxialScene):
     _FIELD_ORDER: ClassVar[tuple[str, ...]] = (
         "axis", "disc_axis", "strain", "diameter", "thickness", "contacts", "rotations", "wall_law", "wall_stiffness",
         "fit_range", "breakage", "contact_law", "cohesive", "platens", "strip_width", "layer_thickness",
-        "failure_rule")
+        "failure_rule",
+        "fixed", "driven")
 
     axis: int = 0
     disc_axis: int = 2
@@ -87,12 +92,12 @@ class BrazilianDisc(AxialScene):
     breakage: bool | None = True
     platens: str = "strips"
     strip_width: float | None = None
+    fixed: Any = None
+    driven: Any = None
 
     #: the solvers that model this scene: a disc between platens is a contact problem loaded to failure, which the
     #: static solvers (DSM, STE) do not model
     methods = ("dem",)
-    fixed = None
-    driven = None
 
     def __post_init__(self):
         _check_failure_rule(self.failure_rule)
@@ -119,16 +124,21 @@ class BrazilianDisc(AxialScene):
             v = getattr(self, name)
             if v is not None and not _is_length(v):
                 raise SceneError(f"{name} must be a positive length [m], got {v!r}")
+        if (self.fixed is None) != (self.driven is None):
+            raise SceneError("give both fixed and driven, or neither")
+        for group in (self.fixed, self.driven):
+            if group is not None:
+                _spec(group)  # a group of no known form is an error here, not at the solve
 
     @property
     def boundary(self) -> str:
         """``"walls"`` (flat platens) or ``"layers"`` (clamped strips), as :class:`UniaxialCompression` says it."""
-        return "walls" if self.platens == "walls" else "layers"
+        return "walls" if self.uses_walls else "layers"
 
     @property
     def uses_walls(self) -> bool:
-        """Whether the platens are plane walls (``platens="walls"``)."""
-        return self.platens == "walls"
+        """Whether the platens are plane walls (``platens="walls"`` without groups given)."""
+        return self.platens == "walls" and self.fixed is None
 
     def layers(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
         """The loading strips' particles (``platens="strips"``).
@@ -140,8 +150,11 @@ class BrazilianDisc(AxialScene):
           ``(fixed [n], driven [n])``: boolean masks of the bottom and the top strip.
 
         Raises:
-          SceneError: an empty strip, or a particle in both.
+          SceneError: an empty strip, or a particle in both; for groups given, a :class:`~jaxbpm.errors.GroupError`
+            naming the group and the particles.
         """
+        if self.fixed is not None:
+            return clamped_groups(sample, self.fixed, self.driven, axis=self.axis, layer_thickness=self.layer_thickness)
         pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
         d = self.dimensions(sample)[0]
         lo, hi = _extent(sample)

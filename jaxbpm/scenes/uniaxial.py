@@ -8,13 +8,14 @@ Poisson ratio from the lateral strain of the middle third, and past the peak the
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from jaxbpm.errors import SceneError
 from jaxbpm.sample import Sample
 from jaxbpm.scenes.base import AxialScene, _check_failure_rule, _check_fit_range, _is_axis
+from jaxbpm.scenes.groups import _spec, clamped_groups
 
 __all__ = ["UniaxialCompression"]
 
@@ -32,7 +33,10 @@ class UniaxialCompression(AxialScene):
       boundary: ``"layers"`` (clamp the particles within ``layer_thickness`` of the bottom, move those within it of
         the top; every DOF of both prescribed, the top translated rigidly, no rotation) or ``"walls"`` (two
         frictionless plane walls touching the outermost spheres; the top one moves).
-      fixed, driven: explicit ``[n]`` boolean masks of clamped particles (override the layers; imply "layers").
+      fixed, driven: the clamped (held) and the driven (moved) particles, in place of the layers (and implying
+        "layers"): each a boolean mask ``[n]``, a list of particle indices, a particle type (:class:`~jaxbpm.scenes.
+        groups.Type`), a region (:class:`~jaxbpm.scenes.groups.Region`), a :class:`~jaxbpm.scenes.groups.Layer` or a
+        combination of them (see :mod:`jaxbpm.scenes.groups`). Kept as given; resolved (and checked) by ``layers``.
       layer_thickness: [m], default one mean particle radius: every particle whose centre lies within it of the
         lowest (highest) centre is clamped (driven).
       gauge_length, area: explicit l [m] and A [m^2]; defaults: l = distance between the mean centres of the
@@ -63,8 +67,8 @@ class UniaxialCompression(AxialScene):
         "rotations", "wall_law", "wall_stiffness", "fit_range", "breakage", "contact_law", "cohesive", "failure_rule")
 
     boundary: str = "layers"
-    fixed: np.ndarray | None = None
-    driven: np.ndarray | None = None
+    fixed: Any = None
+    driven: Any = None
     gauge_length: float | None = None
     area: float | None = None
 
@@ -96,6 +100,9 @@ class UniaxialCompression(AxialScene):
             raise SceneError(f"boundary must be 'layers' or 'walls', got {self.boundary!r}")
         if (self.fixed is None) != (self.driven is None):
             raise SceneError("give both fixed and driven masks, or neither")
+        for group in (self.fixed, self.driven):
+            if group is not None:
+                _spec(group)  # a group of no known form is an error here, not at the solve
         _check_fit_range(self.fit_range)
         self._check_contacts()
 
@@ -111,21 +118,18 @@ class UniaxialCompression(AxialScene):
           sample: the specimen.
 
         Returns:
-          ``(fixed [n], driven [n])``: boolean masks of the bottom and the top layer (or the explicit masks).
+          ``(fixed [n], driven [n])``: boolean masks of the bottom and the top layer (or of the groups given).
 
         Raises:
-          SceneError: a mask of the wrong shape, an empty set, or a particle in both.
+          SceneError: an empty set, or a particle in both; for groups given, a
+            :class:`~jaxbpm.errors.GroupError` naming the group and the particles (see
+            :func:`~jaxbpm.scenes.groups.clamped_groups`).
         """
-        n = sample.n_particles
         if self.fixed is not None:
-            fixed, driven = np.asarray(self.fixed, bool), np.asarray(self.driven, bool)
-            for name, m in (("fixed", fixed), ("driven", driven)):
-                if m.shape != (n,):
-                    raise SceneError(f"{name} mask must have shape [{n}], got {m.shape}")
-        else:
-            z = np.asarray(sample.positions)[:, self.axis]
-            t = self.layer_thickness if self.layer_thickness is not None else float(np.mean(sample.radii))
-            fixed, driven = z <= z.min() + t, z >= z.max() - t
+            return clamped_groups(sample, self.fixed, self.driven, axis=self.axis, layer_thickness=self.layer_thickness)
+        z = np.asarray(sample.positions)[:, self.axis]
+        t = self.layer_thickness if self.layer_thickness is not None else float(np.mean(sample.radii))
+        fixed, driven = z <= z.min() + t, z >= z.max() - t
         if not fixed.any() or not driven.any():
             raise SceneError("the fixed and the driven set must each hold at least one particle")
         if (fixed & driven).any():

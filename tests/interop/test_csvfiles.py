@@ -86,3 +86,18 @@ def test_csv_checksums(tmp_path):
     np.testing.assert_array_equal(swapped.bonds[[1, 0]], sample.bonds[:2])
     b.write_text("\n".join(rows) + "\n")
     _assert_same(sample, formats.read_csv(p))
+
+
+def test_csv_carries_the_particle_types(tmp_path):
+    typed = _multi().replace(types=[2, 2, 5, 1, 0, 3])
+    p, _ = formats.write_csv(tmp_path / "s.csv", typed)
+    assert "id,x,y,z,radius,type" in p.read_text()
+    _assert_same(typed, formats.read_csv(p))
+    # a foreign file: types from a 'group' column, or type 1 without one
+    (tmp_path / "f.csv").write_text("id,x,y,z,radius,group\n0,0,0,0,0.5,4\n1,1,0,0,0.5,2\n")
+    assert formats.read_csv(tmp_path / "f.csv").types.tolist() == [4, 2]
+    (tmp_path / "g.csv").write_text("id,x,y,z,radius\n0,0,0,0,0.5\n1,1,0,0,0.5\n")
+    assert formats.read_csv(tmp_path / "g.csv").types.tolist() == [1, 1]
+    (tmp_path / "h.csv").write_text("id,x,y,z,radius,type\n0,0,0,0,0.5,a\n")
+    with pytest.raises(SampleFileError, match=r"h\.csv:2: column 'type' must hold whole numbers"):
+        formats.read_csv(tmp_path / "h.csv")

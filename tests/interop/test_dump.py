@@ -48,3 +48,11 @@ def test_lammps_dump_atoms_and_local(tmp_path):
     (tmp_path / "cut.dump").write_text(DUMP.replace("2 1 0.2 1.0 1.0 1.0", "2 1 0.2 1.0 one 1.0"))
     with pytest.raises(SampleFileError, match=r"cut\.dump:12: a value is not a number"):
         formats.read_lammps_dump(tmp_path / "cut.dump")
+
+
+def test_dump_frame_types_follow_the_ids(tmp_path):
+    (tmp_path / "run.dump").write_text(DUMP.replace("3 1 0.3", "3 4 0.3").replace("2 1 0.2", "2 2 0.2"))
+    atoms, local = formats.read_lammps_dump(tmp_path / "run.dump")
+    np.testing.assert_array_equal(atoms.types, [1, 2, 4])  # ids 1, 2, 3
+    with pytest.raises(SampleFileError, match="has no 'type' column"):
+        local.types

@@ -97,7 +97,8 @@ def test_lammps_data_text_as_written_line_by_line(tmp_path, make):
     title, body = path.read_text().split("\n", 1)
     assert body == _reference_lammps_body(sample, types)
     assert title.endswith(f" crc32={zlib.crc32(body.encode()):08x}")
-    _assert_same(sample, formats.read_lammps_data(path))
+    # the atom types given are the particles' types of the sample read back
+    _assert_same(sample if types is None else sample.replace(types=types), formats.read_lammps_data(path))
 
 
 @pytest.mark.parametrize("section, word, new, message", [
@@ -272,3 +273,25 @@ def test_lammps_bond_coeffs_in_any_order(tmp_path, comment):
     (tmp_path / "r.data").write_text("\n".join(lines) + "\n")
     back = formats.read_lammps_data(tmp_path / "r.data")
     np.testing.assert_array_equal(lammps_coefficients(back), lammps_coefficients(s))
+
+
+def test_atom_types_are_the_sample_types(tmp_path):
+    """Sample.types are the atom types written by default, read back by both readers (the fast one and, for a file
+    the fast reader declines, line by line), and atom types < 1 are refused with the fix."""
+    sample = _multi().replace(types=[3, 1, 1, 2, 7, 2])
+    path = formats.write_lammps_data(tmp_path / "s.data", sample)
+    atoms = [ln.split() for ln in path.read_text().split("Atoms # bpm/sphere\n\n")[1].splitlines()[:6]]
+    assert [int(w[2]) for w in atoms] == [3, 1, 1, 2, 7, 2]  # id mol TYPE ...
+    assert "7 atom types" in path.read_text()
+    _assert_same(sample, formats.read_lammps_data(path))
+    text = path.read_text().split("\n", 1)[1]  # no checksum; a comment on an atom line: read line by line
+    lines = text.splitlines()
+    k = lines.index("Atoms # bpm/sphere") + 2
+    lines[k] += " # a comment"
+    (tmp_path / "t.data").write_text("LAMMPS data file\n" + "\n".join(lines) + "\n")
+    from jaxbpm.interop import _lammps_fast
+
+    assert _lammps_fast.parse_fast(tmp_path / "t.data", (tmp_path / "t.data").read_text(), None) is None
+    assert formats.read_lammps_data(tmp_path / "t.data").types.tolist() == [3, 1, 1, 2, 7, 2]
+    with pytest.raises(SampleError, match=r"type 0 at particles \[1\].*atom_types=sample.types \+ 1"):
+        formats.write_lammps_data(tmp_path / "z.data", sample.replace(types=[3, 0, 1, 2, 7, 2]))

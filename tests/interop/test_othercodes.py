@@ -128,3 +128,27 @@ def test_yade_text_formats_and_errors(tmp_path):
             formats.read_yade_text(path)
     with pytest.raises(SampleFileError, match="unknown format"):
         formats.read_sample(path, format="pfc")
+
+
+def test_yade_mat_ids_are_the_particle_types(tmp_path):
+    s = generate.lattice("sc", (3, 2, 2), 1e-3)
+    typed = s.replace(types=np.arange(s.n_particles) % 3)
+    path = formats.write_yade_text(tmp_path / "t.txt", typed)
+    assert path.read_text().startswith("#format x_y_z_r_matId\n")
+    back = formats.read_yade_text(path, bond_gap=None)
+    np.testing.assert_array_equal(back.types, typed.types)
+    np.testing.assert_array_equal(back.positions, typed.positions)
+    plain = formats.write_yade_text(tmp_path / "p.txt", s)  # every type 1: the plain layout, as before
+    assert plain.read_text().startswith("#format x_y_z_r\n")
+    assert formats.read_yade_text(plain, bond_gap=None).types.tolist() == [1] * s.n_particles
+    bad = path.read_text().replace("\t2\n", "\ttwo\n", 1)
+    (tmp_path / "b.txt").write_text(bad)
+    with pytest.raises(SampleFileError, match="matId must be a whole number"):
+        formats.read_yade_text(tmp_path / "b.txt")
+
+
+def test_liggghts_atom_types_are_the_particle_types(tmp_path):
+    text = LIGGGHTS_DATA.replace("1 atom types", "3 atom types").replace("3 1 0.002 2500", "3 3 0.002 2500")
+    (tmp_path / "l.data").write_text(text.replace("4 1 0.0025", "4 2 0.0025"))
+    s = formats.read_liggghts_data(tmp_path / "l.data", bond_radius_ratio=0.5)
+    assert s.types.tolist() == [1, 1, 3, 2]  # atoms 1..4 (the file lists 1, 3, 2, 4)

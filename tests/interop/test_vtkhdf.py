@@ -75,3 +75,14 @@ def test_vtkhdf_series_errors(tmp_path):
     series.close()
     with pytest.raises(SampleFileError, match="closed"):
         series.write(2.0)
+
+
+def test_vtkhdf_series_stores_the_particle_types_once(tmp_path):
+    sample = _lattice()
+    sample = sample.replace(types=np.arange(sample.n_particles) % 4 + 1)
+    with formats.VTKHDFSeries(tmp_path / "t.vtkhdf", sample) as series:
+        series.write(0.0)
+        series.write(1.0)
+    with h5py.File(tmp_path / "t.vtkhdf", "r") as f:
+        np.testing.assert_array_equal(f["VTKHDF/PointData/type"][:], sample.types)
+        np.testing.assert_array_equal(f["VTKHDF/Steps/PointDataOffsets/type"][:], [0, 0])

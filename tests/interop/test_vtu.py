@@ -38,3 +38,10 @@ def test_vtu_series_read_back(tmp_path):
         force = [c for c in mesh.cell_data["force"] if len(c) == nb][0]
         np.testing.assert_allclose(force, frame["bond_data"]["force"])
     assert not list(tmp_path.glob(".*.tmp"))  # atomic writes leave no temporary files
+
+
+def test_vtu_series_carries_the_particle_types(tmp_path):
+    sample = _sample().replace(types=[1, 3, 3, 2, 1, 9])
+    formats.write_vtu_series(tmp_path / "run.pvd", sample, [{"time": 0.0}])
+    mesh = meshio.read(next(tmp_path.glob("*.vtu")))
+    np.testing.assert_array_equal(mesh.point_data["type"], [1, 3, 3, 2, 1, 9])

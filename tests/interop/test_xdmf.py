@@ -41,3 +41,10 @@ def test_xdmf_needs_bonds_and_a_valid_sample(tmp_path):
     with pytest.raises(jaxbpm.SampleFileError):
         write_xdmf(tmp_path / "junk.h5")
     assert not list(tmp_path.glob("*.xdmf"))
+
+
+def test_xdmf_shows_the_particle_types(tmp_path):
+    s = jaxbpm.generate.lattice("sc", (2, 2, 3), 1e-3)
+    s = s.replace(types=np.arange(s.n_particles) % 2 + 1)
+    mesh = meshio.read(write_xdmf(io.save_sample(tmp_path / "s.h5", s)))
+    np.testing.assert_array_equal(mesh.point_data["type"], s.types)

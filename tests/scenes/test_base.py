@@ -113,7 +113,8 @@ def test_arguments_and_repr_are_the_scenes_own():
         "BrazilianDisc(axis=0, disc_axis=2, strain=0.02, diameter=None, thickness=None, contacts=True, "
         "rotations=None, wall_law='hertz', wall_stiffness=None, fit_range=(0.05, 0.25), breakage=True, "
         "contact_law='hertz', cohesive=None, platens='strips', strip_width=None, layer_thickness=None, "
-        "failure_rule='separate')")
+        "failure_rule='separate', "
+        "fixed=None, driven=None)")
     for cls in (UniaxialCompression, BrazilianDisc):
         assert issubclass(cls, AxialScene)
         assert sorted(cls._FIELD_ORDER) == sorted(f.name for f in dataclasses.fields(cls))
