@@ -27,7 +27,7 @@ What is measured (one process, pinned to one core, XLA single-threaded, float64)
 
 Goals (printed with the measured figure): DSM and STE wall on ``own`` <= 1.2 x the same sample with ``layers``; DEM
 wall / DSM wall >= 30 and DEM / STE >= 200 on ``own``; splu / DSM >= 20; a new Sample object of the same file
-rebuilds no setup. The load of every core is measured before and after (the machine may be shared).
+rebuilds no setup (its setup time is the digest of its arrays, under 2 ms). The load of every core is measured before and after (the machine may be shared).
 """
 
 from __future__ import annotations
@@ -134,8 +134,8 @@ def goals(out) -> list[dict]:
          masks["dsm"]["run_per_iteration_ms"] / lay["dsm"]["run_per_iteration_ms"], "<= 1.1"),
         ("DEM wall / DSM wall, own groups", own["dem"]["call_s"] / own["dsm"]["call_s"], ">= 30"),
         ("DEM wall / STE wall, own groups", own["dem"]["call_s"] / own["ste"]["call_s"], ">= 200"),
-        ("setup of a new Sample of the same file, DSM + STE [ms]",
-         1e3 * (out["fresh_sample"]["dsm"]["setup_s"] + out["fresh_sample"]["ste"]["setup_s"]), "== 0"),
+        ("setup of a new Sample of the same file, DSM + STE [ms] (its digest only)",
+         1e3 * (out["fresh_sample"]["dsm"]["setup_s"] + out["fresh_sample"]["ste"]["setup_s"]), "<= 2"),
     ]
     if out["splu"]:
         found.append(("splu total / DSM wall (same system, from arrays)",

@@ -27,6 +27,10 @@ Measurements (scene ``UniaxialCompression(axis=2, strain=0.002)``: bonds only, c
    outside the solver's own clock (the solver module's first import happens there). "Process" = import + first
    call (the sample's loading from HDF5 is reported apart, ``load_s``). Headline, per size: DEM second call /
    method second call (wall speed-up as a user sees it) beside DEM run / method run (kernel speed-up).
+   Imported (``--imported N``, default 3000; 0 skips): the same cold and warm processes on a bonded random packing
+   made without jaxbpm (``_common.foreign_packing``) and read from its LAMMPS data file, scene
+   ``UniaxialCompression(axis=2, strain=0.002, fixed=Type(2), driven=Type(3))`` (its own groups, atom types 2 and 3);
+   the "other sample" is the same file read again (a new ``Sample`` object: its setup is found by content).
 2. ``calibrate(sample, scene, {"stiffness": 1.3 x the sample's DSM stiffness}, method="auto")`` on the
    ``--calibrate-n`` sample: once in a new process with an empty cache (which fills it), then in a new process on
    that warm cache (import + calibrate) and a second calibration in the same process.
@@ -56,7 +60,8 @@ import sys
 import tempfile
 import time
 
-from _common import cached_box, enable_x64, machine_info, machine_load, pin, pin_threads, save_png, table, write_json
+from _common import (cached_box, enable_x64, foreign_packing, machine_info, machine_load, pin, pin_threads, save_png,
+                     table, write_json)
 
 METHODS = ("ste", "dsm", "dem")
 MARK = "TIME_TO_ANSWER_RESULT "  # prefix of the one stdout line a child reports
@@ -136,11 +141,25 @@ def _timed_solve(jaxbpm, sample, scene, method):
             "stiffness": r.stiffness, "particles": sample.n_particles, "bonds": sample.n_bonds, "stats": stats}
 
 
+def _load_imported(jaxbpm, path):
+    """The packing of :func:`_common.foreign_packing` read from its LAMMPS data file, and the scene of its own groups
+    (atom types 2 and 3)."""
+    t = time.perf_counter()
+    sample = jaxbpm.interop.formats.read_lammps_data(path, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    load_s = time.perf_counter() - t
+    from jaxbpm.scenes import Type
+
+    return sample, load_s, jaxbpm.scenes.UniaxialCompression(axis=2, strain=STRAIN, fixed=Type(2), driven=Type(3))
+
+
 def child_solve(spec):
     jaxbpm, out = _child_import(spec)
     before = _cache_entries(spec["cache_dir"])
-    sample, out["load_s"] = _load(spec["n"], 0, spec["sample_cache"])
-    scene = jaxbpm.scenes.UniaxialCompression(axis=2, strain=STRAIN)
+    if spec.get("imported"):
+        sample, out["load_s"], scene = _load_imported(jaxbpm, spec["imported"])
+    else:
+        sample, out["load_s"] = _load(spec["n"], 0, spec["sample_cache"])
+        scene = jaxbpm.scenes.UniaxialCompression(axis=2, strain=STRAIN)
     out["first"] = _timed_solve(jaxbpm, sample, scene, spec["method"])
     out["process_s"] = time.time() - spec["t_launch"]  # what a script doing only this would have taken
     out["import_plus_first_s"] = out["import_s"] + out["first"]["call_s"]
@@ -148,7 +167,10 @@ def child_solve(spec):
         out["second"] = _timed_solve(jaxbpm, sample, scene, spec["method"])
         # a third call: without priming, the second pays the allocator's first touches of the program's buffers
         out["third"] = _timed_solve(jaxbpm, sample, scene, spec["method"])
-        other, out["load2_s"] = _load(spec["n2"], 1, spec["sample_cache"])
+        if spec.get("imported"):  # the same file read again: a new Sample object, its setup found by content
+            other, out["load2_s"], _ = _load_imported(jaxbpm, spec["imported"])
+        else:
+            other, out["load2_s"] = _load(spec["n2"], 1, spec["sample_cache"])
         out["other_sample"] = _timed_solve(jaxbpm, other, scene, spec["method"])
     out["cache_before"], out["cache_after"] = before, _cache_entries(spec["cache_dir"])
     return out
@@ -221,7 +243,10 @@ def child_prepare(spec):
         sample, source = cached_box(n, seed, spec["sample_cache"])
         out.append({"n": n, "seed": seed, "particles": sample.n_particles, "bonds": sample.n_bonds,
                     "source": source, "seconds": time.perf_counter() - t})
-    return {"samples": out}
+    made = None
+    if spec.get("imported") and not os.path.exists(spec["imported"]):
+        made = foreign_packing(spec["imported_n"], 0, spec["imported"])
+    return {"samples": out, "imported": spec.get("imported"), "imported_made": made}
 
 
 CHILDREN["prepare"] = child_prepare
@@ -348,6 +373,24 @@ def evaluate_goals(runs, sizes, cal, demo):
                        _get(cal, "warm", "import_plus_first_s"), _get(cal, "n")))
     goals.append(_goal("calibrate auto, second call in the process <= 0.5 s", "<= 0.5 s", 0.5,
                        _get(cal, "warm", "second", "call_s"), _get(cal, "n")))
+    return goals
+
+
+def imported_goals(runs) -> list:
+    """The imported packing's goals: wall speed-up over the DEM >= 30x (DSM), >= 200x (STE), second calls; the file
+    read again (a new Sample) rebuilds no setup."""
+    goals = []
+    dem = _get(runs, "dem", "cold", "second")
+    for m, limit in (("dsm", 30), ("ste", 200)):
+        sec = _get(runs, m, "cold", "second")
+        if sec and dem:
+            ratio = dem["call_s"] / sec["call_s"]
+            goals.append({"goal": f"imported, own groups: DEM / {m} wall, 2nd calls", "target": f">= {limit}x",
+                          "limit": limit, "measured": ratio, "unit": "x", "met": bool(ratio >= limit), "size": None})
+        again = _get(runs, m, "cold", "other_sample")
+        if again:
+            goals.append(_goal(f"imported: {m} on the same file read again, setup", "< 1 ms", 1e-3,
+                               again["setup_s"], None))
     return goals
 
 
@@ -520,7 +563,10 @@ def measure(args, work, report, save):
                      | ({(args.calibrate_n, 0)} if not args.skip_calibrate else set()))
     base = {"threads": args.threads, "sample_cache": os.path.abspath(args.sample_cache)}
     log(f"samples {samples} in {base['sample_cache']} (generated once; a 30k sample takes minutes)")
-    prep = run_child("prepare", dict(base, samples=samples), args.child_timeout)
+    imported = (os.path.join(base["sample_cache"], f"foreign_packing_{args.imported}_seed0.data")
+                if args.imported else None)
+    prep = run_child("prepare", dict(base, samples=samples, imported=imported, imported_n=args.imported),
+                     args.child_timeout)
     report["samples"] = prep
     if prep.get("error"):
         raise SystemExit("could not prepare the samples")
@@ -559,6 +605,24 @@ def measure(args, work, report, save):
                     f"compile {f['compile_s']:.2f}, run {f['run_s']:.3f}) | import+1st {w['import_plus_first_s']:.2f} s"
                     f" | new cache entries {w['cache_after']['entries'] - w['cache_before']['entries']}")
             save()
+
+    if imported:
+        report["imported"] = {"file": imported, "scene": "UniaxialCompression(axis=2, strain=0.002, fixed=Type(2), "
+                              "driven=Type(3))", "runs": {}}
+        for m in args.methods:
+            cache = tempfile.mkdtemp(prefix=f"cache_{m}_imported_", dir=work)
+            rec = report["imported"]["runs"][m] = {"method": m, "cache_dir": cache}
+            for scen in ("cold", "warm"):
+                log(f"[{m}/imported] {scen} process ...")
+                rec[scen] = r = run_child("solve", dict(base, method=m, n=args.imported, n2=args.imported,
+                                                        cache_dir=cache, imported=imported, scenario=scen),
+                                          args.child_timeout)
+                if not r.get("error"):
+                    log(f"  1st call {r['first']['call_s']:.2f} s" + (
+                        f" | 2nd call {r['second']['call_s']:.3f} s (setup {r['second']['setup_s']:.4f}, run "
+                        f"{r['second']['run_s']:.3f}) | the file read again: setup "
+                        f"{r['other_sample']['setup_s']:.4f} s" if scen == "cold" else ""))
+                save()
 
     if not args.skip_calibrate:
         cal = report["calibrate"] = {"n": args.calibrate_n}
@@ -600,23 +664,28 @@ def _fmt(x):
     return f"{x * 1e3:.0f} ms" if x < 0.1 else (f"{x:.2f} s" if x < 10 else f"{x:.1f} s")
 
 
-def markdown_table(runs, sizes) -> str:
+def markdown_table(runs, sizes, imported=None) -> str:
     """The headline table (README, docs): per method and size, a new process on an empty and on a warm cache, the
-    second and third calls and the wall-time ratio to the DEM."""
+    second and third calls and the wall-time ratio to the DEM; then the same for the imported packing (its own
+    groups), where ``imported`` (the report's ``"imported"`` runs by method) is given."""
     rows = ["| method, particles | new process, empty cache: import + 1st call (compile) | warm disk cache: import + "
             "1st call | 2nd call (kernel run) | 3rd call | DEM / method, 2nd calls (kernel ratio) |",
             "|---|---|---|---|---|---|"]
-    for n in sizes:
-        dem = runs.get(f"dem/{n}", {}).get("cold")
-        for m in ("dem", "dsm", "ste"):
-            if f"{m}/{n}" not in runs:
+    groups = [(str(n), {m: runs[f"{m}/{n}"] for m in ("dem", "dsm", "ste") if f"{m}/{n}" in runs}) for n in sizes]
+    if imported:
+        groups.append((" imported, own groups", imported))
+    for label, by_method in groups:
+        dem = by_method.get("dem", {}).get("cold")
+        for m, rec in by_method.items():
+            c, w = rec.get("cold", {}), rec.get("warm", {})
+            if "first" not in c:
                 continue
-            c, w = runs[f"{m}/{n}"]["cold"], runs[f"{m}/{n}"].get("warm", {})
             f, s, t = c["first"], c["second"], c["third"]
-            ratio = "—" if m == "dem" or dem is None else (
+            ratio = "—" if m == "dem" or not dem or "second" not in dem else (
                 f"{dem['second']['call_s'] / s['call_s']:.0f}x ({dem['second']['run_s'] / s['run_s']:.0f}x)")
             warm = _fmt(w["import_plus_first_s"]) if "import_plus_first_s" in w else "-"
-            rows.append(f"| {m.upper()}, {f['particles']} | {_fmt(c['import_s'] + f['call_s'])} "
+            name = f"{f['particles']}{label}" if label.startswith(" ") else str(f["particles"])
+            rows.append(f"| {m.upper()}, {name} | {_fmt(c['import_s'] + f['call_s'])} "
                         f"({_fmt(f['compile_s'])}) | {warm} | {_fmt(s['call_s'])} ({_fmt(s['run_s'])}) | "
                         f"{_fmt(t['call_s'])} | {ratio} |")
     return "\n".join(rows)
@@ -648,6 +717,9 @@ def main(argv=None):
     ap.add_argument("--skip-calibrate", action="store_true")
     ap.add_argument("--threads", type=int, default=1, help="cores (XLA threads); 1 pins to one core")
     ap.add_argument("--cpu", type=int, default=None, help="core to pin to with one thread (default: the least busy)")
+    ap.add_argument("--imported", type=int, default=3000,
+                    help="particles of the packing made without jaxbpm, read from a LAMMPS data file with its own "
+                         "groups as atom types (0: skip)")
     ap.add_argument("--sample-cache", default="results/samples", help="samples saved here and reused")
     ap.add_argument("--work-dir", default=None, help="where the temporary caches go (default: the system's temp)")
     ap.add_argument("--keep-caches", action="store_true", help="keep the temporary compilation caches")
@@ -664,7 +736,7 @@ def main(argv=None):
                     help="a short run: 1000 particles, no demo, calibration on the same sample")
     args = ap.parse_args(argv)
     if args.quick:
-        args.sizes, args.calibrate_n, args.skip_demo = [1000], 1000, True
+        args.sizes, args.calibrate_n, args.skip_demo, args.imported = [1000], 1000, True, 1000
         if args.out == "results/time_to_answer.json":
             args.out = "results/time_to_answer_quick.json"
 
@@ -677,7 +749,7 @@ def main(argv=None):
             ap.error("--tables-from needs --tables")
         data = json.loads(pathlib.Path(args.tables_from).read_text(encoding="utf-8"))
         sizes = sorted({int(k.split("/")[1]) for k in data["runs"]})
-        update_tables(args.tables, markdown_table(data["runs"], sizes))
+        update_tables(args.tables, markdown_table(data["runs"], sizes, (data.get("imported") or {}).get("runs")))
         return 0
 
     load_before = machine_load(1.0)
@@ -700,6 +772,7 @@ def main(argv=None):
     sizes = [n for n in args.sizes if any(f"{m}/{n}" in report["runs"] for m in args.methods)]
     head = headline(report["runs"], sizes)
     goals = evaluate_goals(report["runs"], sizes, report.get("calibrate"), report.get("demo"))
+    goals += imported_goals((report.get("imported") or {}).get("runs") or {})
     found = anomalies(report["runs"])
     report.update(headline=head, goals=goals, timing_anomalies=found, complete=True,
                   machine={**machine_info(), "pinned_core": cpu, "load_before": load_before,
@@ -716,7 +789,7 @@ def main(argv=None):
     save()
     print(f"wrote {args.out}")
     if args.tables:
-        update_tables(args.tables, markdown_table(report["runs"], sizes))
+        update_tables(args.tables, markdown_table(report["runs"], sizes, (report.get("imported") or {}).get("runs")))
     if args.png:
         m = report["machine"]
         note = (f"core {cpu} of {os.cpu_count()}, XLA {args.threads} thread(s); load before {load_before['cpu_busy']} "
