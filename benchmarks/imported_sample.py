@@ -27,7 +27,8 @@ What is measured (one process, pinned to one core, XLA single-threaded, float64)
 
 Goals (printed with the measured figure): DSM and STE wall on ``own`` <= 1.2 x the same sample with ``layers``; DEM
 wall / DSM wall >= 30 and DEM / STE >= 200 on ``own``; splu / DSM >= 20; a new Sample object of the same file
-rebuilds no setup (its setup time is the digest of its arrays, under 2 ms). The load of every core is measured before and after (the machine may be shared).
+rebuilds no setup (its setup time is the digest of its arrays, under 2 ms). The load of every core is measured
+before and after (the machine may be shared).
 """
 
 from __future__ import annotations
