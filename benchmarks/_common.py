@@ -265,7 +265,8 @@ def foreign_packing(n: int, seed: int, path: str, *, slab: float = 0.08, gap: fl
              f"{len(x)} atoms", "3 atom types", f"{len(bonds)} bonds", "1 bond types", ""]
     lines += [f"{float(a)!r} {float(b)!r} {c}lo {c}hi" for a, b, c in zip(lo, hi, "xyz")]
     lines += ["", "Atoms # bpm/sphere", ""]
-    lines += [f"{k + 1} 1 {types[k]} {float(2 * r[k])!r} 2500.0 " + " ".join(repr(float(c)) for c in x[k]) for k in range(len(x))]
+    lines += [f"{k + 1} 1 {types[k]} {float(2 * r[k])!r} 2500.0 " + " ".join(repr(float(c)) for c in x[k])
+              for k in range(len(x))]
     lines += ["", "Bonds", ""]
     lines += [f"{k + 1} 1 {a + 1} {b + 1}" for k, (a, b) in enumerate(bonds)]
     with open(path, "w") as fh:
