@@ -34,7 +34,8 @@ def add_parser(sub) -> None:
     p.add_argument("--solver", default=None, choices=("dsm", "ste", "dem"),
                    help="solver for adam/surrogate/closed-form (default: dsm)")
     p.add_argument("--model", default=None, choices=("dsm", "ste", "dem"), help=argparse.SUPPRESS)  # old --solver
-    p.add_argument("--tol", type=float, default=None, help="relative tolerance on every target (default: 0.05)")
+    p.add_argument("--tol", type=float, default=None, help="relative tolerance on every target (default: 0.005 for stiffness, modulus and Poisson ratio "
+                        "targets, the accuracy of the static solvers; else 0.05)")
     p.add_argument("--strain", type=float, default=0.002, help="compression strain (default: 0.002)")
     p.add_argument("--axis", type=int, default=2, choices=(0, 1, 2), help="loading axis (default: 2)")
     p.add_argument("--check", default=None, choices=("dsm", "ste", "dem"),
@@ -46,7 +47,8 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-_DEFAULTS = {"method": "auto", "solver": "dsm", "tol": 0.05}  # of the options a --config can also set
+_DEFAULTS = {"method": "auto", "solver": "dsm", "tol": None}  # of the options a --config can also set (tol None:
+# calibrate's default for the targets)
 
 
 def _config(path: pathlib.Path) -> dict:
@@ -92,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         ``jaxbpm`` command prints it and exits with 2).
     """
     from jaxbpm.calibrate import CalibrationError, Parameter, Target, calibrate
+    from jaxbpm.calibrate.dispatch import default_tol
     from jaxbpm.io import load_sample
     from jaxbpm.scenes import UniaxialCompression
 
@@ -131,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     method, solver, tol = (getattr(args, key) if getattr(args, key) is not None else cfg.get(key, default)
                            for key, default in _DEFAULTS.items())
     print(f"calibrating {sample.n_particles} particles, {sample.n_bonds} bonds: method {method}, solver {solver}, "
-          f"tol {100 * tol:g} %", flush=True)
+          f"tol {100 * (default_tol(targets, method) if tol is None else tol):g} %", flush=True)
     try:
         result = calibrate(sample, scene, targets, method=method, solver=solver, parameters=parameters, tol=tol,
                            shortcut=not args.no_shortcut, check=args.check, progress=not args.quiet, **options)

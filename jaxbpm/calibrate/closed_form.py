@@ -21,7 +21,7 @@ import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.history import CalibrationResult, History
 
-__all__ = ["closed_form"]
+__all__ = ["closed_form", "one_scale_answer"]
 
 
 def _weighted_rows(problem: Problem):
@@ -31,6 +31,24 @@ def _weighted_rows(problem: Problem):
         rows.append(np.full(tg.size, np.sqrt(w / tg.size) / tg.scale))
         t.append(np.reshape(tg.value, -1))
     return np.concatenate(rows), np.concatenate(t)
+
+
+def one_scale_answer(problem: Problem, values: np.ndarray, outputs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The closed-form answer of one free scale from one solve: every output is proportional to the scale, so the
+    outputs ``y`` at ``values`` give the weighted least-squares scale on the targets at no further solve.
+
+    Args:
+      problem: a problem whose closed form applies, with one free parameter.
+      values: ``[1]`` the parameter value of the solve.
+      outputs: ``[m]`` that solve's outputs.
+
+    Returns:
+      ``(answer [1], predicted outputs [m])`` (exact for one free scale).
+    """
+    r, t = _weighted_rows(problem)
+    jac = (np.asarray(outputs) / values[0])[:, None]
+    answer = problem.space.clip(np.linalg.lstsq(r[:, None] * jac, r * t, rcond=None)[0])
+    return answer, jac @ answer
 
 
 def closed_form(problem: Problem, *, tol: float = 0.05, max_iterations: int = 6, step_tol: float = 1e-4,

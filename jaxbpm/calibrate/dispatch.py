@@ -16,7 +16,7 @@ from jaxbpm.calibrate.objective import (CalibrationError, Forward, Parameter, Pa
 from jaxbpm.calibrate.history import CalibrationResult
 from jaxbpm.calibrate.surrogate import surrogate
 
-__all__ = ["METHODS", "calibrate", "default_parameters"]
+__all__ = ["METHODS", "ELASTIC_TOL", "TOL", "calibrate", "default_parameters", "default_tol"]
 
 METHODS = ("auto", "adam", "surrogate", "closed-form")
 
@@ -37,8 +37,31 @@ def default_parameters(sample) -> list[Parameter]:
     return [Parameter("bond_E", index=None, ratio=tuple(E / E[0]))]
 
 
+#: the default tolerance of an elastic calibration: the accuracy of the static solvers it runs (the DSM solves the
+#: DEM's equilibrium exactly, to its CG tolerance; a calibration need not stop short of what its solves give)
+ELASTIC_TOL = 0.005
+#: the default tolerance where a target is not elastic (a strength: Qu et al. 2020's 5 %)
+TOL = 0.05
+
+
+def default_tol(targets, method: str = "auto") -> float:
+    """The default tolerance of a calibration on ``targets``.
+
+    Args:
+      targets: :class:`Target` s.
+      method: the calibrator.
+
+    Returns:
+      :data:`ELASTIC_TOL` where every target is a stiffness, a modulus or a Poisson ratio and the calibrator solves
+      (not ``"surrogate"``, whose answer is as good as its regression), else :data:`TOL`.
+    """
+    elastic = ("stiffness", "youngs_modulus", "poisson_ratio")
+    solves = method != "surrogate"
+    return ELASTIC_TOL if solves and all(t.observable in elastic for t in targets) else TOL
+
+
 def calibrate(sample, scene, targets, *, method: str = "auto", solver: str | Forward = "dsm",
-              parameters: Sequence[Parameter] | None = None, scaling: str = "log", tol: float = 0.05,
+              parameters: Sequence[Parameter] | None = None, scaling: str = "log", tol: float | None = None,
               shortcut: bool = True, levels: Sequence | None = None, check: str | None = None,
               solve_options: Mapping[str, dict] | None = None, progress=None, executor=None, model=None,
               **options) -> CalibrationResult:
@@ -56,7 +79,9 @@ def calibrate(sample, scene, targets, *, method: str = "auto", solver: str | For
         ``"dem"``), or a :class:`Forward`. ``method="auto"`` runs the solvers of ``levels``.
       parameters: free :class:`Parameter` s; default :func:`default_parameters` (one common bond modulus).
       scaling: ``"log"`` or ``"target"`` (Qu et al. 2020, Eq. 10-11: each parameter over the target it is tied to).
-      tol: relative tolerance on every target (default 5 %, Qu et al. 2020).
+      tol: relative tolerance on every target (default :data:`ELASTIC_TOL`, 0.5 %, where every target is a
+        stiffness, a modulus or a Poisson ratio and the calibrator solves: the accuracy of the static solvers the
+        elastic levels run; else 5 %, Qu et al. 2020; see :func:`default_tol`).
       shortcut: use the closed form wherever it applies (the result's ``method`` and ``notes`` say so).
       levels: multi-fidelity levels (``method="auto"``; default :func:`default_levels`).
       check: a solver (e.g. ``"dem"``) run once at the answer; its errors go to ``result.info["check"]``.
@@ -85,7 +110,7 @@ def calibrate(sample, scene, targets, *, method: str = "auto", solver: str | For
     check_executor(executor)
     first = _first_sample(sample)
     targets = as_targets(targets)
-    tol = _common.check_tol(tol)
+    tol = _common.check_tol(default_tol(targets, method) if tol is None else tol)
     space = _space(sample, first, scene, parameters, scaling)
     solve_options = dict(solve_options or {})
     t0 = time.perf_counter()
