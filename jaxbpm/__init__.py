@@ -28,8 +28,8 @@ Examples:
 
 from jaxbpm import errors
 from jaxbpm._cache import compilation_cache_dir, default_cache_dir, enable_compilation_cache
-from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotFiniteError, OptionsError, SampleError,
-                           SampleFileError, SceneError, SimulationInterrupted, SolveError)
+from jaxbpm.errors import (ConvergenceError, InstabilityError, JaxbpmError, NotFiniteError, NotQuasiStaticError,
+                           OptionsError, SampleError, SampleFileError, SceneError, SimulationInterrupted, SolveError)
 
 from jaxbpm._version import __version__
 
@@ -38,6 +38,7 @@ __all__ = [
     "generate", "io", "errors", "scenes", "solve", "Result",
     "JaxbpmError", "SampleError", "SampleFileError", "SceneError", "SolveError", "InstabilityError", "ConvergenceError",
     "NotFiniteError",
+    "NotQuasiStaticError",
     "SimulationInterrupted",
     "enable_compilation_cache", "compilation_cache_dir", "default_cache_dir",
     "DEM", "DSM", "STE", "SolverOptions", "Status", "OptionsError", "count_compilations",

@@ -7,6 +7,7 @@ __all__ = [
     "InstabilityError",
     "ConvergenceError",
     "NotFiniteError",
+    "NotQuasiStaticError",
     "SolveError",
     "SceneError",
     "GroupError",
@@ -70,6 +71,11 @@ class ConvergenceError(SolveError):
 
 class NotFiniteError(SolveError):
     """A solve returned a stiffness that is NaN or infinite: status ``"not_finite"``."""
+
+
+class NotQuasiStaticError(SolveError):
+    """A DEM run was loaded too fast for a static answer (its ends out of balance, its curve not a line): status
+    ``"not_quasi_static"``."""
 
 
 class ConventionError(JaxbpmError, ValueError):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import enum
 
-from jaxbpm.errors import ConvergenceError, InstabilityError, NotFiniteError
+from jaxbpm.errors import ConvergenceError, InstabilityError, NotFiniteError, NotQuasiStaticError
 
 __all__ = ["Status"]
 
@@ -33,6 +33,8 @@ class Status(str, enum.Enum):
     UNSTABLE = "unstable", "the DEM's time integration blew up", InstabilityError
     INTERRUPTED = "interrupted", "a DEM run stopped early by Ctrl-C or a callback", None
     NOT_FINITE = "not_finite", "the stiffness came out NaN or infinite", NotFiniteError
+    NOT_QUASI_STATIC = ("not_quasi_static", "a DEM run loaded too fast for a static answer (see its stats' imbalance)",
+                        NotQuasiStaticError)
 
     def __new__(cls, value: str, message: str, error):
         member = str.__new__(cls, value)

@@ -9,7 +9,8 @@ from jaxbpm.status import Status
 
 
 def test_the_members_are_the_strings_results_always_had():
-    assert [s.value for s in Status] == ["converged", "max_iterations", "unstable", "interrupted", "not_finite"]
+    assert [s.value for s in Status] == ["converged", "max_iterations", "unstable", "interrupted", "not_finite",
+                                         "not_quasi_static"]
     for s in Status:
         assert s == s.value and isinstance(s, str) and str(s) == s.value and f"{s}" == s.value
         assert repr(s) == repr(s.value) and hash(s) == hash(s.value)
@@ -22,6 +23,7 @@ def test_each_failure_carries_the_error_throw_raises():
     assert Status.MAX_ITERATIONS.error is errors.ConvergenceError
     assert Status.UNSTABLE.error is errors.InstabilityError
     assert Status.NOT_FINITE.error is errors.NotFiniteError
+    assert Status.NOT_QUASI_STATIC.error is errors.NotQuasiStaticError
     assert all(issubclass(s.error, errors.SolveError) for s in Status if s.error is not None)
 
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from jaxbpm import _interrupt
 from jaxbpm._compile import compile_clock
+from jaxbpm.dem import quasistatic
 from jaxbpm.dem.chunk import _run_chunk
 from jaxbpm.dem.curve import curve, peak_stats, plan_stats
 from jaxbpm.dem.integrator import _progress_fn
@@ -281,8 +282,7 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
     rec = ({key: np.concatenate([r[key][b] for r in ran.records[:completed]]) for key in ran.records[0]}
            if completed else {})
     status = Status.UNSTABLE if message is not None else Status.CONVERGED
-    disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records,
-                                         strict=not ran.interrupted and status == Status.CONVERGED)
+    disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records, strict=False)
     per_chunk = float(np.median(kernel)) if kernel else float("nan")
     share = timing.share(n_batch)
     stats = {"setup_time": share.setup_time, "compile_time": share.compile_time, "run_time": share.run_time,
@@ -295,6 +295,8 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
         stats.update(interrupted=True, steps_planned=the_plan.n_steps)
     stats.update(plan_stats(the_plan, the_plan.dt_crit[b], ran.interrupted))
     stats.update(peak_stats(scene, sample, rec, disp, force, keep, the_plan.breakage))
+    if not ran.interrupted:
+        status = quasistatic.check(scene, the_plan, rec, disp, force, stats, status)
     stats["batch"] = {"size": n_batch, "index": b, "vectorize": vectorize, "dt": the_plan.dt,
                       "loading_time": the_plan.loading_time, "chunk": chunk, "wall_time": timing.wall_time,
                       "compile_time": timing.compile_time, "kernel_time": float(np.sum(kernel))}

@@ -47,6 +47,8 @@ class Plan:
         attrs: the run's scalar attributes (what a record file of it stores).
         start: the state the run starts from (``None``: the model at rest).
         steps_done: the steps of the run before ``start`` (0 from rest; a resumed run's steps so far).
+        transit_time: the time an elastic wave needs to cross the sample along the scene's path [s] (the slowest
+            member's; the run's loading time over it is its ``transits``).
     """
 
     model: Model
@@ -66,6 +68,7 @@ class Plan:
     attrs: dict
     start: DEMState | None = None
     steps_done: int = 0
+    transit_time: float = float("nan")
 
     @property
     def n_chunks(self) -> int:
@@ -142,10 +145,11 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
     dt = float(_time_step(dt, safety, dt_crit, batch=not isinstance(params, Mapping)))
     length, area = scene.geometry(sample)
     target = scene.strain * length
+    # a wave crossing the sample along its longest loaded path (the gauge length; a beam's span)
+    path = scene.transit_length(sample)
+    crossing = max(transit_time(sample, model, p, path) for p in members)
     if loading_time is None:
-        # a wave crossing the sample along its longest loaded path (the gauge length; a beam's span)
-        path = scene.transit_length(sample)
-        loading_time = transits * max(transit_time(sample, model, p, path) for p in members)
+        loading_time = transits * crossing
     n_steps = int(np.ceil(loading_time / dt))
     if chunk is None:
         chunk = default_chunk(n_steps, snapshots)
@@ -159,7 +163,7 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
                  contact_law=model.contact_law, breakage=breaks, failure_rule=model.failure_rule)
     return Plan(model=model, size=size, breakage=breaks, dt=dt, dt_crit=dt_crit, damping=damping,
                 gauge_length=length, area=area, target=target, loading_time=float(loading_time), n_steps=n_steps,
-                chunk=chunk, speed=speed, load=load, attrs=attrs, start=state)
+                chunk=chunk, speed=speed, load=load, attrs=attrs, start=state, transit_time=float(crossing))
 
 
 _models = SetupCache()
@@ -205,9 +209,12 @@ def default_chunk(n_steps: int, snapshots=None) -> int:
         snapshots: VTU frames the run writes, or ``None``.
 
     Returns:
-        A power of two, 32 to 4096 steps, about 20 chunks a run; with ``snapshots`` at least one chunk per frame after
-        the first.
+        A power of two, 32 to 4096 steps, about 20 chunks a run (a run of fewer than 32 steps is one chunk of its
+        steps: the loading time asked for is the one run); with ``snapshots`` at least one chunk per frame after the
+        first.
     """
+    if n_steps < 32:
+        return max(int(n_steps), 1)
     chunk = 1 << int(np.log2(np.clip(n_steps // 20, 32, 4096)))
     if snapshots is not None and snapshots > 1:
         chunk = max(1, min(chunk, n_steps // (snapshots - 1)))

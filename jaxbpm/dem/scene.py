@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from jaxbpm._compile import compile_clock
+from jaxbpm.dem import quasistatic as quasi_static
 from jaxbpm.dem.curve import curve, peak_stats, plan_stats
 from jaxbpm.dem.integrator import integrate, Outcome
 from jaxbpm.dem.options import DEM
@@ -113,14 +114,15 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
         max_records: the most points kept in the returned curve.
 
     Returns:
-        The :class:`~jaxbpm.result.Result` (status ``"converged"``, ``"unstable"`` or ``"interrupted"``; a
-        converged one may still be found not finite by :func:`jaxbpm.result.settle`).
+        The :class:`~jaxbpm.result.Result` (status ``"converged"``, ``"not_quasi_static"`` (loaded too fast: see
+        :mod:`jaxbpm.dem.quasistatic`), ``"unstable"`` or ``"interrupted"``; a converged one may still be found not
+        finite by :func:`jaxbpm.result.settle`).
     """
     status, stats = run.status, run.stats
     interrupted = status == Status.INTERRUPTED
     rec = _whole_records(run, out)
     disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records,
-                                         strict=status == Status.CONVERGED)
+                                         strict=False)  # (too few records: not quasi-static, below)
     stats.update(plan_stats(the_plan, the_plan.dt_crit[0], interrupted))
     # wall = setup (before the first chunk, less the compilations in it) + compile + run (the rest)
     setup = clock.t_sim - clock.t0 - clock.setup_compile + stats["setup_time"]
@@ -132,6 +134,7 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
         stats["vtu"] = str(out.series.path)
         stats["vtu_frames"] = len(out.series.steps)
     stats.update(peak_stats(scene, sample, rec, disp, force, keep, the_plan.breakage))
+    status = quasi_static.check(scene, the_plan, rec, disp, force, stats, status)
     stats.update(_lateral(scene, sample, run.state, stats, the_plan.breakage, status))
     youngs = scene.modulus(stiffness, sample)
     if out.recorder is not None:
