@@ -68,7 +68,7 @@ def test_calibrate_options_override_the_config(tmp_path, capsys, monkeypatch):
     config = tmp_path / "config.json"
     config.write_text(json.dumps({"method": "adam", "solver": "ste", "tol": 0.02}))
     for argv, expected in (
-            ([], {"method": "auto", "solver": "dsm", "tol": 0.05}),  # the defaults
+            ([], {"method": "auto", "solver": "dsm", "tol": None}),  # the defaults (tol: calibrate's, for the targets)
             (["--config", config], {"method": "adam", "solver": "ste", "tol": 0.02}),  # the config over them
             (["--config", config, "--solver", "dem", "--tol", 0.1], {"method": "adam", "solver": "dem", "tol": 0.1}),
             (["--method", "surrogate", "--config", config], {"method": "surrogate", "solver": "ste", "tol": 0.02}),
