@@ -87,7 +87,11 @@ def test_clamp_layers_is_the_deprecated_spelling_of_boundary():
         with pytest.warns(DeprecationWarning, match=f"use boundary='{new}'") as caught:
             res = jaxbpm.solve(s, scene, method="ste", clamp_layers=old)
         assert caught[0].filename == __file__  # the warning names the caller, not jaxbpm
-        assert res.stiffness == jaxbpm.solve(s, scene, method="ste", boundary=new).stiffness
+        # the same options: the setup the old spelling built serves the new one (nothing built, nothing compiled)
+        built = ste.scene._setups.builds
+        with jaxbpm.count_compilations() as c:
+            assert res.stiffness == jaxbpm.solve(s, scene, method="ste", boundary=new).stiffness
+        assert ste.scene._setups.builds == built and c.count == 0
         with pytest.warns(DeprecationWarning):
             est = ste.estimator(s, scene, clamp_layers=old)
         assert est.clamped == (18 if old else 0)
