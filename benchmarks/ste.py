@@ -18,7 +18,8 @@ Samples
 
 Methods (scene: ``UniaxialCompression(strain=0.002)``, clamped layers, bonds only)
 ---------------------------------------------------------------------------------
-* STE (3 DOF, Eq. 32): ``jaxbpm.ste.scene_stiffness`` jitted; compile time (``lower().compile()``) and run time
+* STE (3 DOF, Eq. 32; ``--boundary``: the library's default ``clamped`` form or the paper's ``free`` one, see
+  ``docs/ste.md``): ``jaxbpm.ste.scene_stiffness`` jitted; compile time (``lower().compile()``) and run time
   (min of ``--repeats`` calls, ``block_until_ready``) separately; the estimator setup (NumPy: fabric, volumes) is
   timed as ``setup``. Twice: in float64 (the default) and with ``precision="float32"`` (columns ``ste32_*``).
 * DSM (linear, 3 DOF = the STE's model, and 6 DOF = the DEM's model) up to ``--dsm-max`` particles.
@@ -54,7 +55,7 @@ def fcc_sample(n_target, seed=0, radius=1e-3):
     return jaxbpm.Sample.from_arrays(pos, s.radii, s.bonds, s.bond_radius, materials=s.materials, domain=s.domain)
 
 
-def time_ste(sample, scene, repeats, precision="float64"):
+def time_ste(sample, scene, repeats, precision="float64", boundary="clamped"):
     import jax
 
     from jaxbpm import ste
@@ -62,7 +63,7 @@ def time_ste(sample, scene, repeats, precision="float64"):
 
     params = default_params(sample)
     t = time.perf_counter()
-    est = ste.estimator(sample, scene, precision=precision)
+    est = ste.estimator(sample, scene, precision=precision, boundary=boundary)
     setup = time.perf_counter() - t
 
     def k_of(est, params):
@@ -91,6 +92,8 @@ def main(argv=None):
     ap.add_argument("--cpu", type=int, default=None, help="core to pin to (default: the least busy)")
     ap.add_argument("--threads", type=int, default=1, help="cores (XLA threads); 1 pins to one core")
     ap.add_argument("--cache-dir", default=None, help="reuse/save the random samples here (box_<n>_seed0.h5)")
+    ap.add_argument("--boundary", choices=("clamped", "free"), default="clamped",
+                    help="the STE's boundary form (default: the library's, clamped)")
     ap.add_argument("--out", default="results/ste.json")
     args = ap.parse_args(argv)
     if args.quick:
@@ -113,10 +116,10 @@ def main(argv=None):
         gen = time.perf_counter() - t
         log(f"{kind} {s.n_particles} particles, {s.n_bonds} bonds (generated in {gen:.1f} s)")
         row = {"sample": kind, "particles": s.n_particles, "bonds": s.n_bonds, "gen_s": gen}
-        st = time_ste(s, scene, args.repeats)
+        st = time_ste(s, scene, args.repeats, boundary=args.boundary)
         row.update({f"ste_{k}": v for k, v in st.items()})
         log(f"  STE K={st['K']:.5g} compile {st['compile_s']:.2f} s run {st['run_s'] * 1e3:.2f} ms")
-        st32 = time_ste(s, scene, args.repeats, "float32")
+        st32 = time_ste(s, scene, args.repeats, "float32", args.boundary)
         row.update({f"ste32_{k}": v for k, v in st32.items() if k in ("K", "compile_s", "run_s")})
         row["ste32_vs_ste64_rel"] = st32["K"] / st["K"] - 1
         log(f"  STE float32 K={st32['K']:.7g} ({row['ste32_vs_ste64_rel']:+.1e}) run {st32['run_s'] * 1e3:.2f} ms")
@@ -155,7 +158,8 @@ def main(argv=None):
     out = {"benchmark": "ste", "machine": machine_info(), "settings": vars(args), "rows": rows,
            "scaling_exponent": exponent, "scaling_exponent_float32": exponent32,
            "load": {"before": load_before, "after": load_after}, "total_time_s": time.perf_counter() - t_all,
-           "notes": "STE 3 DOF (Eq. 32), default surface_depth (one diameter); speed-up = DEM run / STE run"}
+           "notes": f"STE 3 DOF (Eq. 32), boundary={args.boundary!r}, default surface_depth (one diameter); "
+                    "speed-up = DEM run / STE run"}
     write_json(args.out, out)
     _plot(rows, exponent, args.out.replace(".json", ".png"))
 

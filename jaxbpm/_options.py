@@ -262,6 +262,7 @@ class SolverOptions:
 
         @functools.wraps(generated)
         def __init__(self, **options):
+            options = type(self)._renamed(options)
             _check_names(type(self), options)
             generated(self, **options)
 
@@ -272,6 +273,12 @@ class SolverOptions:
             check = f.metadata.get("check")
             if check is not None:
                 check(f.name, getattr(self, f.name))
+
+    @classmethod
+    def _renamed(cls, options: dict) -> dict:
+        """The options given, with deprecated names mapped onto the options they became (a subclass that renamed an
+        option overrides this and warns with :class:`DeprecationWarning`)."""
+        return options
 
     @classmethod
     def names(cls) -> tuple[str, ...]:

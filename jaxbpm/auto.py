@@ -331,7 +331,8 @@ def choose(sample, scene, tol=DEFAULT_TOL, *, params=None) -> Choice:
             note += f"; the bonds' geometric error measured on its bonds-only field: {100 * geometric:+.2g} %"
     if route == "dsm_bonds_corrected" and "dsm_bonds" in probe and route not in probe:
         seconds += _correct_probe(sample, scene, params, probe)
-    options = {"ste": {}, "dsm_bonds": {"nonlinear": False, **_linear_options(tol)},
+    # the STE's envelope was measured on its free-surface form, the closer to the DEM on random packings
+    options = {"ste": {"boundary": "free"}, "dsm_bonds": {"nonlinear": False, **_linear_options(tol)},
                "dsm_bonds_corrected": {"nonlinear": False, "geometric_correction": True, **_linear_options(tol)},
                "dsm_linearised": {"nonlinear": False, **_linear_options(tol)},
                "dsm_nonlinear": {"nonlinear": True}, "dem": {}}[route]

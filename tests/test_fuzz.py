@@ -507,7 +507,8 @@ INVALID_OPTIONS = {
             "contacts": _FLAG[:3] + [1.0], "contact_fraction": [0, 1.01, np.nan, "all"],
             "layer_thickness": _POSITIVE, "surface_depth": [-1.0, np.nan, np.inf, "1e-3", True, np.array([1.0, 2.0])],
             "volumes": [[1.0, -1.0], [np.nan], "abc", [[1.0], [1.0, 2.0]], [True, False], 1.0],
-            "precision": ["float16", 64, None, "FLOAT64"], "pad": _FLAG, "throw": _FLAG, "clamp_layers": _FLAG},
+            "precision": ["float16", 64, None, "FLOAT64"], "pad": _FLAG, "throw": _FLAG,
+            "boundary": ["layers", "walls", None, True, "Clamped", ["free"]]},
 }
 VALID_OPTIONS = {"dem": {"dt": 1e-7, "safety": 0.3, "damping": 0.0, "chunk": 50, "pad": False, "progress": None},
                  "dsm": {"dofs": 3, "tol": 1e-8, "stiffness_tol": "auto", "operator": "jvp", "contact_fraction": 1},

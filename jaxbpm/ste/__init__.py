@@ -34,12 +34,18 @@ Conventions and choices:
 * **Particle volume** ``V^n`` = particle volume / global solid fraction (solid volume over the sample's domain
   volume, or over the spheres' bounding box without a domain), so ``sum_n V^n`` = the sample volume. The body
   tensor is the V-weighted average of the local ones, in which V^n cancels: ``C = sum_n sum_m d (x) f / (2 V)``.
+* **Boundary forms** (``boundary``). ``"clamped"`` (the default): the particles the scene clamps (its end layers or
+  ``fixed``/``driven`` masks) follow the affine field (``phi = 0``), as their prescribed displacements do in the
+  DEM and the DSM; they bound the sample along the load and are left out of the averages (exact on a clamped
+  simple-cubic lattice, where the affine field is the solution). ``"free"``: the paper's form, every particle
+  relaxes, the clamped ones as one-sided surface particles. Walls clamp no particle: a scene with walls gets the
+  free form.
 * **Surface particles.** A particle whose centre lies within ``surface_depth`` (default one mean particle
-  diameter) of the sample's boundary (its domain box or cylinder, else the spheres' bounding box) has a one-sided
-  neighbourhood: Eq. 32 lets it relax as if the missing neighbours were absent, which under-counts the stiffness of
-  the bulk. Such particles keep their local tensor and their Gamma (they still
-  act on their neighbours) but are left out of the averages; ``surface_depth=0`` averages over every particle, as
-  the paper did for samples of 10^5 particles.
+  diameter) of the sample's free surface (its domain box or cylinder, else the spheres' bounding box; in the clamped
+  form the faces parallel to the load only) has a one-sided neighbourhood: Eq. 32 lets it relax as if the missing
+  neighbours were absent, which under-counts the stiffness of the bulk. Such particles keep their local tensor and
+  their Gamma (they still act on their neighbours) but are left out of the averages; ``surface_depth=0`` averages
+  over every particle that is not clamped, as the paper did for samples of 10^5 particles (in the free form).
 * **Singular particles** (fewer than three interactions, or all their interactions coplanar: the fabric
   ``sum n n^T`` has a smallest eigenvalue below 1e-6 of its largest) are skipped: they have no local tensor and do
   not enter the averages, and as neighbours they follow the affine field (``Gamma^m = 0``). Their count is reported.

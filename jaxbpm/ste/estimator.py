@@ -18,8 +18,9 @@ from jaxbpm.physics import tangent
 from jaxbpm.physics.model import Model, contact_params
 from jaxbpm.physics.padding import pad_model
 from jaxbpm.sample import Sample
+from jaxbpm.ste.options import boundary_keyword
 
-__all__ = ["Estimator", "estimator"]
+__all__ = ["Estimator", "estimator", "clamped_form"]
 
 
 _FABRIC_TOL = 1e-6
@@ -32,8 +33,8 @@ class Estimator:
     model: the :class:`~jaxbpm.physics.model.Model` of the bonds. pairs ``[P, 2]``: interacting pairs, the
     ``nb`` bonds first, then the active contacts; d ``[P, 3]``: ``x_j - x_i`` at rest; contact_d ``[C, 3]``: the
     contact vectors shortened to their linearisation overlap. volume ``[n]``: V^n [m^3]; valid ``[n]``: not
-    singular; include ``[n]``: valid and not at the surface (enters the averages); free ``[n]``: valid and not
-    clamped by the scene (its fluctuation is solved for; a clamped particle follows the affine field, ``phi = 0``).
+    singular; include ``[n]``: valid, not clamped and not at the free surface (enters the averages); free ``[n]``:
+    valid and not clamped by the scene (its fluctuation is solved for; a clamped particle follows the affine field, ``phi = 0``).
     layer ``[n]``: layer index of each particle along the scene axis (for ``layered``). With ``dofs=3``: geometry
     ``[S, nb, 9]``, the bond's ``K^nm`` (row-major 3x3) per unit value of each stiffness that enters it (``terms``,
     indices into (k_n, k_t, k_tw, k_b)): the Jacobian of the bond law at rest is linear in the stiffnesses, so
@@ -109,8 +110,8 @@ class Estimator:
 
     @property
     def surface(self) -> int:
-        """Number of non-singular surface particles left out of the averages."""
-        return int(np.sum(np.asarray(self.valid) & ~np.asarray(self.include)))
+        """Number of non-singular, not clamped surface particles left out of the averages."""
+        return int(np.sum(np.asarray(self.relaxing) & ~np.asarray(self.include)))
 
 
 jax.tree_util.register_dataclass(
@@ -122,28 +123,30 @@ jax.tree_util.register_dataclass(
 def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: bool = False, contacts=None,
               contact_fraction: float | None = None, layer_thickness: float | None = None,
               surface_depth: float | None = None, volumes=None, precision: str = "float64",
-              pad: bool = False, clamp_layers: bool = False) -> Estimator:
+              pad: bool = False, boundary: str = "clamped", clamp_layers: bool | None = None) -> Estimator:
     """Build the parameter-independent part of the STE for ``sample`` (and ``scene``, optional).
 
     Args:
       sample: the bonded sample.
       scene: a :class:`~jaxbpm.scenes.UniaxialCompression` or ``None``; it sets the load axis, whether contacts are
-        linearised (``scene.contacts``) and the target strain at which they are, and, with ``clamp_layers``, the
-        clamped particles.
-      clamp_layers: the particles the scene clamps (boundary ``"layers"`` or ``fixed``/``driven`` masks; not walls)
-        follow the affine field (no fluctuation), as their prescribed displacements do in the DEM and the DSM,
-        instead of relaxing like free one-sided surface particles (the paper's form, the default). Exact on a
-        clamped simple-cubic lattice (to round-off; the default is low there); on random packings the estimate is
-        then stiffer than the default and further from the DEM: the relaxing end layers offset most of the affine
-        estimate's excess stiffness in the interior.
+        linearised (``scene.contacts``) and the target strain at which they are, and the clamped particles.
+      boundary: ``"clamped"`` (default): the particles the scene clamps (boundary ``"layers"`` or
+        ``fixed``/``driven`` masks) follow the affine field (no fluctuation), as their prescribed displacements do
+        in the DEM and the DSM; they bound the sample along the load, so they are left out of the averages and
+        ``surface_depth`` counts from the faces parallel to the load only. Exact where the affine field is (a
+        clamped simple-cubic lattice, to round-off). ``"free"``: the paper's form, every particle relaxes (the
+        clamped ones as one-sided surface particles) and ``surface_depth`` counts from every face. Without a scene,
+        or with walls (which clamp no particle), the free form is built.
+      clamp_layers: the deprecated spelling of ``boundary`` (``True``: ``"clamped"``, ``False``: ``"free"``;
+        :class:`DeprecationWarning`).
       dofs: 3 (translations, the paper's form) or 6 (translations and rotations) per particle.
       first_neighbour: the first-neighbour-only form (Eq. 33-35) instead of Eq. 32.
       contacts: override ``scene.contacts``.
       contact_fraction: fraction of the target strain at which contacts are linearised (default: middle of the
         scene's fit range).
       layer_thickness: layer thickness of the layered model [m] (default two mean particle diameters).
-      surface_depth: particles closer than this to the sample's boundary [m] are left out of the averages
-        (default one mean particle diameter; 0 keeps every non-singular particle).
+      surface_depth: particles closer than this to the sample's free surface [m] are left out of the averages
+        (default one mean particle diameter; 0 keeps every non-singular particle that is not clamped).
       volumes: ``[n]`` particle volumes V^n [m^3] to use instead of particle volume / global solid fraction.
       precision: ``"float64"`` (default) or ``"float32"``: the float type of the estimate's arithmetic. The
         geometry is always built in the float type JAX gives (float64 with x64 on) and then cast. float32 runs the
@@ -168,7 +171,7 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
     model = _bond_model(sample, dofs)
     pairs, d, cpairs, cd = _interactions(sample, model, scene, axis, use_contacts, contact_fraction)
     valid = _non_singular(pairs, d, sample.n_particles)
-    parts = _particles(sample, scene, valid, clamp_layers, volumes, surface_depth)
+    parts = _particles(sample, scene, valid, boundary_keyword(boundary, clamp_layers), volumes, surface_depth)
     layer, n_layers = _layers(sample, axis, _layer_thickness(sample, layer_thickness))
     counts = np.array([sample.n_particles, len(sample.bonds), len(cpairs)], np.int64)
     rad = np.asarray(sample.radii, np.float64)
@@ -219,17 +222,33 @@ def _non_singular(pairs, d, n) -> np.ndarray:
     return (count >= 3) & (eig[:, 0] > _FABRIC_TOL * np.maximum(eig[:, -1], 1e-300))
 
 
-def _particles(sample, scene, valid, clamp_layers, volumes, surface_depth) -> dict:
+def clamped_form(scene, boundary: str) -> bool:
+    """Whether the STE of ``scene`` with ``boundary`` clamps the scene's particles (``"clamped"`` on a scene with
+    clamped particles: layers or masks, not walls).
+
+    Args:
+      scene: the scene or ``None``.
+      boundary: ``"clamped"`` or ``"free"``.
+
+    Returns:
+      ``True`` for the clamped form, ``False`` for the free one.
+    """
+    return boundary == "clamped" and scene is not None and not scene.uses_walls
+
+
+def _particles(sample, scene, valid, boundary, volumes, surface_depth) -> dict:
     """The per-particle arrays ``[n]``: ``valid``, ``free`` (valid and not clamped by the scene), ``vol`` (V^n)
-    and ``include`` (valid and at least ``surface_depth`` inside the sample)."""
+    and ``include`` (valid, not clamped and at least ``surface_depth`` inside the sample's free surface)."""
     n = sample.n_particles
     rad = np.asarray(sample.radii, np.float64)
     # particles the scene clamps (its fixed and driven sets) have prescribed displacements: they follow the affine
-    # field (no fluctuation), as in the DEM and the DSM, instead of relaxing as free one-sided surface particles
+    # field (no fluctuation), as in the DEM and the DSM, instead of relaxing as free one-sided surface particles;
+    # they are the sample's boundary along the load, so the free surface is the faces parallel to the load
     clamped = np.zeros(n, bool)
-    if clamp_layers and scene is not None and not scene.uses_walls:
+    along = None
+    if clamped_form(scene, boundary):
         fixed, driven = scene.layers(sample)
-        clamped = fixed | driven
+        clamped, along = fixed | driven, int(scene.axis)
     if volumes is None:
         phi, _ = sample.packing_fraction()
         vol = 4.0 / 3.0 * np.pi * rad**3 / phi
@@ -240,10 +259,13 @@ def _particles(sample, scene, valid, clamp_layers, volumes, surface_depth) -> di
     depth = 2.0 * float(np.mean(rad)) if surface_depth is None else float(surface_depth)
     if not (depth >= 0 and np.isfinite(depth)):
         raise SceneError(f"surface_depth must be a length >= 0, got {surface_depth!r}")
-    include = valid & (_boundary_distance(sample) >= depth) if depth > 0 else valid
+    include = valid & ~clamped
+    if depth > 0:
+        include &= _boundary_distance(sample, along) >= depth
     if not include.any():
-        raise SceneError(f"STE: no particle is both non-singular ({int(valid.sum())} are) and deeper than "
-                         f"surface_depth = {depth:.4g} m inside the sample; use a smaller surface_depth")
+        raise SceneError(f"STE: no particle is non-singular ({int(valid.sum())} are), not clamped "
+                         f"({int(clamped.sum())} are) and deeper than surface_depth = {depth:.4g} m inside the "
+                         "sample's free surface; use a smaller surface_depth")
     return {"valid": valid, "free": valid & ~clamped, "vol": vol, "include": include}
 
 
@@ -315,15 +337,18 @@ def _domain_extent(sample: Sample, axis: int) -> tuple[float, float]:
     return float((z - r).min()), float((z + r).max())
 
 
-def _boundary_distance(sample: Sample) -> np.ndarray:
+def _boundary_distance(sample: Sample, along: int | None = None) -> np.ndarray:
     """Distance of each particle centre to the boundary of the sample's domain (box or z-cylinder), or to its
-    spheres' bounding box."""
+    spheres' bounding box; with ``along`` (an axis) to the faces parallel to it only (a cylinder's curved face
+    counts whole, its flat faces where they are parallel to ``along``)."""
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     if sample.domain is not None:
         lo, hi = np.asarray(sample.domain.lo), np.asarray(sample.domain.hi)
     else:
         lo, hi = (pos - rad[:, None]).min(axis=0), (pos + rad[:, None]).max(axis=0)
     dist = np.minimum(pos - lo, hi - pos)
+    if along is not None:
+        dist[:, along] = np.inf
     if sample.domain is not None and sample.domain.kind == "cylinder":
         centre, radius = 0.5 * (lo[:2] + hi[:2]), 0.25 * float(np.sum(hi[:2] - lo[:2]))
         radial = radius - np.linalg.norm(pos[:, :2] - centre, axis=1)

@@ -17,7 +17,7 @@ from jaxbpm.errors import SceneError
 from jaxbpm.physics.model import default_params
 from jaxbpm.result import settle, timed_result
 from jaxbpm.sample import Sample
-from jaxbpm.ste.estimator import Estimator, estimator
+from jaxbpm.ste.estimator import clamped_form, Estimator, estimator
 from jaxbpm.ste.options import ESTIMATOR_OPTIONS, STE
 from jaxbpm.ste.tensor import body_tensor, isotropic_fit, local_tensors, moduli
 
@@ -206,7 +206,9 @@ def _check_scene(scene):
 def _estimator_for(sample, scene, options: STE):
     """``(est, geometry, wall_law)`` of ``sample`` and ``scene``: the setup :func:`solve_scene` and
     :func:`stiffness_function` share, kept for the last few samples."""
-    key = (scene, options.replace(layered=False, throw=True))  # (what the estimator does not depend on: one key)
+    # what the estimator does not depend on gives one key; walls clamp nothing: both forms are the free one there
+    boundary = options.boundary if clamped_form(scene, options.boundary) else "free"
+    key = (scene, options.replace(layered=False, throw=True, boundary=boundary))
     return _setups.get(sample, key, lambda: _setup(sample, scene, options))
 
 
@@ -272,7 +274,9 @@ def solve_scene(sample: Sample, scene, params=None, options: STE | None = None):
       The :class:`~jaxbpm.result.Result`. Its ``stats``: ``tensor`` (Voigt 6x6 [Pa], nested lists), ``E_x``,
       ``E_y``, ``E_z`` [Pa], ``nu`` (3x3), ``E_iso``, ``nu_iso`` (isotropic fit), ``K_body`` (before walls),
       ``skipped`` (singular particles), ``surface`` (surface particles left out of the averages), ``clamped``
-      (particles of the scene's fixed and driven sets, which follow the affine field), ``particles``, ``bonds``,
+      (particles of the scene's fixed and driven sets, which follow the affine field and are left out of the
+      averages), ``boundary`` (the form that ran: ``"clamped"``, or ``"free"`` where asked for or where the scene
+      has walls), ``particles``, ``bonds``,
       ``contacts``, ``dofs``, ``first_neighbour``, ``layered``; walls: ``k_bottom``, ``k_top`` [N/m],
       ``n_bottom``, ``n_top``; ``size_class`` (the padded particle, bond and contact capacities).
 
@@ -292,6 +296,7 @@ def solve_scene(sample: Sample, scene, params=None, options: STE | None = None):
     length, area = float(geo.length), float(geo.area)
     delta = scene.strain * length
     stats = _stats(est, scene, parts, e, nu, e_iso, nu_iso, options.layered, setup_time)
+    stats["boundary"] = "clamped" if clamped_form(scene, options.boundary) else "free"
     k = float(k)
     # what is neither setup nor compilation (moving the outputs to the host) counts as run time
     return settle(timed_result("ste", t0, stiffness=k, gauge_length=length, area=area,

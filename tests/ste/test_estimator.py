@@ -26,49 +26,79 @@ def _clamped_lattice(cells):
 
 
 def test_clamped_simple_cubic_lattice_is_exact():
-    # the affine field is the exact solution: the DSM gives the closed form to round-off, and so does the STE when
-    # the clamped end layers follow the affine field (clamp_layers; default, first-neighbour, 6 DOF and layered forms)
+    # the affine field is the exact solution: the DSM gives the closed form to round-off, and so does the STE's
+    # default (boundary="clamped": the clamped end layers follow the affine field and bound the sample), in every
+    # form (first-neighbour, 6 DOF, layered) and with every non-clamped particle averaged (surface_depth=0)
     s, scene, exact, kn = _clamped_lattice((4, 4, 8))
     dsm = jaxbpm.solve(s, scene, method="dsm")
     np.testing.assert_allclose(dsm.stiffness, exact, rtol=1e-12)
-    res = jaxbpm.solve(s, scene, method="ste", clamp_layers=True)
+    res = jaxbpm.solve(s, scene, method="ste")
     np.testing.assert_allclose(res.stiffness, exact, rtol=1e-9)  # measured 1e-16
-    assert res.stats["clamped"] == 32 and res.stats["surface"] == 104 and res.stats["skipped"] == 0
-    np.testing.assert_allclose(res.stats["E_z"], kn / D, rtol=1e-9)
-    for opts in ({"first_neighbour": True}, {"dofs": 6}, {"layered": True}):
-        np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste", clamp_layers=True, **opts).stiffness,
-                                   exact, rtol=1e-9)
-    # without clamp_layers (the paper's form) the end layers relax: 1 - 5 / (13 (n_z - 2)) (see below)
-    np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste").stiffness / exact, 1 - 5 / 78, rtol=1e-12)
+    np.testing.assert_allclose(res.stiffness, dsm.stiffness, rtol=1e-9)
+    # the end layers are clamped and out of the averages; the free surface is the four faces parallel to the load
+    # (the outer ring of each of the 6 inner layers: 12 x 6 particles)
+    st = res.stats
+    assert st["boundary"] == "clamped" and st["clamped"] == 32 and st["surface"] == 72 and st["skipped"] == 0
+    np.testing.assert_allclose(st["E_z"], kn / D, rtol=1e-9)
+    for opts in ({"first_neighbour": True}, {"dofs": 6}, {"layered": True}, {"surface_depth": 0.0}):
+        np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste", **opts).stiffness, exact, rtol=1e-9)
     # every included particle has the interior tensor's C_33 = k_n / d (C_13 = C_23 = 0)
-    est = ste.estimator(s, scene, clamp_layers=True)
+    est = ste.estimator(s, scene)
+    assert est.clamped == 32 and not np.any(np.asarray(est.include) & ~np.asarray(est.free))
     c = np.asarray(jax.jit(ste.local_tensors)(est, default_params(s)))[np.asarray(est.include)]
     np.testing.assert_allclose(c[:, 2, 2], kn / D, rtol=1e-12)
     np.testing.assert_allclose(c[:, :2, 2], 0.0, atol=1e-12 * kn / D)
 
 
+def test_clamped_particles_as_layers_or_masks_give_the_same_stiffness():
+    # the scene's default layers and the same particles given as fixed/driven masks: one clamped form, one K
+    s, masks, exact, _ = _clamped_lattice((3, 3, 6))
+    layers = UniaxialCompression(strain=0.002)
+    fixed, driven = layers.layers(s)
+    assert np.array_equal(fixed, masks.fixed) and np.array_equal(driven, masks.driven)
+    assert layers.geometry(s) == pytest.approx(masks.geometry(s), rel=1e-12)
+    a, b = (jaxbpm.solve(s, sc, method="ste") for sc in (layers, masks))
+    np.testing.assert_allclose(a.stiffness, exact, rtol=1e-9)
+    np.testing.assert_allclose(b.stiffness, a.stiffness, rtol=1e-12)
+    assert a.stats["clamped"] == b.stats["clamped"] == 18
+
+
 def test_paper_form_on_the_clamped_lattice():
-    # what the other forms give where the affine field is exact (docs/ste.md tabulates them)
+    # boundary="free", the paper's form: the clamped end layers relax as one-sided surface particles (docs/ste.md
+    # tabulates it); the layer next to each end inherits their relaxation through Eq. 29 and K Gamma^m and loses
+    # 5/26 of its C_33 (k_t = 0.4 k_n); two layers of n_z - 2 averaged: 1 - 5 / (13 (n_z - 2))
     s, scene, exact, kn = _clamped_lattice((4, 4, 8))
+    free = jaxbpm.solve(s, scene, method="ste", boundary="free")
+    np.testing.assert_allclose(free.stiffness / exact, 1 - 5 / 78, rtol=1e-12)
+    assert free.stats["boundary"] == "free" and free.stats["clamped"] == 0 and free.stats["surface"] == 104
+    # an estimator without a scene clamps nothing: the same form
     p = default_params(s)
-    # every particle averaged: the clamped layers count with whole cells, but the gauge length runs between their
-    # centres: (n_z - 1) / n_z; half a cell for them (their part inside the gauge length) makes it exact
-    every = jaxbpm.solve(s, scene, method="ste", surface_depth=0.0, clamp_layers=True)
-    np.testing.assert_allclose(every.stiffness / exact, 7 / 8, rtol=1e-12)
-    fixed, driven = scene.layers(s)
-    half = np.where(fixed | driven, 0.5, 1.0) * D**3
-    np.testing.assert_allclose(jaxbpm.solve(s, scene, method="ste", surface_depth=0.0, volumes=half,
-                                            clamp_layers=True).stiffness, exact, rtol=1e-9)
+    np.testing.assert_allclose(float(ste.scene_stiffness(ste.estimator(s), p, s, scene)[0]), free.stiffness,
+                               rtol=1e-12)
+    # every particle averaged (surface_depth=0): the clamped layers also count with whole cells while the gauge
+    # length runs between their centres, (n_z - 1) / n_z: -27.1 % here (-10.3 % on 10 x 10 x 20)
+    every = jaxbpm.solve(s, scene, method="ste", boundary="free", surface_depth=0.0)
+    assert abs(every.stiffness / exact - (1 - 0.2708)) < 1e-3
 
-    def unclamped(**opts):  # nothing clamped (no scene): the end layers relax as one-sided surface particles
-        est = ste.estimator(s, **opts)
-        return float(ste.scene_stiffness(est, p, s, scene)[0]) / exact
 
-    # the default: the layer next to each end inherits the end's relaxation through Eq. 29 and K Gamma^m
-    # and loses 5/26 of its C_33 (k_t = 0.4 k_n); two layers of n_z - 2 averaged: 1 - 5 / (13 (n_z - 2))
-    np.testing.assert_allclose(unclamped(), 1 - 5 / 78, rtol=1e-12)
-    # the paper's form (nothing clamped, every particle averaged): both effects, -27.1 % here (-10.3 % on 10x10x20)
-    assert abs(unclamped(surface_depth=0.0) - (1 - 0.2708)) < 1e-3
+def test_clamp_layers_is_the_deprecated_spelling_of_boundary():
+    s, scene, exact, _ = _clamped_lattice((3, 3, 6))
+    for old, new in ((True, "clamped"), (False, "free")):
+        with pytest.warns(DeprecationWarning, match=f"use boundary='{new}'") as caught:
+            res = jaxbpm.solve(s, scene, method="ste", clamp_layers=old)
+        assert caught[0].filename == __file__  # the warning names the caller, not jaxbpm
+        # the same options: the setup the old spelling built serves the new one (nothing built, nothing compiled)
+        built = ste.scene._setups.builds
+        with jaxbpm.count_compilations() as c:
+            assert res.stiffness == jaxbpm.solve(s, scene, method="ste", boundary=new).stiffness
+        assert ste.scene._setups.builds == built and c.count == 0
+        with pytest.warns(DeprecationWarning):
+            est = ste.estimator(s, scene, clamp_layers=old)
+        assert est.clamped == (18 if old else 0)
+    with pytest.raises(SceneError, match="clamp_layers must be True or False"):
+        ste.estimator(s, scene, clamp_layers="yes")
+    with pytest.raises(SceneError, match="boundary must be 'clamped' or 'free'"):
+        ste.estimator(s, scene, boundary="walls")
 
 
 def test_float32_estimate_matches_float64(packing, plain):
