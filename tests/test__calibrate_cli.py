@@ -131,3 +131,12 @@ def test_history_never_replaces_the_input_sample(tmp_path, capsys, monkeypatch):
     code, _, err = _run(capsys, "calibrate", old, "--config", lab_cfg, "--force")
     assert code == 2 and 'lab "report"' in err and "input" in err
     assert sample.read_bytes() == before
+
+
+def test_an_unreachable_target_is_said_on_the_command_line(one, tmp_path, capsys):
+    path = tmp_path / "s.h5"
+    save_sample(path, one)
+    code, out, _ = _run(capsys, "calibrate", path, "--target-E", 1e15, "--method", "closed-form", "--quiet")
+    assert code == 1
+    assert "target youngs_modulus = 1e+15 is out of reach of the parameter range: bond_E" in out
+    assert "at its upper bound" in out and "closest value reached" in out
