@@ -78,7 +78,8 @@ def check_outputs(outputs: dict, inputs: dict, force: bool = False, resumable: d
     for label, path in written:
         for in_label, source in ins.items():
             if _same_file(path, source):
-                raise OutputPathError(f"{label} {path}: it is the command's input {in_label}; an input is never "
+                same = "" if str(source) == str(path) else f" ({source})"
+                raise OutputPathError(f"{label} {path}: it is the command's input {in_label}{same}; an input is never "
                                       "overwritten (not even with --force): give another path")
     for i, (label, path) in enumerate(written):
         for other, second in written[i + 1:]:
