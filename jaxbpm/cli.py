@@ -57,6 +57,11 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     from jaxbpm.io import save_sample
 
     check_outputs({"--out": args.out}, {}, force=args.force)  # before the packing, which can take minutes
+    if args.bond_radius_ratio is not None and args.bond_radius_ratio > 1:
+        from jaxbpm.errors import SampleError
+
+        raise SampleError(f"--bond-radius-ratio {args.bond_radius_ratio:g} > 1: bonds wider than the smaller of their "
+                          "particles (Sample.from_arrays(..., wide_bonds=True) builds such a sample)")
     start = time.perf_counter()
     sample = generate.from_shape(args.shape, args.n, seed=args.seed, progress=not args.quiet,
                                  **_generate_kwargs(args))

@@ -244,6 +244,9 @@ def test_generate_checks_its_output_before_packing(tmp_path, capsys, monkeypatch
     assert code == 2 and "no such directory" in err and "missing" in err
     code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path)
     assert code == 2 and "it is a directory" in err and ".tmp" not in err
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path / "w.h5",
+                        "--bond-radius-ratio", 1.5)
+    assert code == 2 and "--bond-radius-ratio 1.5 > 1" in err and "wide_bonds=True" in err
 
 
 def test_negative_and_out_of_range_numbers_get_the_options_own_message(tmp_path, capsys):

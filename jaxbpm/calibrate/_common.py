@@ -217,7 +217,7 @@ def unreachable(problem, values, errors, tol: float) -> list[dict]:
                    "the value reached there is under 1e-09 of the target")
         out.append({"target": t.name, "value": target, "closest": closest, "error": float(e[s][k]),
                     "pinned": pinned, "message": f"target {t.name} = {target:.6g} is out of reach of the parameter "
-                    f"range: {at}; {reached} ({100 * float(e[s][k]):+.3g} %); widen the bounds (Parameter bounds) "
+                    f"range: {at}; {reached} ({100 * float(e[s][k]):+.3f} %); widen the bounds (Parameter bounds) "
                     "or check the target"})
     return out
 
