@@ -43,6 +43,8 @@ def add_parser(sub) -> None:
     p.add_argument("--no-shortcut", action="store_true", dest="no_shortcut",
                    help="do not replace Adam by the closed form where it applies")
     p.add_argument("--history", type=pathlib.Path, default=None, help="write the history to this HDF5 file")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing sample or record at --history or the lab report (never an input)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
@@ -93,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
       CalibrationError: a bad config, no target, a bad calibrator option, or a calibration that fails (the
         ``jaxbpm`` command prints it and exits with 2).
     """
+    from jaxbpm._outputs import check_outputs
     from jaxbpm.calibrate import CalibrationError, Parameter, Target, calibrate
     from jaxbpm.calibrate.dispatch import default_tol
     from jaxbpm.io import load_sample
@@ -125,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
     options = cfg.get("options", {})
     if not isinstance(options, dict):
         raise CalibrationError("config options must be an object")
+    runs_file = options.get("runs_file")
+    check_outputs({"--history": args.history}, {"SAMPLE": args.sample, "--config": args.config}, force=args.force,
+                  resumable={"runs_file": runs_file if isinstance(runs_file, (str, pathlib.Path)) else None})
     sample = load_sample(args.sample)
     scene = UniaxialCompression(axis=args.axis, strain=args.strain)
     # defaults < --config < options given on the command line (those default to None when not given)
@@ -158,6 +164,7 @@ def _run_lab(args: argparse.Namespace, cfg: dict) -> int:
                  "options": {"tol": 0.05}, "report": "lab.md"}}
 
     The positional sample serves every test that ``samples`` does not name."""
+    from jaxbpm._outputs import check_outputs
     from jaxbpm.calibrate import CalibrationError, lab
     from jaxbpm.io import load_sample
 
@@ -173,8 +180,16 @@ def _run_lab(args: argparse.Namespace, cfg: dict) -> int:
     paths = spec.get("samples", {})
     if not isinstance(paths, dict):
         raise CalibrationError('config lab "samples" must map tests to sample files')
+    here = pathlib.Path(args.config).parent
+    if not all(isinstance(v, (str, pathlib.Path)) for v in paths.values()):
+        raise CalibrationError('config lab "samples" must map tests to sample files')
+    report = here / spec["report"] if spec.get("report") else None
+    inputs = {"SAMPLE": args.sample, "--config": args.config,
+              **{f'lab sample "{k}"': here / v for k, v in paths.items()}}
+    chart = None if report is None else report.with_suffix(".png")
+    check_outputs({'lab "report"': report, 'lab "report" chart': chart}, inputs, force=args.force)
     default = load_sample(args.sample)
-    samples = {k: load_sample(pathlib.Path(args.config).parent / v) for k, v in paths.items()}
+    samples = {k: load_sample(here / v) for k, v in paths.items()}
     for key in ("ucs", "bts", "flexural"):
         samples.setdefault(key, default)
     samples.setdefault("elastic", samples["ucs"])
@@ -189,6 +204,6 @@ def _run_lab(args: argparse.Namespace, cfg: dict) -> int:
     print(result.table())
     for key, why in result.unreached.items():
         print(f"not reached: {key}: {why}")
-    if spec.get("report"):
-        print(f"wrote {result.report(pathlib.Path(args.config).parent / spec['report'])}")
+    if report is not None:
+        print(f"wrote {result.report(report)}")
     return 0 if result.converged else 1

@@ -250,7 +250,8 @@ def _ratio(bond_radius_ratio) -> float:
     return ratio
 
 
-def checked_bond_radius(bond_radius, bond_radius_ratio, rad: np.ndarray, b: np.ndarray) -> np.ndarray:
+def checked_bond_radius(bond_radius, bond_radius_ratio, rad: np.ndarray, b: np.ndarray,
+                        wide_bonds: bool = False) -> np.ndarray:
     """The bond radii, given or as a ratio of the smaller particle's radius, checked.
 
     Args:
@@ -258,20 +259,38 @@ def checked_bond_radius(bond_radius, bond_radius_ratio, rad: np.ndarray, b: np.n
       bond_radius_ratio: a number, or ``None``; exactly one of the two is given.
       rad: ``[n]`` checked radii [m].
       b: ``[nb, 2]`` checked bonds.
+      wide_bonds: allow bonds wider than the smaller of their two particles (ratio above 1).
 
     Returns:
       ``[nb]`` float64 bond radii [m].
 
     Raises:
-      SampleError: both or neither given, a bad ratio, wrong shape, or values not finite and positive.
+      SampleError: both or neither given, a bad ratio, wrong shape, values not finite and positive, or (without
+        ``wide_bonds``) a bond radius above the smaller particle's radius.
     """
     if (bond_radius is None) == (bond_radius_ratio is None):
         raise SampleError("give exactly one of bond_radius and bond_radius_ratio")
+    smaller = np.minimum(rad[b[:, 0]], rad[b[:, 1]])
     if bond_radius_ratio is not None:
-        return _ratio(bond_radius_ratio) * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
+        ratio = _ratio(bond_radius_ratio)
+        if ratio > 1.0 + _WIDE_TOL and not wide_bonds and len(b):
+            raise SampleError(f"bond_radius_ratio {shown(bond_radius_ratio)} > 1: bonds wider than the smaller of "
+                              "their particles (the ratio is r_b / min(R1, R2), usually 0.5 to 1); pass "
+                              "wide_bonds=True to allow them")
+        return ratio * smaller
     nb = b.shape[0]
-    return _positive_per_item("bond_radius", bond_radius, nb, f"be a scalar or have shape [{nb}]",
-                              "non-positive at bonds")
+    rb = _positive_per_item("bond_radius", bond_radius, nb, f"be a scalar or have shape [{nb}]",
+                            "non-positive at bonds")
+    wide = np.flatnonzero(rb > smaller * (1.0 + _WIDE_TOL))
+    if len(wide) and not wide_bonds:
+        k = wide[np.argmax(rb[wide] / smaller[wide])]
+        raise SampleError(f"bond_radius above the smaller particle's radius at bonds {listed(wide)} (bond {k}: "
+                          f"{rb[k]:.6g} m, ratio {rb[k] / smaller[k]:.6g} to {smaller[k]:.6g} m); pass "
+                          "wide_bonds=True to allow bonds wider than their particles")
+    return rb
+
+
+_WIDE_TOL = 1e-9  # a ratio of 1 computed through another code's convention may come out a rounding above it
 
 
 def checked_bond_material(bond_material, nb: int, n_materials: int) -> np.ndarray:

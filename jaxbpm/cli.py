@@ -28,6 +28,8 @@ _LATTICE_SHAPES = ("sc", "fcc")
 _GENERATE_DEFAULTS = {"mean_radius": None, "spread": 0.05, "packing_fraction": None, "bond_radius_ratio": 0.5,
                       "E": 1.0e9, "nu": 0.25}
 _DEMO_DIR = "jaxbpm-demo"
+_DEMO_FILES = ("demo_sample.h5", "demo_results.json", "demo_speed_accuracy.png")  # what the demo writes there
+_FORCE_HELP = "replace an existing sample or record at the output path (never an input of the command)"
 
 
 # ---------------------------------------------------------------------------------------------- commands
@@ -51,9 +53,15 @@ def _generate_kwargs(args: argparse.Namespace) -> dict[str, Any]:
 
 def _cmd_generate(args: argparse.Namespace) -> int:
     from jaxbpm import generate
-    from jaxbpm.io import check_writable, save_sample
+    from jaxbpm._outputs import check_outputs
+    from jaxbpm.io import save_sample
 
-    check_writable(args.out)  # before the packing, which can take minutes
+    check_outputs({"--out": args.out}, {}, force=args.force)  # before the packing, which can take minutes
+    if args.bond_radius_ratio is not None and args.bond_radius_ratio > 1:
+        from jaxbpm.errors import SampleError
+
+        raise SampleError(f"--bond-radius-ratio {args.bond_radius_ratio:g} > 1: bonds wider than the smaller of their "
+                          "particles (Sample.from_arrays(..., wide_bonds=True) builds such a sample)")
     start = time.perf_counter()
     sample = generate.from_shape(args.shape, args.n, seed=args.seed, progress=not args.quiet,
                                  **_generate_kwargs(args))
@@ -105,8 +113,10 @@ def _human_bytes(n: int) -> str:
 
 
 def _cmd_export_vtk(args: argparse.Namespace) -> int:
+    from jaxbpm._outputs import check_outputs
     from jaxbpm.io import export_vtk, load_sample
 
+    check_outputs({"OUT": args.out}, {"SAMPLE": args.sample}, force=args.force)
     sample = load_sample(args.sample)
     out = export_vtk(args.out, sample)
     print(f"wrote {out}  ({sample.n_particles} particles as vertices, {sample.n_bonds} bonds as lines)")
@@ -238,6 +248,12 @@ def _demo_chart(path, table, sample):
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from jaxbpm._outputs import OutputPathError, check_outputs
+
+    if args.out.exists() and not args.out.is_dir():
+        raise OutputPathError(f"--out {args.out}: the file exists; the demo writes a folder, give a folder path")
+    if args.out.is_dir():  # a demo folder is reused: its demo files are replaced, nothing else is touched
+        check_outputs({f"--out ({name})": args.out / name for name in _DEMO_FILES}, {}, force=True)
     run_demo(args.out, n=args.n, seed=args.seed, quiet=args.quiet, solve=not args.no_solve,
              calibrate=not args.no_calibrate)
     return 0
@@ -332,6 +348,7 @@ def _add_generate(sub) -> None:
     p.add_argument("--nu", type=float, default=None, metavar="NU",
                    help=f"Poisson ratio of the bonds (default: {d['nu']})")
     p.add_argument("--quiet", action="store_true", help="no progress output while generating")
+    p.add_argument("--force", action="store_true", help=_FORCE_HELP)
     p.set_defaults(func=_cmd_generate)
 
 
@@ -358,6 +375,7 @@ def _add_export_vtk(sub) -> None:
                                    "of OUT picks the format: .vtu (XML, preferred) or .vtk (legacy).")
     p.add_argument("sample", type=pathlib.Path, help="sample file (.h5) written by jaxbpm")
     p.add_argument("out", type=pathlib.Path, help="VTK file to write (.vtu or .vtk)")
+    p.add_argument("--force", action="store_true", help=_FORCE_HELP)
     p.set_defaults(func=_cmd_export_vtk)
 
 
@@ -372,7 +390,8 @@ def _add_demo(sub) -> None:
                                    "OUT/demo_results.json and the speed-against-accuracy chart "
                                    "OUT/demo_speed_accuracy.png.")
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path(_DEMO_DIR),
-                   help=f"output directory (default: ./{_DEMO_DIR})")
+                   help=f"output directory (default: ./{_DEMO_DIR}); a folder of an earlier demo is reused, its demo "
+                        "files replaced")
     p.add_argument("--n", type=_positive_int, default=2000, help="number of particles (default: 2000)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default: 0)")
     p.add_argument("--quiet", action="store_true", help="no progress output")

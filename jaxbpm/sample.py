@@ -17,6 +17,7 @@ import jax
 import numpy as np
 
 from jaxbpm._spatial import morton_order
+from jaxbpm._summary import SampleSummary
 from jaxbpm._text import shown
 from jaxbpm._validate import (bond_lengths, checked_bond_material, checked_bond_radius, checked_bonds,
                               checked_positions, checked_radii, checked_types, listed)
@@ -186,51 +187,6 @@ class ParticleMaterial:
 _register(ParticleMaterial, ["density", "E", "nu", "friction", "restitution"])
 
 
-@dataclasses.dataclass(frozen=True)
-class SampleSummary:
-    """What :meth:`Sample.summary` reports; ``str()`` gives a readable table."""
-
-    n_particles: int
-    n_bonds: int
-    n_materials: int
-    bonds_per_material: tuple[int, ...]
-    coordination_mean: float
-    coordination_min: int
-    coordination_max: int
-    n_unbonded: int
-    n_clusters: int
-    largest_cluster: int
-    packing_fraction: float
-    packing_basis: str
-    bbox_lo: tuple[float, float, float]
-    bbox_hi: tuple[float, float, float]
-    radius_min: float
-    radius_mean: float
-    radius_max: float
-    total_mass: float
-    bond_contact: str
-    types: tuple[tuple[int, int], ...] = ()
-
-    def __str__(self) -> str:
-        lo = ", ".join(f"{v:.4g}" for v in self.bbox_lo)
-        hi = ", ".join(f"{v:.4g}" for v in self.bbox_hi)
-        lines = [
-            f"particles            {self.n_particles}",
-            f"bonds                {self.n_bonds}  (per material: {list(self.bonds_per_material)})",
-            f"coordination         mean {self.coordination_mean:.3f}  min {self.coordination_min}"
-            f"  max {self.coordination_max}",
-            f"unbonded particles   {self.n_unbonded}",
-            f"clusters             {self.n_clusters}  (largest {self.largest_cluster} particles)",
-            f"packing fraction     {self.packing_fraction:.4f}  ({self.packing_basis})",
-            f"radius [m]           min {self.radius_min:.4g}  mean {self.radius_mean:.4g}  max {self.radius_max:.4g}",
-            f"bounding box [m]     ({lo}) .. ({hi})",
-            f"total mass [kg]      {self.total_mass:.4g}",
-            f"bonded pairs         contact forces {self.bond_contact}d",
-            f"particle types       {', '.join(f'{t}: {c}' for t, c in self.types)}  (type: particles)",
-        ]
-        return "\n".join(lines)
-
-
 _BOND_CONTACT = ("superimpose", "replace")
 
 
@@ -286,6 +242,7 @@ class Sample:
         bond_contact: str = "superimpose",
         domain: Domain | None = None,
         types=None,
+        wide_bonds: bool = False,
     ) -> "Sample":
         """Build and validate a sample from plain arrays.
 
@@ -304,6 +261,8 @@ class Sample:
           domain: the region the sample fills (used for its packing fraction), optional.
           types: ``[n]`` (or a scalar) whole numbers >= 0, each particle's type (default 1, LAMMPS's first atom
             type); carried through subsets, renumbering and files, read by no solver.
+          wide_bonds: allow bond radii above the smaller particle's radius (``bond_radius_ratio`` > 1), refused
+            otherwise.
 
         Returns:
           The sample, with its derived per-particle and per-bond quantities.
@@ -316,7 +275,7 @@ class Sample:
         rad = checked_radii(radii, n)
         b = checked_bonds(bonds, n)
         length = bond_lengths(pos, rad, b)
-        rb = checked_bond_radius(bond_radius, bond_radius_ratio, rad, b)
+        rb = checked_bond_radius(bond_radius, bond_radius_ratio, rad, b, wide_bonds=bool(wide_bonds))
         mats = _material_table(materials)
         bm = checked_bond_material(bond_material, b.shape[0], mats.n)
         pm = _particle_material(particle_material, density)
@@ -351,7 +310,8 @@ class Sample:
         Args:
           **changes: keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
             ``bond_radius_ratio``, ``bond_material``, ``materials``, ``density``, ``particle_material``,
-            ``bond_contact``, ``domain``, ``types``). New ``bonds`` need a new ``bond_radius`` or ``bond_radius_ratio``.
+            ``bond_contact``, ``domain``, ``types``, ``wide_bonds``). New ``bonds`` need a new ``bond_radius`` or
+            ``bond_radius_ratio``. The bond radii are checked against the radii again only where one of them changes.
 
         Returns:
           The sample, its derived quantities recomputed.
@@ -369,9 +329,10 @@ class Sample:
             raise SampleError("replace(bonds=...) also needs bond_radius or bond_radius_ratio for the new bonds")
         if "bonds" in changes and "bond_material" not in changes:
             kw.pop("bond_material")
-        unknown = set(changes) - set(kw) - {"bond_radius_ratio", "density"}
+        unknown = set(changes) - set(kw) - {"bond_radius_ratio", "density", "wide_bonds"}
         if unknown:
             raise SampleError(f"replace: unknown fields {sorted(unknown)}")
+        kw["wide_bonds"] = not {"radii", "bonds", "bond_radius", "bond_radius_ratio"} & set(changes)
         kw.update(changes)
         return Sample.from_arrays(**kw)
 
@@ -431,7 +392,8 @@ class Sample:
         return Sample.from_arrays(pick(self.positions, rows), pick(self.radii, rows), bonds,
                                   pick(self.bond_radius, bond_rows), bond_material=pick(self.bond_material, bond_rows),
                                   materials=self.materials, particle_material=self.particle_material,
-                                  bond_contact=self.bond_contact, domain=self.domain, types=pick(self.types, rows))
+                                  bond_contact=self.bond_contact, domain=self.domain, types=pick(self.types, rows),
+                                  wide_bonds=True)  # (bonds of this sample, accepted when it was built)
 
     def largest_cluster(self) -> "Sample":
         """The sample without the particles outside its largest bonded cluster (loose particles and fragments).

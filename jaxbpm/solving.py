@@ -9,7 +9,7 @@ from jaxbpm.errors import SceneError
 from jaxbpm.physics.model import check_params
 from jaxbpm.result import Result
 from jaxbpm.sample import Sample
-from jaxbpm.scenes import Scene
+from jaxbpm.scenes import Scene, scene_from_name
 
 __all__ = ["solve", "METHODS"]
 
@@ -31,7 +31,8 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 
     Args:
       sample: the bonded sample.
-      scene: the scene (boundary conditions and loading), e.g. :class:`~jaxbpm.scenes.UniaxialCompression`.
+      scene: the scene (boundary conditions and loading), e.g. :class:`~jaxbpm.scenes.UniaxialCompression`, or its
+        name (``"uniaxial"``, ``"ucs"``, ``"bts"``, ``"tpb"``; see :mod:`jaxbpm.scenes.names`).
       method: ``"dem"``, ``"dsm"``, ``"ste"``, ``"auto"`` or an options object.
       params: ``{"bond_E": [...], "bond_nu": [...], ...}`` overriding the sample's material table (for
         calibration; see :func:`jaxbpm.physics.model.check_params`).
@@ -42,7 +43,9 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 
     Raises:
       OptionsError: an unknown solver or option (with the closest names) or an option out of its range.
-      SceneError: a scene the solver does not model, or parameters that do not fit the sample.
+      SceneError: a scene the solver does not model (a static solver asked for a scene with bond breakage: the DSM
+        and STE give the elastic range only, ``method="dem"`` the strength), an unknown scene name, or parameters
+        that do not fit the sample.
       SolveError: with ``throw=True``, a solve that did not converge.
     """
     from jaxbpm import _interrupt
@@ -56,6 +59,8 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
 def _solve(sample, scene, method, params, options) -> Result:
     """:func:`solve` without the interrupt guard: checks the options, the sample, the scene and the parameters, once,
     then runs the solver."""
+    if isinstance(scene, str):  # "ucs", "bts", "tpb", "uniaxial", ...: jaxbpm.scenes.names
+        scene = scene_from_name(scene)
     if isinstance(method, str) and method == "auto":  # the cheapest solver expected to meet tol: jaxbpm.auto
         return solve_auto(sample, scene, params, options, solve=_dispatch)
     method = resolve_options(method, options)
@@ -77,6 +82,10 @@ def _check_supported(scene, name: str) -> None:
         raise SceneError(f"{type(scene).__name__} needs method={allowed[0]!r}"
                          f"{'' if len(allowed) == 1 else f' (or one of {allowed[1:]})'}: the {name.upper()} does "
                          "not model it")
+    if name != "dem" and getattr(scene, "breakage", None) is True:
+        raise SceneError(f"{type(scene).__name__} with breakage=True asks for failure: the {name.upper()} gives the "
+                         "elastic range only (no bond breaks in a static solve); method='dem' gives the strength. "
+                         "For the elastic range, give the scene with breakage=False (e.g. UniaxialCompression())")
     if name != "dem" and scene.contacts and scene.cohesive_law is not None:
         raise SceneError(f"the cohesive contact law depends on the loading history: it needs method='dem', not "
                          f"{name!r}")

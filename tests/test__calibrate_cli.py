@@ -101,3 +101,42 @@ def test_old_solver_option_and_config_key_still_read(tmp_path, capsys, monkeypat
     config.write_text(json.dumps({"model": "dem", "solver": "ste"}))
     code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1e9, "--config", config)
     assert code == 2 and 'give "solver" only' in err
+
+
+def test_history_never_replaces_the_input_sample(tmp_path, capsys, monkeypatch):
+    """``--history s.h5`` onto the calibrated sample: refused before any calibration, even with ``--force``; an
+    existing record needs ``--force``; the runs file of a config may not be the sample either."""
+    import jaxbpm.calibrate
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the calibration ran before the outputs were checked")
+
+    monkeypatch.setattr(jaxbpm.calibrate, "calibrate", must_not_run)
+    sample = tmp_path / "s.h5"
+    save_sample(sample, _tiny())
+    before = sample.read_bytes()
+    for extra in ([], ["--force"]):
+        code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1.5e8, "--history", sample, *extra)
+        assert code == 2 and f"--history {sample}" in err and "input SAMPLE" in err
+    old = tmp_path / "old.h5"
+    save_sample(old, _tiny())
+    code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1.5e8, "--history", old)
+    assert code == 2 and "--force" in err
+    cfg = tmp_path / "c.json"
+    cfg.write_text(json.dumps({"options": {"runs_file": str(sample)}}))
+    code, _, err = _run(capsys, "calibrate", sample, "--target-E", 1.5e8, "--config", cfg)
+    assert code == 2 and "runs_file" in err and "input SAMPLE" in err
+    lab_cfg = tmp_path / "lab.json"
+    lab_cfg.write_text(json.dumps({"lab": {"targets": {"E": 1e9}, "samples": {"ucs": "s.h5"}, "report": "s.h5"}}))
+    code, _, err = _run(capsys, "calibrate", old, "--config", lab_cfg, "--force")
+    assert code == 2 and 'lab "report"' in err and "input" in err
+    assert sample.read_bytes() == before
+
+
+def test_an_unreachable_target_is_said_on_the_command_line(one, tmp_path, capsys):
+    path = tmp_path / "s.h5"
+    save_sample(path, one)
+    code, out, _ = _run(capsys, "calibrate", path, "--target-E", 1e15, "--method", "closed-form", "--quiet")
+    assert code == 1
+    assert "target youngs_modulus = 1e+15 is out of reach of the parameter range: bond_E" in out
+    assert "at its upper bound" in out and "closest value reached" in out

@@ -244,6 +244,9 @@ def test_generate_checks_its_output_before_packing(tmp_path, capsys, monkeypatch
     assert code == 2 and "no such directory" in err and "missing" in err
     code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path)
     assert code == 2 and "it is a directory" in err and ".tmp" not in err
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", tmp_path / "w.h5",
+                        "--bond-radius-ratio", 1.5)
+    assert code == 2 and "--bond-radius-ratio 1.5 > 1" in err and "wide_bonds=True" in err
 
 
 def test_negative_and_out_of_range_numbers_get_the_options_own_message(tmp_path, capsys):
@@ -258,3 +261,38 @@ def test_negative_and_out_of_range_numbers_get_the_options_own_message(tmp_path,
     code, _, err = _run(capsys, "calibrate", good, "--target-E", "-1e8")
     assert code == 2 and err.startswith("error: ") and "must be > 0" in err and "np." not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["good.h5"]
+
+
+def test_no_command_overwrites_an_input_or_a_sample(tmp_path, capsys, monkeypatch):
+    """``generate --out`` over a sample needs ``--force``; ``export-vtk`` onto its own input is refused even with it;
+    nothing is packed or written before the refusal."""
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the packing ran before the output path was checked")
+
+    sample = tmp_path / "s.h5"
+    io.save_sample(sample, _tiny())
+    before = sample.read_bytes()
+    monkeypatch.setattr(generate, "from_shape", must_not_run, raising=False)
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 50, "--out", sample)
+    assert code == 2 and f"--out {sample}" in err and "--force" in err and err.startswith("error:")
+    for argv in (["export-vtk", sample, sample], ["export-vtk", sample, tmp_path / "." / "s.h5", "--force"]):
+        code, _, err = _run(capsys, *argv)
+        assert code == 2 and "input SAMPLE" in err and "not even with --force" in err
+    assert sample.read_bytes() == before
+    monkeypatch.setattr(generate, "from_shape", lambda shape, n, **kw: _chain(4), raising=False)
+    code, _, err = _run(capsys, "generate", "--shape", "box", "--n", 4, "--out", sample, "--force", "--quiet")
+    assert code == 0, err
+    assert io.load_sample(sample).n_particles == 4
+
+
+def test_demo_reuses_its_folder_but_not_a_file(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(generate, "from_shape", lambda shape, n, **kw: _chain(5), raising=False)
+    afile = tmp_path / "notes.txt"
+    afile.write_text("keep")
+    code, _, err = _run(capsys, "demo", "--out", afile, "--no-solve", "--quiet")
+    assert code == 2 and "--out" in err and "folder" in err and afile.read_text() == "keep"
+    for _ in range(2):  # the second run replaces the demo's own files
+        assert _run(capsys, "demo", "--out", tmp_path / "d", "--no-solve", "--quiet")[0] == 0
+    (tmp_path / "e" / "demo_sample.h5").mkdir(parents=True)
+    code, _, err = _run(capsys, "demo", "--out", tmp_path / "e", "--no-solve", "--quiet")
+    assert code == 2 and "directory" in err

@@ -577,3 +577,182 @@ def test_fuzz_solve_refuses_before_compiling(lattice):
                           names)
     assert compiled.count == 0
     tally.finish("solve", 36)
+
+
+# ============================================================================================== scenes, radii, targets
+def test_fuzz_scene_names_and_failure_scenes(lattice):
+    """Scenes by name and failure scenes for the static solvers: an unknown name (typos, random words) is a
+    SceneError listing the names, for every method; a failure scene (breakage on) asked of the DSM or STE is refused
+    at once, saying which method gives the strength; nothing is compiled."""
+    from jaxbpm.scenes import ThreePointBending, scene_from_name
+    from jaxbpm.scenes.names import SCENE_NAMES
+
+    rng = np.random.default_rng(11)
+    tally = Tally()
+    cases = []
+    for k in range(24):
+        base = str(rng.choice(sorted(SCENE_NAMES)))
+        name = _typo(base, rng) if k % 2 else "".join(rng.choice(list(string.ascii_letters + " _-"), 1 + k % 7))
+        if name.strip().lower() in SCENE_NAMES:
+            continue
+        cases.append((f"name {name!r}", name, str(rng.choice(["dem", "dsm", "ste", "auto"])), ("unknown scene name",)))
+    for k in range(8):
+        name = str(rng.choice(["ucs", "UCS", " ucs", "bts", "Brazilian"]))
+        cases.append((f"name {name!r}", name, str(rng.choice(["dsm", "ste"])), ("elastic range only", "needs method")))
+    for k in range(12):
+        strain = float(10 ** rng.uniform(-4, -0.5))
+        scene = [UniaxialCompression(strain=strain, breakage=True, contacts=bool(rng.integers(2))),
+                 UniaxialCompression.to_failure(strain=strain), ThreePointBending(breakage=True)][k % 3]
+        method = str(rng.choice(["dsm", "ste"]))
+        cases.append((f"{type(scene).__name__} strain {strain:.3g}", scene, method, ("elastic range only",
+                                                                                      "needs method")))
+    with jaxbpm.count_compilations() as compiled:
+        for label, scene, method, names in cases:
+            tally.refused(f"{method} {label}", lambda: jaxbpm.solve(lattice, scene, method), names)
+    assert compiled.count == 0
+    for name in SCENE_NAMES:  # and every known name, in any case, is its scene
+        assert scene_from_name(f" {name.upper()} ") == scene_from_name(name)
+    tally.finish("scene names and failure scenes", 36)
+
+
+def test_fuzz_bond_radii():
+    """Random bond radius ratios and per-bond radii on random radii: refused naming the bonds (or the ratio) and
+    ``wide_bonds``, or accepted with no bond wider than its smaller particle; ``wide_bonds=True`` accepts them."""
+    rng = np.random.default_rng(12)
+    tally = Tally()
+    pos = np.arange(6)[:, None] * np.array([1.0, 0.0, 0.0])
+    bonds = [[0, 1], [1, 2], [2, 3], [3, 4], [4, 5]]
+    for k in range(60):
+        radii = 0.5 * rng.uniform(0.5, 1.0, 6)
+        smaller = np.minimum(radii[:-1], radii[1:])
+        if k % 2:
+            ratio = float(10 ** rng.uniform(-2, 2))
+            kw, wide = {"bond_radius_ratio": ratio}, ratio > 1 + 1e-9
+        else:
+            rb = smaller * 10 ** rng.uniform(-1, 0.2, 5)
+            kw, wide = {"bond_radius": rb}, bool(np.any(rb > smaller * (1 + 1e-9)))
+        label = f"case {k}: {'ratio' if k % 2 else 'radii'}"
+        if wide:
+            tally.refused(label, lambda: Sample.from_arrays(pos, radii, bonds, **kw), ("wide_bonds",),
+                          error=jaxbpm.SampleError)
+            got = Sample.from_arrays(pos, radii, bonds, wide_bonds=True, **kw)
+            assert np.any(got.bond_radius > smaller), label
+        else:
+            got = tally.read(label, lambda: Sample.from_arrays(pos, radii, bonds, **kw))
+            assert got is not None and np.all(got.bond_radius <= smaller * (1 + 1e-9)), label
+    tally.finish("bond radii", 60)
+
+
+def test_fuzz_lammps_atom_types(tmp_path):
+    """Atom types and the header's ``atom types`` count changed at random in a file without the checksum: a type
+    outside 1..count is an error naming its line, as LAMMPS refuses it; any other file reads with those types."""
+    rng = np.random.default_rng(13)
+    tally = Tally()
+    lines = _without_checksum_lammps(formats.write_lammps_data(tmp_path / "w.data", SAMPLE).read_bytes()) \
+        .decode().splitlines()
+    header = next(k for k, ln in enumerate(lines) if ln.endswith("atom types"))
+    first = next(k for k, ln in enumerate(lines) if ln.startswith("Atoms")) + 2
+    target = tmp_path / "t.data"
+    for k in range(40):
+        count = int(rng.integers(1, 4))
+        types = rng.integers(1, count + 1, SAMPLE.n_particles)
+        if k % 2:  # one or two atoms of a type the header does not count
+            types[rng.choice(SAMPLE.n_particles, 1 + k % 3 // 2, replace=False)] = rng.choice([-1, 0, count + 1, 9])
+        edited = list(lines)
+        edited[header] = f"{count} atom types"
+        for i, t in enumerate(types):
+            words = edited[first + i].split("#")[0].split()
+            words[2] = str(int(t))  # bpm/sphere: id mol type diameter density x y z
+            edited[first + i] = " ".join(words)
+        target.write_text("\n".join(edited) + "\n")
+        bad = np.flatnonzero((types < 1) | (types > count))
+        if bad.size:
+            tally.refused(f"case {k}: types {types.tolist()} under {count}", lambda: formats.read_lammps_data(target),
+                          (f"t.data:{first + bad[0] + 1}: atom {bad[0] + 1} has type {types[bad[0]]}",),
+                          error=jaxbpm.SampleFileError)
+        else:
+            got = tally.read(f"case {k}", lambda: formats.read_lammps_data(target))
+            assert got is not None and np.array_equal(got.types, types)
+    tally.finish("LAMMPS atom types", 40)
+
+
+def test_fuzz_calibration_targets():
+    """Random targets over 24 decades on a model of known range (E = 3 bond_E, bond_E in [1e-3, 1e3]): each result is
+    converged within tol, or a target out of the range is reported with the parameter at the bound on its side."""
+    from jaxbpm import calibrate as cal
+    from jaxbpm.calibrate import Target
+    from tests.calibrate._cases import _analytic_problem
+
+    rng = np.random.default_rng(14)
+    outcomes = collections.Counter()
+    for k in range(12):
+        target = float(10 ** rng.uniform(-12, 12))
+        res = cal.adam(_analytic_problem([Target("youngs_modulus", target)]), gradient="fd-forward", tol=0.01,
+                       max_iterations=5)
+        reachable = 3e-3 <= target <= 3e3
+        if res.converged:
+            assert reachable and abs(res.errors["youngs_modulus"]) <= 0.01, (target, res.errors)
+            outcomes["converged"] += 1
+            continue
+        assert not reachable, (target, res.table())
+        (entry,) = res.info["unreachable"]
+        side = "upper" if target > 3e3 else "lower"
+        assert [p[1] for p in entry["pinned"]] == [side] and entry["value"] == target, entry
+        assert entry["message"] in res.notes and "out of reach" in res.table()
+        outcomes[f"out of reach ({side})"] += 1
+    assert outcomes["converged"] and len(outcomes) == 3, outcomes
+
+
+def test_fuzz_cli_outputs_never_replace_an_input(tmp_path, monkeypatch, capsys):
+    """Every command that writes a file, with its output naming its input however spelled (relative, ``./``,
+    ``sub/..``, absolute, a symbolic link, a hard link), with and without ``--force``: refused (exit 2, ``error:``
+    naming the input) before any work, the input unchanged; an existing sample that is no input: refused without
+    ``--force``."""
+    import os
+    import pathlib
+
+    import jaxbpm.calibrate
+    from jaxbpm import cli, generate
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("work started before the outputs were checked")
+
+    monkeypatch.setattr(generate, "from_shape", must_not_run, raising=False)
+    monkeypatch.setattr(jaxbpm.calibrate, "calibrate", must_not_run)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sub").mkdir()
+    io.save_sample(tmp_path / "s.h5", SAMPLE)
+    io.save_sample(tmp_path / "other.h5", SAMPLE)
+    os.symlink(tmp_path / "s.h5", tmp_path / "link.h5")
+    os.link(tmp_path / "s.h5", tmp_path / "hard.h5")
+    before = (tmp_path / "s.h5").read_bytes()
+    spellings = ["s.h5", "./s.h5", "sub/../s.h5", str(tmp_path / "s.h5"), "link.h5", "hard.h5"]
+    commands = {"export-vtk": lambda out: ["export-vtk", "s.h5", out],
+                "calibrate": lambda out: ["calibrate", "s.h5", "--target-E", "1e9", "--history", out],
+                "convert": lambda out: ["convert", "s.h5", out]}
+    tally = Tally()
+    for name, argv in commands.items():
+        for out in spellings:
+            for force in ([], ["--force"]):
+                code = cli.main(argv(out) + force)
+                err = capsys.readouterr().err
+                if code == 2 and err.startswith("error:") and "is the command's input" in err \
+                        and str(pathlib.Path(out)) in err:
+                    tally.counts["named error"] += 1
+                else:
+                    tally.failures.append(f"{name} -> {out} {force}: exit {code}, {err.strip()!r}")
+        code = cli.main(argv("other.h5"))  # a sample, no input: --force needed
+        err = capsys.readouterr().err
+        if code == 2 and "--force" in err and "other.h5" in err:
+            tally.counts["named error"] += 1
+        else:
+            tally.failures.append(f"{name} -> other.h5: exit {code}, {err.strip()!r}")
+    for out in spellings + ["other.h5"]:
+        code = cli.main(["generate", "--shape", "box", "--n", "9", "--out", out])
+        err = capsys.readouterr().err
+        if code == 2 and "--force" in err:
+            tally.counts["named error"] += 1
+        else:
+            tally.failures.append(f"generate -> {out}: exit {code}, {err.strip()!r}")
+    assert (tmp_path / "s.h5").read_bytes() == before
+    tally.finish("CLI outputs", 46)

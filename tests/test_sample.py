@@ -188,3 +188,35 @@ def test_particle_types_follow_their_particles():
     assert jax.tree_util.tree_unflatten(tree, leaves).types.tolist() == [3, 1, 4, 1, 5]
     assert t.summary().types == ((1, 2), (3, 1), (4, 1), (5, 1))
     assert "particle types       1: 2, 3: 1, 4: 1, 5: 1" in str(t.summary())
+
+
+def test_bonds_wider_than_their_particles_need_wide_bonds():
+    """``bond_radius_ratio=50.0`` was accepted (bonds 50 times wider than the particles)."""
+    from jaxbpm.errors import SampleError
+
+    pos = np.array([[0.0, 0, 0], [1.5, 0, 0], [3.0, 0, 0]])
+    radii = np.array([1.0, 0.5, 1.0])
+    bonds = [[0, 1], [1, 2]]
+    with pytest.raises(SampleError, match=r"bond_radius_ratio 50.0 > 1.*wide_bonds=True"):
+        Sample.from_arrays(pos, radii, bonds, bond_radius_ratio=50.0)
+    # bond radius per bond: against the smaller particle (0.5 here), the bond named
+    with pytest.raises(SampleError, match=r"above the smaller particle's radius at bonds \[1\].*ratio 1.2"):
+        Sample.from_arrays(pos, radii, bonds, [0.5, 0.6])
+    assert np.allclose(Sample.from_arrays(pos, radii, bonds, bond_radius_ratio=1.0).bond_radius, 0.5)
+    wide = Sample.from_arrays(pos, radii, bonds, bond_radius_ratio=2.0, wide_bonds=True)
+    assert np.allclose(wide.bond_radius, 1.0) and np.allclose(wide.bond_area, np.pi)
+    # the sample's own bonds stay accepted through subsets, renumbering and unrelated changes
+    assert wide.subset([True, True, False]).n_bonds == 1 and wide.renumbered([2, 1, 0]).n_bonds == 2
+    assert wide.replace(density=1000.0).n_bonds == 2
+    with pytest.raises(SampleError, match="wide_bonds=True"):  # new radii: checked again
+        wide.replace(radii=0.4)
+    assert wide.replace(radii=0.4, wide_bonds=True).n_bonds == 2
+
+
+def test_a_saved_sample_with_wide_bonds_loads(tmp_path):
+    from jaxbpm import io
+
+    pos = np.array([[0.0, 0, 0], [1.5, 0, 0]])
+    wide = Sample.from_arrays(pos, 1.0, [[0, 1]], bond_radius_ratio=3.0, wide_bonds=True)
+    back = io.load_sample(io.save_sample(tmp_path / "w.h5", wide))
+    assert np.array_equal(back.bond_radius, wide.bond_radius)

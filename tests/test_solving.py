@@ -71,3 +71,31 @@ def test_a_scene_states_the_solvers_that_model_it(lattice):
 def test_methods_lists_every_solver():
     assert solving.METHODS == ("dem", "dsm", "ste")
     assert np.all([jaxbpm.solve.__doc__.count(c) for c in ("jaxbpm.DEM", "jaxbpm.DSM", "jaxbpm.STE")])
+
+
+def test_a_scene_by_name(lattice):
+    """``solve(S, "ucs", "dsm")`` raised ``AttributeError: 'str' object has no attribute 'contacts'``."""
+    by_name = jaxbpm.solve(lattice, "uniaxial", "dsm")
+    assert by_name.stiffness == jaxbpm.solve(lattice, UniaxialCompression(), "dsm").stiffness
+    with pytest.raises(SceneError, match="unknown scene name 'ucss'.*'ucs'"):
+        jaxbpm.solve(lattice, "ucss", "dsm")
+    with pytest.raises(SceneError, match="unknown scene name"):
+        jaxbpm.solve(lattice, "nope", "auto")
+    with pytest.raises(SceneError, match="needs method='dem'"):  # the Brazilian test: the DEM only
+        jaxbpm.solve(lattice, "bts", "ste")
+
+
+@pytest.mark.parametrize("method", ["dsm", "ste"])
+def test_a_static_solver_refuses_a_failure_scene_at_once(lattice, method, monkeypatch):
+    """``solve(S, UniaxialCompression.to_failure(), "dsm")`` ran 40 s, then said "too few records in fit_range"."""
+    from jaxbpm import dsm, ste
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the solver ran")
+
+    monkeypatch.setattr(dsm, "solve_scene", must_not_run)
+    monkeypatch.setattr(ste, "solve_scene", must_not_run)
+    for scene in ("ucs", UniaxialCompression.to_failure(), UniaxialCompression(strain=0.002, breakage=True)):
+        with pytest.raises(SceneError, match=rf"the {method.upper()} gives the elastic range only.*method='dem' "
+                                             "gives the strength"):
+            jaxbpm.solve(lattice, scene, method)

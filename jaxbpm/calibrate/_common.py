@@ -164,12 +164,62 @@ def make_result(problem, history: History, values, errors, *, method: str, tol: 
     params = {k: np.asarray(v) for k, v in problem.space.to_params(values).items()}
     if converged is None:
         converged = bool(np.all(problem.max_errors(errors) <= tol))
+    info = dict(info or {})
+    out_of_reach = [] if converged else unreachable(problem, values, errors, tol)
+    if out_of_reach:
+        info["unreachable"] = out_of_reach
+        notes = list(notes) + [entry["message"] for entry in out_of_reach]
     return CalibrationResult(values=problem.space.describe(values), params=params,
                              errors=problem.signed_errors(errors), converged=bool(converged), method=method,
                              solver=problem.forward.name, evaluations=int(evaluations),
                              iterations=len(history) if iterations is None else int(iterations),
                              wall_time=float(wall_time), tol=float(tol), history=history, notes=list(notes),
-                             band=band, info=dict(info or {}))
+                             band=band, info=info)
+
+
+def unreachable(problem, values, errors, tol: float) -> list[dict]:
+    """The targets missed (error above ``tol``) while parameters sit at a bound of their range: out of reach of the
+    parameter range, not of the iterations.
+
+    Args:
+      problem: the :class:`~jaxbpm.calibrate.objective.Problem`.
+      values: the answer ``[n]``.
+      errors: its relative errors ``[m]``.
+      tol: the relative tolerance.
+
+    Returns:
+      One entry per missed target: ``{"target", "value", "closest", "error", "pinned": [(parameter, "lower" or
+      "upper", bound)], "message"}``. ``closest``: the value reached at the answer (the element of largest error
+      for a vector target): the solve's own output where the answer was the last point solved, else from the
+      error, ``None`` where that is below 1e-9 of the target (lost to rounding). Empty where no parameter is at a
+      bound.
+    """
+    space = problem.space
+    values = np.asarray(values, dtype=np.float64)
+    pinned = [(name, side, float(bound)) for name, v, lo, hi in zip(space.names, values, space.lower, space.upper)
+              for side, bound in (("lower", lo), ("upper", hi)) if abs(v - bound) <= 1e-6 * abs(bound)]
+    if not pinned:
+        return []
+    last = getattr(problem, "_last", None)  # (values, outputs) of the last point solved
+    outputs = np.asarray(last[1]) if last is not None and np.array_equal(last[0], values) else None
+    e = np.asarray(errors, dtype=np.float64)
+    at = ", ".join(f"{name} at its {side} bound {bound:.6g}" for name, side, bound in pinned)
+    out = []
+    for t, s, worst in zip(problem.targets, problem.slices, problem.max_errors(e)):
+        if not worst > tol:
+            continue
+        k = int(np.argmax(np.abs(e[s])))
+        target = float(np.reshape(np.asarray(t.value, dtype=np.float64), (-1,))[k])
+        closest = float(outputs[s][k]) if outputs is not None else target + float(e[s][k]) * float(t.scale)
+        if outputs is None and not abs(closest) > 1e-9 * abs(target):
+            closest = None
+        reached = (f"the closest value reached is {closest:.6g}" if closest is not None else
+                   "the value reached there is under 1e-09 of the target")
+        out.append({"target": t.name, "value": target, "closest": closest, "error": float(e[s][k]),
+                    "pinned": pinned, "message": f"target {t.name} = {target:.6g} is out of reach of the parameter "
+                    f"range: {at}; {reached} ({100 * float(e[s][k]):+.3f} %); widen the bounds (Parameter bounds) "
+                    "or check the target"})
+    return out
 
 
 def check_tol(tol) -> float:

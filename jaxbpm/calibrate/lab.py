@@ -303,10 +303,17 @@ def _strengths(samples, scene_of, targets, wanted, params, stages, unreached, ac
     params.update(bond_tensile_strength=res.values.get("bond_tensile_strength", params["bond_tensile_strength"]),
                   bond_shear_strength=res.values.get("bond_shear_strength", params["bond_shear_strength"]))
     if not res.converged:
+        out_of_reach = {u["target"]: u for u in res.info.get("unreachable", [])}
         for k in wanted:
-            if abs(res.errors[f"{_SCENE_OF[k]}.strength"]) > tol:
-                unreached[k] = (f"not within {tol:.0%} after {res.iterations} iterations (best "
-                                f"{res.errors[f'{_SCENE_OF[k]}.strength']:+.1%}); raise max_iterations")
+            name = f"{_SCENE_OF[k]}.strength"
+            if abs(res.errors[name]) > tol:
+                best = f"best {res.errors[name]:+.1%}"
+                unreached[k] = f"not within {tol:.0%} after {res.iterations} iterations ({best}); raise max_iterations"
+                if name in out_of_reach:  # a bond strength at a bound of its range: iterations will not help
+                    pinned = ", ".join(f"{p} at its {side} bound {b:.4g}"
+                                       for p, side, b in out_of_reach[name]["pinned"])
+                    unreached[k] = f"out of reach of the bond strength range ({best}): {pinned}; more iterations " \
+                                   "will not reach it"
     curves = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved, targets)
     solves["answer runs (DEM)"] = len(wanted)
     return curves

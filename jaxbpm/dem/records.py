@@ -22,6 +22,7 @@ is finished (then raised). :func:`read_records` reads one back (also while the r
 from __future__ import annotations
 
 import contextlib
+import errno
 import pathlib
 import signal
 import threading
@@ -31,7 +32,7 @@ import numpy as np
 
 from jaxbpm.errors import SampleFileError
 
-__all__ = ["RecordFile", "read_records"]
+__all__ = ["RecordFile", "RecordLockedError", "read_records"]
 
 FORMAT = "jaxbpm-records"
 VERSION = 1
@@ -57,6 +58,36 @@ def _hold_interrupts():
             raise KeyboardInterrupt
 
 
+class RecordLockedError(SampleFileError):
+    """A record file that another process holds open (HDF5 locks a file while it is open for writing): two runs
+    recording to one file, or a reader while a run writes. ``path``: the file."""
+
+    def __init__(self, path):
+        super().__init__(f"{path}: the record file is held by another process (HDF5 file lock): one file takes one "
+                         "run at a time; give each run its own record_to path, or wait for the other to finish")
+        self.path = pathlib.Path(path)
+
+
+def _locked(err: OSError) -> bool:
+    return isinstance(err, BlockingIOError) or err.errno in (errno.EAGAIN, errno.EWOULDBLOCK) \
+        or "unable to lock file" in str(err)
+
+
+@contextlib.contextmanager
+def _h5(path, mode: str):
+    """``h5py.File(path, mode)``, a file locked by another process raising :class:`RecordLockedError`."""
+    import h5py
+
+    try:
+        f = h5py.File(path, mode)
+    except OSError as err:
+        if _locked(err):
+            raise RecordLockedError(path) from err
+        raise
+    with f:
+        yield f
+
+
 def _scalar(v):
     if isinstance(v, (bool, np.bool_)):
         return int(v)
@@ -80,11 +111,11 @@ def _differing(stored: Mapping[str, Any], attrs: Mapping[str, Any], keys) -> lis
 
 def _same_run(path: pathlib.Path, attrs: Mapping[str, Any]) -> bool:
     """Whether ``path`` is a jaxbpm record file of the run ``attrs`` describes."""
-    import h5py
-
     try:
-        with h5py.File(path, "r") as f:
+        with _h5(path, "r") as f:
             return f.attrs.get("format") == FORMAT and not _differing(f.attrs, attrs, SAME_RUN)
+    except RecordLockedError:
+        raise
     except (OSError, KeyError, ValueError):
         return False
 
@@ -106,8 +137,6 @@ class RecordFile:
 
     def __init__(self, path, attrs: Mapping[str, Any] | None = None, *, steps_planned: int | None = None,
                  overwrite: bool = False):
-        import h5py
-
         self.path = pathlib.Path(path)
         if self.path.suffix.lower() not in (".h5", ".hdf5"):
             raise SampleFileError(f"{self.path}: a record file must end in .h5 or .hdf5")
@@ -117,7 +146,7 @@ class RecordFile:
             raise SampleFileError(f"{self.path} exists and is not a record of this run: not replaced (choose another "
                                   "path, or pass overwrite=True to replace it)")
         self.steps = 0
-        with _hold_interrupts(), h5py.File(self.path, "w") as f:
+        with _hold_interrupts(), _h5(self.path, "w") as f:
             f.attrs.update(format=FORMAT, version=VERSION, status="running", steps=0,
                            steps_planned=-1 if steps_planned is None else int(steps_planned))
             for k, v in (attrs or {}).items():
@@ -137,14 +166,12 @@ class RecordFile:
         Raises:
           ValueError: arrays of different lengths.
         """
-        import h5py
-
         rows = {k: np.asarray(v) for k, v in rows.items()}
         lengths = {len(v) for v in rows.values()}
         if len(lengths) != 1:
             raise ValueError(f"RecordFile.append: arrays of different lengths {sorted(lengths)}")
         m = lengths.pop()
-        with _hold_interrupts(), h5py.File(self.path, "a") as f:
+        with _hold_interrupts(), _h5(self.path, "a") as f:
             g = f["records"]
             for k, v in rows.items():
                 if k not in g:
@@ -174,8 +201,6 @@ class RecordFile:
           SampleFileError: a file of another run (naming the attributes that differ), a complete run, or one that
             cannot be resumed (no saved state, or a file changed after the interruption).
         """
-        import h5py
-
         records, stored = read_records(path)
         self = cls.__new__(cls)
         self.path, self.steps = pathlib.Path(path), int(stored["steps"])
@@ -189,7 +214,7 @@ class RecordFile:
         if status == "complete":
             raise SampleFileError(f"{path}: the run is complete ({self.steps} steps): nothing to resume")
         checkpoint = None
-        with h5py.File(self.path, "r") as f:
+        with _h5(self.path, "r") as f:
             if "checkpoint" in f:
                 g = f["checkpoint"]
                 checkpoint = {k: np.asarray(d[()]) for k, d in g.items()}
@@ -200,7 +225,7 @@ class RecordFile:
             raise SampleFileError(f"{path}: the run has status {status!r} and {self.steps} steps without a saved state "
                                   "(a run saves its state when interrupted by Ctrl-C, not when killed): it cannot be "
                                   "resumed; run it again")
-        with _hold_interrupts(), h5py.File(self.path, "a") as f:
+        with _hold_interrupts(), _h5(self.path, "a") as f:
             f.attrs["status"] = "running"
             f.attrs["resumed"] = int(f.attrs.get("resumed", 0)) + 1
         return self, records, checkpoint
@@ -212,9 +237,7 @@ class RecordFile:
         Args:
           arrays: ``{name: array}`` (``/checkpoint``, one dataset per name).
         """
-        import h5py
-
-        with _hold_interrupts(), h5py.File(self.path, "a") as f:
+        with _hold_interrupts(), _h5(self.path, "a") as f:
             if "checkpoint" in f:
                 del f["checkpoint"]
             g = f.create_group("checkpoint")
@@ -230,9 +253,7 @@ class RecordFile:
           status: ``"complete"``, ``"interrupted"`` (the checkpoint is kept) or ``"unstable"``.
           attrs: results to store (scalars only).
         """
-        import h5py
-
-        with _hold_interrupts(), h5py.File(self.path, "a") as f:
+        with _hold_interrupts(), _h5(self.path, "a") as f:
             f.attrs["status"] = status
             if status != "interrupted" and "checkpoint" in f:  # (only an interrupted run is resumed)
                 del f["checkpoint"]
@@ -253,18 +274,18 @@ def read_records(path) -> tuple[dict, dict]:
     Raises:
       SampleFileError: a missing or unreadable file, or not a jaxbpm record file.
     """
-    import h5py
-
     path = pathlib.Path(path)
     if not path.is_file():
         raise SampleFileError(f"{path}: no such record file")
     try:
-        with h5py.File(path, "r") as f:
+        with _h5(path, "r") as f:
             attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
             if attrs.get("format") != FORMAT:
                 raise SampleFileError(f"{path}: not a jaxbpm record file (format {attrs.get('format')!r})")
             steps = int(attrs["steps"])
             records = {k: d[:steps] for k, d in f["records"].items()}
+    except RecordLockedError:
+        raise
     except OSError as err:
         raise SampleFileError(f"{path}: cannot read the record file ({err})") from err
     return records, attrs

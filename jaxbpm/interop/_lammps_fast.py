@@ -220,6 +220,8 @@ def parse_fast(path, text: str, atom_style):
     counts, i = header(path, ((k + 1, lines.line(k)) for k in range(1, lines.count)))
     sections = _sections(lines, counts, i)
     atoms = None if sections is None else _atoms(lines, sections, atom_style)
+    if atoms is not None and np.any((atoms[4] < 1) | (atoms[4] > counts.get("atom types", np.inf))):
+        atoms = None  # a type outside the header's: the line-by-line reader names the line
     bonds = None if atoms is None else _bonds(lines, sections, atoms[0], counts)
     if bonds is None:
         return None

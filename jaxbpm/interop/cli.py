@@ -17,8 +17,11 @@ __all__ = ["add_parsers"]
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
+    from jaxbpm._outputs import check_outputs
     from jaxbpm.interop import formats
 
+    check_outputs(_companions({"OUT": args.output}), _companions({"IN": args.input, "--sample": args.sample}),
+                  force=args.force)
     kw = {}
     if args.normalize:
         kw["normalize"] = True
@@ -32,6 +35,15 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     if len(written) > 3:
         print(f"... and {len(written) - 3} more files")
     return 0
+
+
+def _companions(paths: dict) -> dict:
+    """``paths`` with the bonds file of each CSV sample (``<stem>_bonds.csv``, read and written with it)."""
+    out = dict(paths)
+    for label, path in paths.items():
+        if path is not None and path.suffix.lower() == ".csv":
+            out[f"{label} (its bonds file)"] = path.with_name(f"{path.stem}_bonds{path.suffix}")
+    return out
 
 
 def _parse_values(items: list[str]) -> dict[str, float]:
@@ -106,6 +118,8 @@ def add_parsers(sub) -> None:
                         + "; ".join(f"{k}: {v}" for k, v in READERS.items()))
     p.add_argument("--normalize", action="store_true",
                    help="LAMMPS output: coefficients for bond_style bpm/rotational normalize yes")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing sample or record at OUT (never IN or the --sample file)")
     p.set_defaults(func=_cmd_convert)
 
     names = sorted(CONVENTIONS)

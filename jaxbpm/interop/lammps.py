@@ -432,14 +432,20 @@ def _atom_rows(path, raw: list[str], rows: list[Line], style: str | None):
     return ids, dia, dens, pos, types
 
 
-def _atoms_by_line(path, raw: list[str], sections, atom_style):
-    """``(ids, dia, dens, pos, types)`` of the Atoms section sorted by ID: unique IDs, one density; errors name the
-    line."""
+def _atoms_by_line(path, raw: list[str], sections, atom_style, counts: dict[str, int]):
+    """``(ids, dia, dens, pos, types)`` of the Atoms section sorted by ID: unique IDs, one density, types within the
+    header's ``atom types``; errors name the line."""
     style = _atom_style(path, sections, atom_style)
     _, rows = sections.get("Atoms", (None, []))
     if not rows:
         raise SampleFileError(f"{path}: the Atoms section is empty")
     ids, dia, dens, pos, types = _atom_rows(path, raw, rows, style)
+    n_types = counts.get("atom types")
+    bad = np.flatnonzero((types < 1) | (types > (n_types if n_types is not None else np.inf)))
+    if bad.size:
+        k = int(bad[0])
+        raise SampleFileError(f"{path}:{rows[k].no}: atom {ids[k]} has type {types[k]}, outside "
+                              f"1..{n_types if n_types is not None else 'N'} (header 'atom types'); LAMMPS refuses it")
     order = np.argsort(ids, kind="stable")
     dup = np.flatnonzero(np.diff(ids[order]) == 0)
     if dup.size:
@@ -509,7 +515,7 @@ def _parse_lines(path, text: str, atom_style):
     counts, body_start = header(path, enumerate(raw[1:], start=2))
     sections = _line_sections(path, raw, counts, body_start)
     _check_complete(path, text, raw, counts, sections)
-    ids, dia, dens, pos, atom_types = _atoms_by_line(path, raw, sections, atom_style)
+    ids, dia, dens, pos, atom_types = _atoms_by_line(path, raw, sections, atom_style, counts)
     bonds = _bonds_by_line(path, raw, sections, ids, counts)
     return (crc, without_line(text, 0), meta, pos, dia, dens, *bonds, _coeffs_by_line(path, sections), atom_types)
 

@@ -11,6 +11,7 @@ scene. The scenes of the package:
 * :class:`BrazilianDisc` (:mod:`~jaxbpm.scenes.brazilian`): a disc squeezed across a diameter; Brazilian tensile
   strength. DEM only.
 
+A scene may also be given by name (:mod:`~jaxbpm.scenes.names`: ``"uniaxial"``, ``"ucs"``, ``"bts"``, ``"tpb"``).
 Each scene's clamped groups take a mask, particle indices, a type, a region or a layer (:mod:`~jaxbpm.scenes.groups`:
 :class:`Ids`, :class:`Type`, :class:`Region`, :class:`Layer`).
 """
@@ -22,6 +23,8 @@ from jaxbpm.scenes.bending import ThreePointBending
 from jaxbpm.scenes.groups import Group, Ids, Layer, Region, Type
 from jaxbpm.scenes.brazilian import BrazilianDisc
 from jaxbpm.scenes.uniaxial import UniaxialCompression
+from jaxbpm.scenes.names import SCENE_NAMES, scene_from_name
 
 __all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "Scene", "BaseScene", "AxialScene", "METHODS",
-           "sample_breaks", "lateral_stats", "Group", "Ids", "Type", "Region", "Layer"]
+           "sample_breaks", "lateral_stats", "Group", "Ids", "Type", "Region", "Layer",
+           "SCENE_NAMES", "scene_from_name"]

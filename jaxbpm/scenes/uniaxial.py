@@ -25,7 +25,8 @@ class UniaxialCompression(AxialScene):
     """Uniaxial compression along ``axis`` (0, 1 or 2) to ``strain``.
 
     Served by every solver. With ``breakage``, loading past the peak gives the uniaxial compressive strength (UCS =
-    peak stress; see :meth:`to_failure`); the static solvers (DSM, STE) always model the elastic range.
+    peak stress; see :meth:`to_failure`), by the DEM only: the static solvers (DSM, STE) model the elastic range, and
+    ``jaxbpm.solve`` refuses them a scene with ``breakage=True``.
 
     Args:
       axis: the load axis (default z).

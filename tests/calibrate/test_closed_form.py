@@ -41,3 +41,21 @@ def test_closed_form_errors(one):
     two_free = ParameterSpace([Parameter("bond_E", 0)], {**p, "bond_E": jnp.array([1e9, 1e9])})
     with pytest.raises(CalibrationError, match="held fixed"):
         cal.closed_form(Problem(cal.forward_model(one, SCENE, "dsm"), [Target("stiffness", 1.0)], two_free))
+
+
+def test_an_unreachable_target_names_the_bound_and_the_closest_value(one):
+    """``calibrate`` with a target far out of the bond modulus range: not converged, and the result says which
+    parameter sits at which bound and the closest modulus reached (a DSM solve at that bound gives the same)."""
+    p = default_params(one)
+    for target, side in ((1e15, "upper"), (1e2, "lower")):
+        res = cal.calibrate(one, SCENE, {"youngs_modulus": target}, method="closed-form")
+        assert not res.converged
+        (entry,) = res.info["unreachable"]
+        ((name, pinned_side, bound),) = entry["pinned"]
+        assert pinned_side == side and res.values[name] == bound and entry["target"] == "youngs_modulus"
+        np.testing.assert_allclose(entry["closest"],
+                                   _modulus(one, {**p, "bond_E": jnp.full_like(p["bond_E"], bound)}), rtol=1e-6)
+        assert any(f"at its {side} bound" in n for n in res.notes) and "out of reach" in res.table()
+    # 1e30 Pa: the modulus reached is lost to rounding against the target; the bound is still named
+    res = cal.calibrate(one, SCENE, {"youngs_modulus": 1e30}, method="closed-form")
+    assert "at its upper bound" in res.info["unreachable"][0]["message"]

@@ -84,3 +84,33 @@ def test_elastic_model_is_the_old_name_of_elastic_solver():
     with pytest.warns(DeprecationWarning, match="elastic_solver="):
         with pytest.raises(CalibrationError, match="lab targets"):
             lab({}, {"young": 1e9}, elastic_model="dsm")
+
+
+def test_strength_advice_says_out_of_reach_when_a_bound_stops_it(monkeypatch):
+    """``lab`` advised "raise max_iterations" for a target no bond strength can reach; with the strength pinned at
+    a bound of its range (``info["unreachable"]`` of the strength stage) it says the target is out of reach."""
+    import importlib
+    import types
+
+    lab_module = importlib.import_module("jaxbpm.calibrate.lab")
+
+    def stage(unreachable):
+        return types.SimpleNamespace(
+            converged=False, errors={"ucs.strength": -0.9, "bts.strength": 0.2}, iterations=6, evaluations=9,
+            values={}, info={"unreachable": unreachable})
+
+    monkeypatch.setattr(lab_module, "_curves", lambda *args, **kwargs: {})
+    for unreachable, expected in (
+            ([{"target": "ucs.strength", "pinned": [("bond_shear_strength", "upper", 8e9)]}],
+             {"ucs": "out of reach of the bond strength range (best -90.0%): bond_shear_strength at its upper bound "
+                     "8e+09; more iterations will not reach it", "bts": "raise max_iterations"}),
+            ([], {"ucs": "raise max_iterations", "bts": "raise max_iterations"})):
+        monkeypatch.setattr(lab_module, "_strength_stage", lambda *args, _u=unreachable, **kwargs: stage(_u))
+        unreached = {}
+        lab_module._strengths({}, {}, {"ucs": 1.0, "bts": 1.0}, ["ucs", "bts"],
+                              {"bond_tensile_strength": 1.0, "bond_shear_strength": 1.0}, {}, unreached, {}, {},
+                              tol=0.05, max_iterations=6, fd_step=0.2, solve_options=None, executor=None,
+                              progress=False)
+        for key, text in expected.items():
+            assert text in unreached[key], (key, unreached[key])
+        assert ("raise max_iterations" in unreached["ucs"]) == (not unreachable)

@@ -70,3 +70,25 @@ def test_files_it_refuses(tmp_path):
         RecordFile.resume(other, {**ATTRS, "damping": 0.5})
     with pytest.raises(ValueError, match="different lengths"):
         RecordFile(tmp_path / "run.h5", ATTRS).append({"time": np.zeros(3), "vmax": np.zeros(2)})
+
+
+def test_a_record_file_locked_by_another_process_is_a_named_error(tmp_path):
+    """HDF5 locks a file while it is open (flock); a second run recording to it, or a reader, got a raw
+    ``BlockingIOError``. The lock is taken here by flock on another file descriptor, as another process holds it."""
+    import fcntl
+
+    from jaxbpm.dem.records import RecordLockedError
+
+    path = tmp_path / "run.h5"
+    rec = RecordFile(path, ATTRS, steps_planned=8)
+    rec.append(_rows(0, 4))
+    with open(path, "rb") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        for attempt in (lambda: rec.append(_rows(4, 4)), lambda: read_records(path),
+                        lambda: RecordFile(path, ATTRS, steps_planned=8), lambda: rec.finish("complete")):
+            with pytest.raises(RecordLockedError, match="held by another process") as err:
+                attempt()
+            assert isinstance(err.value, SampleFileError) and err.value.path == path and str(path) in str(err.value)
+        fcntl.flock(fh, fcntl.LOCK_UN)
+    assert rec.append(_rows(4, 4)) == 8  # released: the run goes on
+    assert len(read_records(path)[0]["time"]) == 8

@@ -45,3 +45,24 @@ def test_cli_convert_and_params(tmp_path, capsys):
     (tmp_path / "bad.data").write_text("title\n\n2 atoms\n\nAtoms\n\n1 1 1 1.0 1.0 0 0 0\n")
     assert cli.main(["convert", str(tmp_path / "bad.data"), str(tmp_path / "x.h5")]) == 2
     assert "bad.data:7: section Atoms ended after 1 of 2 lines" in capsys.readouterr().err
+
+
+def test_cli_convert_never_overwrites_its_input(tmp_path, capsys):
+    sample = _multi()
+    src = tmp_path / "s.h5"
+    io.save_sample(src, sample)
+    before = src.read_bytes()
+    for argv in (["convert", src, src, "--force"], ["convert", src, tmp_path / "x" / ".." / "s.h5"],
+                 ["convert", tmp_path / "run.dump", tmp_path / "run.pvd", "--sample", tmp_path / "run.pvd"]):
+        (tmp_path / "x").mkdir(exist_ok=True)
+        assert cli.main([str(a) for a in argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error:") and "is the command's input" in err and "not even with --force" in err
+    assert cli.main(["convert", str(src), str(tmp_path / "t.csv")]) == 0
+    # a CSV sample is two files: writing t.csv replaces t_bonds.csv, an input here
+    assert cli.main(["convert", str(tmp_path / "t.csv"), str(tmp_path / "t_bonds.csv"), "--force"]) == 2
+    assert "its bonds file" in capsys.readouterr().err
+    assert cli.main(["convert", str(tmp_path / "t.csv"), str(src)]) == 2  # an existing sample: --force
+    assert "--force" in capsys.readouterr().err and src.read_bytes() == before
+    assert cli.main(["convert", str(tmp_path / "t.csv"), str(src), "--force"]) == 0
+    _assert_same(sample, io.load_sample(src))

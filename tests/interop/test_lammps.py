@@ -110,6 +110,8 @@ def test_lammps_data_text_as_written_line_by_line(tmp_path, make):
     ("Bonds", 3, "3.0", "Bonds line must hold 4 whole numbers"),
     ("Bonds", 3, "3", "bond 3 joins atom 3 to itself"),
     ("Bonds", 1, "9", "bond type 9 is outside"),
+    ("Atoms", 2, "5", "atom 3 has type 5, outside 1..1 (header 'atom types'); LAMMPS refuses it"),
+    ("Atoms", 2, "0", "atom 3 has type 0, outside 1..1"),
 ])
 def test_lammps_data_damaged_row_names_its_line(tmp_path, section, word, new, message):
     """A damaged row (the 3rd of its section, without the checksum) is reported with its line number, as the
