@@ -13,11 +13,11 @@ scene. The scenes of the package:
 """
 
 from jaxbpm.scenes.base import (
-    METHODS, AxialScene, BaseScene, Scene, _build_model, _check_failure_rule, _is_axis, _loading, lateral_stats,
-    sample_breaks)
+    METHODS, AxialScene, BaseScene, Scene, _build_model, _check_failure_rule, _is_axis, _loading, force_weights,
+    lateral_stats, sample_breaks)
 from jaxbpm.scenes.bending import ThreePointBending
 from jaxbpm.scenes.brazilian import BrazilianDisc
 from jaxbpm.scenes.uniaxial import UniaxialCompression
 
 __all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "Scene", "BaseScene", "AxialScene", "METHODS",
-           "sample_breaks", "lateral_stats"]
+           "sample_breaks", "lateral_stats", "force_weights"]

@@ -13,7 +13,8 @@ import numpy as np
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.loading import Loading
 from jaxbpm.sample import Sample
-from jaxbpm.scenes.base import BaseScene, _check_failure_rule, _check_fit_range, _extent, _is_axis, _loading
+from jaxbpm.scenes.base import (BaseScene, _check_failure_rule, _check_fit_range, _check_stop_after_peak,
+                                _extent, _is_axis, _loading)
 
 __all__ = ["ThreePointBending"]
 
@@ -44,6 +45,9 @@ class ThreePointBending(BaseScene):
       rotations: rotational DOFs (``None``: the Model decides).
       fit_range: the part of the loading (fractions of the target deflection) over which K is fitted.
       breakage, failure_rule: as in :class:`~jaxbpm.scenes.UniaxialCompression`.
+      stop_after_peak: with breakage, the DEM run stops once the punch force has fallen to this fraction of its
+        peak, in (0, 1) (default 0.7); ``None``: it runs to the full ``strain`` (see
+        :class:`~jaxbpm.scenes.UniaxialCompression`).
 
     Raises:
       SceneError: an argument out of its range.
@@ -61,6 +65,7 @@ class ThreePointBending(BaseScene):
     fit_range: tuple[float, float] = (0.02, 0.1)
     breakage: bool | None = None
     failure_rule: str = "separate"
+    stop_after_peak: float | None = 0.7
 
     #: the solvers that model this scene (the STE models uniaxial compression only)
     methods = ("dem", "dsm")
@@ -70,6 +75,7 @@ class ThreePointBending(BaseScene):
 
     def __post_init__(self):
         _check_failure_rule(self.failure_rule)
+        _check_stop_after_peak(self.stop_after_peak)
         if not _is_axis(self.axis) or not _is_axis(self.span_axis) or self.axis == self.span_axis:
             raise SceneError(f"axis and span_axis must be two different axes of 0, 1, 2, got {self.axis!r} and "
                              f"{self.span_axis!r}")
