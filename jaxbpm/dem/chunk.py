@@ -83,7 +83,8 @@ def _steps(advance, carry, n_steps, limit, going, stop, track, counted):
         k, old, records, rebuilds, t = c
         new, rec = advance(old)
         if counted:  # jax-md's list is built again inside a step when a particle has moved half the skin
-            rebuilds = rebuilds + jnp.any(new[0].nbrs.reference_position != old[0].nbrs.reference_position)
+            moved = jnp.any(new[0].nbrs.reference_position != old[0].nbrs.reference_position)
+            rebuilds = rebuilds + moved.astype(jnp.int32)
         if tracking:
             t = _track(t, rec, stop)
         return k + 1, new, jax.tree.map(lambda r, a: r.at[k].set(a), records, rec), rebuilds, t

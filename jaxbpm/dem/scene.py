@@ -23,7 +23,7 @@ from jaxbpm.dem.options import DEM
 from jaxbpm.dem.peak import peak_stop
 from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import restore_state, state_arrays, unpad_state
-from jaxbpm.dem.writers import check_frames, Writers, writers
+from jaxbpm.dem.writers import check_frames, write_frame, Writers, writers
 from jaxbpm.errors import SimulationInterrupted
 from jaxbpm.physics.model import default_params
 from jaxbpm.result import Result, settle, timed_result
@@ -106,6 +106,10 @@ def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbo
         raise
     if run.status == Status.INTERRUPTED and out.recorder is not None and out.recorder.steps > the_plan.steps_done:
         out.recorder.checkpoint(state_arrays(run.state))  # what resume= continues from
+    if run.stats.get("stop_reason") == "after_peak" and out.series is not None:
+        t = float(run.state.time)
+        if not out.series.steps or out.series.steps[-1][0] != t:  # the last frame: where the run stopped
+            write_frame(out.series, run.state, sample, t)
     if the_plan.size is None:
         return run
     return run._replace(state=unpad_state(run.state, sample.n_particles, sample.n_bonds))
