@@ -134,3 +134,29 @@ def test_runs_with_contacts_stop_on_either_candidate_list(lists, monkeypatch):
     np.testing.assert_array_equal(stopped.force, full.force[:at + 1])
     assert stopped.stats["peak_force"] == full.stats["peak_force"] and stopped.stiffness == full.stiffness
     assert jax.numpy.all(jax.numpy.isfinite(stopped.state.positions))
+
+
+def test_a_run_resumed_after_its_peak_stops_where_the_whole_run_does(rock, runs, tmp_path):
+    """The peak before an interruption is carried into the resumed run (else it would track the falling force from
+    where it resumed and stop later)."""
+    full, stopped = runs
+    chunk = 32
+    peak, end = int(np.argmax(full.force)), len(stopped.force) - 1
+    after = ((peak + end) // 2) // chunk  # chunks run before the interruption: past the peak, before the stop
+    assert peak < after * chunk - 1 < end
+
+    calls = []
+
+    def cut(done, total, elapsed):
+        calls.append(done)
+        if len(calls) == after:
+            raise KeyboardInterrupt
+
+    options = dict(transits=30, chunk=chunk, max_records=ALL)
+    whole = jaxbpm.solve(rock, SCENE, "dem", **options)
+    with pytest.raises(jaxbpm.SimulationInterrupted):
+        jaxbpm.solve(rock, SCENE, "dem", record_to=tmp_path / "cut.h5", progress=cut, **options)
+    resumed = jaxbpm.solve(rock, SCENE, "dem", resume=tmp_path / "cut.h5", **options)
+    assert whole.stats["stop_reason"] == resumed.stats["stop_reason"] == "after_peak"
+    assert resumed.stats["steps"] == whole.stats["steps"] == len(whole.force) == _stop_index(whole, 0.7, SCENE) + 1
+    np.testing.assert_allclose(resumed.stats["peak_force"], whole.stats["peak_force"], rtol=1e-9)
