@@ -49,12 +49,12 @@ def _scenes(args):
         stop = dataclasses.replace(scenes[key], stop_after_peak=args.fraction)
         full = dataclasses.replace(scenes[key], stop_after_peak=None)
         _, first = _run(jaxbpm, sample, stop, args.transits)  # compiles
-        t_stop = t_full = float("inf")
+        best = {"stop": (None, float("inf")), "full": (None, float("inf"))}
         for _ in range(args.repeat):  # alternately, the best of each (a shared machine)
-            a, t = _run(jaxbpm, sample, stop, args.transits)
-            t_stop = min(t_stop, t)
-            b, t = _run(jaxbpm, sample, full, args.transits)
-            t_full = min(t_full, t)
+            for name, scene in (("stop", stop), ("full", full)):
+                res, t = _run(jaxbpm, sample, scene, args.transits)
+                best[name] = min(best[name], (res, t), key=lambda rt: rt[1])
+        (a, t_stop), (b, t_full) = best["stop"], best["full"]
         n = len(a.force)
         row = {"scene": key, "particles": sample.n_particles, "bonds": sample.n_bonds,
                "steps_stop": a.stats["steps"], "steps_full": b.stats["steps"],
