@@ -66,7 +66,8 @@ def _scenes(args):
                "strength_stop": a.stats["strength"], "strength_full": b.stats["strength"],
                "strain_at_peak": a.stats["strain_at_peak"], "stop_strain": float(a.displacement[-1]) / a.gauge_length,
                "target_strain": scenes[key].strain, "stiffness_stop": a.stiffness, "stiffness_full": b.stiffness,
-               "same_peak": a.stats["peak_force"] == b.stats["peak_force"], "same_stiffness": a.stiffness == b.stiffness,
+               "same_peak": a.stats["peak_force"] == b.stats["peak_force"],
+               "same_stiffness": a.stiffness == b.stiffness,
                "force_end_over_peak": float(a.force[-1] / a.stats["peak_force"]),
                "full_end_over_peak": float(b.force[-1] / b.stats["peak_force"]),
                "curve_equal_to_stop": bool(np.array_equal(a.force, b.force[:n]))}
@@ -124,7 +125,8 @@ def main(argv=None):
     enable_x64()
     rows = _scenes(args)
     table(rows, ["scene", "particles", "steps_stop", "steps_full", "steps_ratio", "wall_stop_s", "wall_full_s",
-                 "wall_ratio", "kernel_stop_s", "kernel_full_s", "peak_stop", "peak_full", "same_peak", "same_stiffness", "curve_equal_to_stop", "strain_at_peak",
+                 "wall_ratio", "kernel_stop_s", "kernel_full_s", "peak_stop", "peak_full", "same_peak",
+                 "same_stiffness", "curve_equal_to_stop", "strain_at_peak",
                  "stop_strain"])
     batch = _batch(args) if args.batch else None
     if batch:

@@ -58,8 +58,8 @@ def _run_chunk(model, params, load, state, dt, damping, origin, n_steps, margin=
     finite = jnp.all(jnp.isfinite(state.positions))
     # steps run; pairs within reach: most, refound; candidate list built again inside the steps (jax-md's)
     counts = jnp.stack([done, near_pairs, near_found, rebuilds]).astype(jnp.int32)
-    return (state, records, overflow, finite, jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0), counts,
-            track)
+    extent = jnp.min(state.positions, axis=0), jnp.max(state.positions, axis=0)
+    return state, records, overflow, finite, *extent, counts, track
 
 
 def _steps(advance, carry, n_steps, limit, going, stop, track, counted):
