@@ -1061,7 +1061,9 @@ def _ucs_scene(args) -> int:
         if args.ucs_sample_file:
             io.save_sample(args.ucs_sample_file, sample)
     t_gen = time.perf_counter() - tg
-    scene = UniaxialCompression.to_failure(strain=args.ucs_strain, failure_rule=args.ucs_failure_rule)
+    # the full strain, as LAMMPS runs it (the curves, broken bonds and final force are compared to the end)
+    scene = UniaxialCompression.to_failure(strain=args.ucs_strain, failure_rule=args.ucs_failure_rule,
+                                           stop_after_peak=None)
     fixed, driven = scene.layers(sample)
     length, area = scene.geometry(sample)
     target = scene.strain * length

@@ -38,7 +38,9 @@ class Result:
         compilation cache, had them).
       run_time: the solver's kernel, run once [s].
       stats: solver details (steps, time step, critical time step, iterations, ...); ``stats["failure"]`` says
-        what went wrong.
+        what went wrong. A DEM run also has ``peak_force``, ``strength``, ``strain_at_peak`` and ``stop_reason``
+        (``"after_peak"``: stopped once the force fell past its peak, see the scenes' ``stop_after_peak``;
+        ``"full_strain"``, ``"unstable"``, ``"interrupted"``).
       state: the solver's final state (for restarts and inspection).
       interrupted: the run was stopped early (see :class:`~jaxbpm.errors.SimulationInterrupted`); the curve and
         stats cover the part that was run (stiffness NaN when the fit range was not reached).

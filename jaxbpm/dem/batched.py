@@ -36,6 +36,7 @@ from jaxbpm.dem import quasistatic
 from jaxbpm.dem.chunk import _run_chunk
 from jaxbpm.dem.curve import curve, peak_stats, plan_stats
 from jaxbpm.dem.integrator import _progress_fn
+from jaxbpm.dem.peak import peak_stop, tracker
 from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import unpad_state
 from jaxbpm.dem.stepper import _start
@@ -71,6 +72,11 @@ def solve_batch(sample: Sample, scene, params_batch, *, method="dem", vectorize:
 
     Failure per member: a member that blows up stops being checked and gets the ``"unstable"`` result ``solve``
     would give it (the curve up to the chunk before the blow-up); the others run on.
+
+    Stop after the peak per member: with the scene's ``stop_after_peak`` (:mod:`jaxbpm.dem.peak`) each member tracks
+    its own peak and stops on its own, as its single run would (its records end there, its ``stats["stop_reason"]``
+    says ``"after_peak"``); the batch ends when every member has stopped, failed or reached the full strain. With
+    ``lax.map`` a stopped member runs no more steps; with ``vectorize=True`` it is frozen while the others run.
 
     Args:
       sample: the bonded sample.
@@ -136,16 +142,18 @@ def _stack(trees):
 
 
 @functools.partial(jax.jit, static_argnames=("n_steps", "vectorize"))
-def _run_chunks(model, params, load, state, dt, damping, origin, n_steps, vectorize=True):
-    """:func:`jaxbpm.dem.chunk._run_chunk` mapped over the leading axis of ``params`` (precomputed) and ``state``; the
-    model, the loading, the time step and the damping are shared. ``vectorize``: ``jax.vmap`` (one vectorised
-    program); else ``lax.map`` (the members one after another inside the program, each by the single run's code)."""
-    def one(p, s):
-        return _run_chunk(model, p, load, s, dt, damping, origin, n_steps)
+def _run_chunks(model, params, load, state, dt, damping, origin, n_steps, vectorize=True, stop=None, track=None):
+    """:func:`jaxbpm.dem.chunk._run_chunk` mapped over the leading axis of ``params`` (precomputed), ``state`` and the
+    peak trackers ``track``; the model, the loading, the time step, the damping and the ``stop`` are shared.
+    ``vectorize``: ``jax.vmap`` (one vectorised program: a member that stopped is frozen while the others run);
+    else ``lax.map`` (the members one after another inside the program, each by the single run's code: a member that
+    stopped runs no step)."""
+    def one(p, s, t):
+        return _run_chunk(model, p, load, s, dt, damping, origin, n_steps, stop=stop, track=t)
 
     if vectorize:
-        return jax.vmap(one)(params, state)
-    return jax.lax.map(lambda ps: one(*ps), (params, state))
+        return jax.vmap(one)(params, state, track)
+    return jax.lax.map(lambda pst: one(*pst), (params, state, track))
 
 
 def _solve_batch(sample, scene, method, params_batch, vectorize, options) -> list[Result]:
@@ -195,13 +203,20 @@ def _check(sample, scene, options) -> None:
 class _Chunks:
     """The chunks a batch ran: host records of each completed chunk (``[B, chunk, ...]``), each chunk's kernel time,
     per member ``(chunks completed, its state then, the message)`` once it blew up, the state after the last
-    completed chunk, and whether the batch was interrupted."""
+    completed chunk, whether the batch was interrupted, the steps each member ran in each chunk (``[B]`` per chunk:
+    fewer where it stopped after the peak, none after) and which members stopped."""
 
     records: list
     kernel: list
     failure: list
     done: Any
     interrupted: bool = False
+    steps: list = dataclasses.field(default_factory=list)
+    stopped: Any = None
+
+    def going(self) -> bool:
+        """Whether a member is neither failed nor stopped."""
+        return any(f is None and not s for f, s in zip(self.failure, self.stopped))
 
 
 def _run_batch(t0, compiling, sample, scene, members, vectorize, options) -> list[Result]:
@@ -216,7 +231,9 @@ def _run_batch(t0, compiling, sample, scene, members, vectorize, options) -> lis
     jax.block_until_ready((state, pre))
     _interrupt.check()
     t_loop, setup_compile = time.perf_counter(), compiling.seconds
-    ran = _run_chunks_until_done(the_plan, pre, state, vectorize, report, t0, compiling, len(members))
+    stop = peak_stop(scene, the_plan.model, the_plan.load, the_plan)
+    track = _stack([tracker(dtype=the_plan.model.positions0.dtype)] * len(members))
+    ran = _run_chunks_until_done(the_plan, pre, state, vectorize, report, t0, compiling, (stop, track))
     # the members' results; the timings are each member's share of the batch's
     timing = Timings.since(t0, compiling.seconds, setup_time=t_loop - t0 - setup_compile)
     host = jax.tree_util.tree_map(np.asarray, ran.done)
@@ -231,24 +248,30 @@ def _run_batch(t0, compiling, sample, scene, members, vectorize, options) -> lis
     return results
 
 
-def _run_chunks_until_done(the_plan: Plan, pre, state, vectorize, report, t0, compiling, n_batch) -> _Chunks:
-    """Run the batch's chunks until all are done, every member failed, or an interruption."""
+def _run_chunks_until_done(the_plan: Plan, pre, state, vectorize, report, t0, compiling, watch) -> _Chunks:
+    """Run the batch's chunks until all are done, every member failed or stopped after its peak, or an
+    interruption. ``watch``: the stop after the peak and the members' trackers."""
     model, dt, chunk = the_plan.model, the_plan.dt, the_plan.chunk
     origin = jax.device_put(np.zeros(3, model.positions0.dtype))
     r_min = float(np.min(np.asarray(model.radii)))
-    ran = _Chunks([], [], [None] * n_batch, state)
+    stop, track = watch
+    n_batch = int(np.shape(track.stopped)[0])
+    ran = _Chunks([], [], [None] * n_batch, state, stopped=np.zeros(n_batch, bool))
     try:
-        while len(ran.records) < the_plan.n_chunks and any(f is None for f in ran.failure):
+        while len(ran.records) < the_plan.n_chunks and ran.going():
             _interrupt.check()
             tc, compiled = time.perf_counter(), compiling.seconds
-            new, rec, _, finite, _, _, _ = _run_chunks(model, pre, the_plan.load, state, dt, the_plan.damping, origin,
-                                                       chunk, vectorize=vectorize)
+            new, rec, _, finite, _, _, counts, track = _run_chunks(model, pre, the_plan.load, state, dt,
+                                                                   the_plan.damping, origin, chunk,
+                                                                   vectorize=vectorize, stop=stop, track=track)
             jax.block_until_ready(new.positions)
             ran.kernel.append(time.perf_counter() - tc - (compiling.seconds - compiled))
             rec = jax.device_get(rec)
             _check_members(ran, rec, np.asarray(finite), the_plan, r_min)
             state = ran.done = new
             ran.records.append(rec)
+            ran.steps.append(np.asarray(counts)[:, 0])
+            ran.stopped = np.asarray(track.stopped)
             report(len(ran.records) * chunk, the_plan.n_chunks * chunk, time.perf_counter() - t0)
     except KeyboardInterrupt:
         _interrupt.clear()
@@ -279,7 +302,8 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
     member_state = jax.tree_util.tree_map(lambda x: jax.device_put(x[b]), member_state)
     if the_plan.size is not None:
         member_state = unpad_state(member_state, sample.n_particles, sample.n_bonds)
-    rec = ({key: np.concatenate([r[key][b] for r in ran.records[:completed]]) for key in ran.records[0]}
+    steps = [int(k[b]) for k in ran.steps[:completed]]  # (fewer in the chunk where the member stopped, then none)
+    rec = ({key: np.concatenate([r[key][b][:k] for r, k in zip(ran.records, steps)]) for key in ran.records[0]}
            if completed else {})
     status = Status.UNSTABLE if message is not None else Status.CONVERGED
     disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records, strict=False)
@@ -287,12 +311,14 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
     share = timing.share(n_batch)
     stats = {"setup_time": share.setup_time, "compile_time": share.compile_time, "run_time": share.run_time,
              "wall_time": share.wall_time, "kernel_time": float(np.sum(kernel)) / n_batch,
-             "steps": completed * chunk, "steps_per_second": chunk / per_chunk, "reallocations": 0,
-             "contact_capacity": 0}
+             "steps": sum(steps), "steps_per_second": chunk / per_chunk, "reallocations": 0,
+             "contact_capacity": 0, "stop_reason": "full_strain"}
     if message is not None:
-        stats.update(unstable=True, steps_planned=the_plan.n_steps, failure=message)
+        stats.update(unstable=True, steps_planned=the_plan.n_steps, failure=message, stop_reason="unstable")
     elif ran.interrupted:
-        stats.update(interrupted=True, steps_planned=the_plan.n_steps)
+        stats.update(interrupted=True, steps_planned=the_plan.n_steps, stop_reason="interrupted")
+    elif ran.stopped[b]:
+        stats.update(steps_planned=the_plan.n_steps, stop_reason="after_peak")
     stats.update(plan_stats(the_plan, the_plan.dt_crit[b], ran.interrupted))
     stats.update(peak_stats(scene, sample, rec, disp, force, keep, the_plan.breakage))
     if not ran.interrupted:

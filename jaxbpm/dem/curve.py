@@ -53,14 +53,16 @@ def peak_stats(scene, sample, records: dict, disp, force, keep, breakage: bool) 
         breakage: whether bonds break.
 
     Returns:
-        ``peak_force``, ``displacement_at_peak`` and the scene's ``strength``; with breakage the broken-bond counts
+        ``peak_force``, ``displacement_at_peak``, ``strain_at_peak`` (over the scene's displacement scale
+        ``geometry(sample)[0]``) and the scene's ``strength``; with breakage the broken-bond counts
         (``broken_tensile``, ``broken_shear`` at the end, ``broken_curve`` along the kept curve, ``broken_at_peak``)
         and whether the run went past the peak (``past_peak``). Empty without records.
     """
     stats = {}
     if len(force):
         peak = int(np.argmax(force))
-        stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]))
+        stats.update(peak_force=float(force[peak]), displacement_at_peak=float(disp[peak]),
+                     strain_at_peak=float(disp[peak]) / float(scene.geometry(sample)[0]))
         stats["strength"] = float(scene.strength(float(force[peak]), sample))
         if breakage:
             counts = records["broken"]  # [steps, 2]: tensile, shear (cumulative)

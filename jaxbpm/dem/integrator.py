@@ -5,7 +5,9 @@ Between chunks, outside jit, the run checks the chunk: instability first (a blow
 candidate list), then the pairs within reach (more than their slots: the chunk runs again with more), the candidate
 list (its buffer overflowed or the particles left its box: it is allocated again and the chunk runs again, so no
 contact is ever dropped), and a list built on the host that would go stale (built again where the next step takes the
-particles, and the chunk goes on from there). Accepted chunks hand their records to ``on_chunk`` and progress.
+particles, and the chunk goes on from there). Accepted chunks hand their records to ``on_chunk`` and progress. With a
+stop after the peak (:mod:`jaxbpm.dem.peak`) the chunks track the force's peak on the device; a chunk in which the
+run stopped ends there, and the run ends with it.
 
 Contacts: on the CPU the candidate list is built on the host by a k-d tree between chunks; on accelerators it is
 jax-md's cell list, built again inside the step (:func:`jaxbpm.dem.neighbors.neighbors_owner`).
@@ -27,6 +29,7 @@ from jaxbpm.dem.chunk import _ahead, _run_chunk
 from jaxbpm.dem.forces import initial_cohesion
 from jaxbpm.dem.neighbors import (_remap_history, HostList, near_count, near_size, neighbors_owner,
                                   NeighborSettings)
+from jaxbpm.dem.peak import PeakStop, tracker
 from jaxbpm.dem.state import DEMState
 from jaxbpm.dem.stepper import _precompute, _start, _with_bond_springs
 from jaxbpm.errors import InstabilityError, SimulationInterrupted
@@ -51,7 +54,8 @@ class Outcome(NamedTuple):
             ``time [steps]``; with breakage ``broken [steps, 2]``, the cumulative tensile and shear counts); empty
             when no chunk completed.
         stats: the run's statistics (see :func:`integrate`); with ``failure`` (the message) when unstable.
-        status: :class:`~jaxbpm.status.Status` ``CONVERGED`` (every step ran), ``UNSTABLE`` (the run blew up, or the
+        status: :class:`~jaxbpm.status.Status` ``CONVERGED`` (every step ran, or the run stopped after the peak:
+            ``stats["stop_reason"]`` says which), ``UNSTABLE`` (the run blew up, or the
             candidate list was allocated again and again for one chunk) or ``INTERRUPTED`` (a ``KeyboardInterrupt``:
             Ctrl-C, or raised by a callback; a chunk in flight is dropped).
     """
@@ -65,7 +69,8 @@ class Outcome(NamedTuple):
 def integrate(model: Model, params, load: Loading, *, dt: float, n_steps: int, damping: float = 0.0,
               chunk: int = 1000, neighbors: NeighborSettings | None = None, progress: bool | Callable = False,
               dt_crit: float | None = None, state: DEMState | None = None,
-              on_chunk: Callable[[int, DEMState, dict], Any] | None = None) -> Outcome:
+              on_chunk: Callable[[int, DEMState, dict], Any] | None = None, stop: PeakStop | None = None,
+              peak: float | None = None) -> Outcome:
     """Run ``n_steps`` DEM steps (rounded up to whole chunks) and return the outcome, failed or not.
 
     Args:
@@ -83,6 +88,9 @@ def integrate(model: Model, params, load: Loading, *, dt: float, n_steps: int, d
         state: the state to start from (default: the model at rest, :func:`jaxbpm.dem.stepper.init_state`).
         on_chunk: called as ``on_chunk(steps_done, state, chunk_records)`` after every chunk (records of that chunk
             only, NumPy arrays), e.g. to write them to a file as they arrive.
+        stop: the stop after the peak (:func:`jaxbpm.dem.peak.peak_stop`): the run ends after the step where the
+            force has fallen to its fraction of the peak; the progress then gets ``steps_total = steps_done``.
+        peak: the force's peak before ``state`` [N] (a resumed run's), for ``stop``.
 
     Returns:
         The :class:`Outcome`. Its stats: ``wall_time`` = ``setup_time`` (candidate list, initial state) +
@@ -94,25 +102,28 @@ def integrate(model: Model, params, load: Loading, *, dt: float, n_steps: int, d
         (``contact_slots``), where the list is built (``contact_list``: ``"host"`` or ``"jax-md"``), how often it
         was built again (``contact_rebuilds``) and how often the pairs within reach were found
         (``contacts_refound``), chunks run again included. A run that did not finish has ``steps_planned`` and
-        ``unstable`` or ``interrupted`` set.
+        ``unstable`` or ``interrupted`` set; ``stop_reason`` says why the run ended (``"after_peak"``,
+        ``"full_strain"``, ``"unstable"`` or ``"interrupted"``), and a run stopped after the peak has
+        ``steps_planned``.
 
     Raises:
         KeyboardInterrupt: an interruption during the set-up, before the first chunk.
     """
     with compile_clock() as compiling:
-        run = _Run(model, params, load, dt, damping, chunk, n_steps, neighbors, state, compiling)
+        run = _Run(model, params, load, dt, damping, chunk, n_steps, neighbors, state, compiling, stop, peak)
         return run.loop(_progress_fn(progress), on_chunk, dt_crit)
 
 
 def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, damping: float = 0.0,
              chunk: int = 1000, neighbors: NeighborSettings | None = None, progress: bool | Callable = False,
              dt_crit: float | None = None, state: DEMState | None = None,
-             on_chunk: Callable[[int, DEMState, dict], Any] | None = None):
+             on_chunk: Callable[[int, DEMState, dict], Any] | None = None, stop: PeakStop | None = None,
+             peak: float | None = None):
     """:func:`integrate`, raising where the run did not finish.
 
     Args:
-        model, params, load, dt, n_steps, damping, chunk, neighbors, progress, dt_crit, state, on_chunk: as for
-            :func:`integrate`.
+        model, params, load, dt, n_steps, damping, chunk, neighbors, progress, dt_crit, state, on_chunk, stop, peak:
+            as for :func:`integrate`.
 
     Returns:
         ``(final_state, records, stats)`` (see :class:`Outcome`).
@@ -125,7 +136,7 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, da
             records and stats of the chunks completed so far.
     """
     out = integrate(model, params, load, dt=dt, n_steps=n_steps, damping=damping, chunk=chunk, neighbors=neighbors,
-                    progress=progress, dt_crit=dt_crit, state=state, on_chunk=on_chunk)
+                    progress=progress, dt_crit=dt_crit, state=state, on_chunk=on_chunk, stop=stop, peak=peak)
     if out.status == Status.UNSTABLE:
         err = InstabilityError(out.stats["failure"])
         err.state, err.records, err.stats = out.state, out.records, out.stats
@@ -138,7 +149,7 @@ def simulate(model: Model, params, load: Loading, *, dt: float, n_steps: int, da
 class _Chunk(NamedTuple):
     """A chunk as it came back: the state after it, its records (host arrays, the steps run), its kernel time, the
     overflow flags (candidate list, pairs within reach), whether the positions are finite, the particles' extent,
-    the steps run and the most pairs within reach."""
+    the steps run, the most pairs within reach, the peak tracker after it and whether the run stopped in it."""
 
     state: DEMState
     records: dict
@@ -149,12 +160,14 @@ class _Chunk(NamedTuple):
     extent: tuple
     ran: int
     within: int
+    track: Any
+    stopped: bool
 
 
 class _Run:
     """The host side of a run: its set-up and the loop over chunks with the checks between them."""
 
-    def __init__(self, model, params, load, dt, damping, chunk, n_steps, neighbors, state, compiling):
+    def __init__(self, model, params, load, dt, damping, chunk, n_steps, neighbors, state, compiling, stop, peak):
         self.t0 = time.perf_counter()
         self.model, self.load, self.dt, self.damping, self.compiling = model, load, dt, damping, compiling
         self.clock = {"t0": self.t0, "compiling": compiling, "kernel": []}
@@ -175,6 +188,9 @@ class _Run:
         self.n_chunks = -(-n_steps // self.chunk)  # every chunk has the same length: it compiles once
         self.state = self.done = state  # done: the state after the last completed chunk
         self.records, self.reallocs, self.stalled = [], 0, 0
+        # the stop after the peak: the tracker after the last completed chunk (or part of one), and whether it fired
+        self.stop, self.stopped, self.steps_run = stop, False, 0
+        self.track = None if stop is None else tracker(-np.inf if peak is None else peak, model.positions0.dtype)
         # a candidate list built on the host: a chunk stops before the list goes stale, the list is built again and
         # the chunk goes on from there (``left`` steps; the records and kernel time of its parts so far in ``parts``)
         self.host = model.contacts and isinstance(state.nbrs, HostList)
@@ -207,7 +223,7 @@ class _Run:
         self.clock["loop"] = time.perf_counter()
         failure = None
         try:
-            while len(self.records) < self.n_chunks and failure is None:
+            while len(self.records) < self.n_chunks and failure is None and not self.stopped:
                 _interrupt.check()
                 failure = self._advance(crit, on_chunk, report)
         except KeyboardInterrupt:
@@ -229,7 +245,7 @@ class _Run:
             self._more_slots(c.within)
         elif self.model.contacts and (c.overflow or not self.owner.inside(*c.extent)):
             return self._reallocate(c, vmax, crit)
-        elif self.host and c.ran < self.left:
+        elif self.host and c.ran < self.left and not c.stopped:
             self._rebuild_ahead(c)
         else:
             self._accept(c, on_chunk, report)
@@ -241,10 +257,10 @@ class _Run:
     def _run(self) -> _Chunk:
         """The next chunk, run from the current state, and what the checks need of it."""
         tc, compiled, host = time.perf_counter(), self.compiling.seconds, self.host
-        new, rec, overflow, finite, pmin, pmax, counts = _run_chunk(
+        new, rec, overflow, finite, pmin, pmax, counts, track = _run_chunk(
             self.model, self.pre, self.load, self.state, self.dt, self.damping, self.origin, self.chunk,
             self.margin, self.near_slots, jnp.asarray(self.left, jnp.int32) if host else None,
-            jnp.asarray(self.forced, jnp.int32) if host else None)
+            jnp.asarray(self.forced, jnp.int32) if host else None, self.stop, self.track)
         jax.block_until_ready(new.positions)
         elapsed = time.perf_counter() - tc - (self.compiling.seconds - compiled)  # (less a new program's compile)
         rec, (ran, within, refound, rebuilt) = jax.device_get(rec), (int(c) for c in np.asarray(counts))
@@ -252,12 +268,13 @@ class _Run:
         if self.near_slots is not None:
             self.clock["near_count"] = max(self.clock["near_count"], within)
             self.clock["near_found"] = self.clock.get("near_found", 0) + refound
-        if host:
-            rec = {k: r[:ran] for k, r in rec.items()}
-            if ran == 0:
-                new = self.state  # the first step would go stale: the list is built again
+        rec = {k: r[:ran] for k, r in rec.items()}  # (steps after a stop, or after the host's list went stale)
+        if host and ran == 0:
+            new = self.state  # the first step would go stale: the list is built again
         overflow, near_overflow = (bool(o) for o in np.asarray(overflow))
-        return _Chunk(new, rec, elapsed, overflow, near_overflow, bool(finite), (pmin, pmax), ran, within)
+        stopped = track is not None and bool(track.stopped)
+        return _Chunk(new, rec, elapsed, overflow, near_overflow, bool(finite), (pmin, pmax), ran, within, track,
+                      stopped)
 
     def _more_slots(self, within: int) -> None:
         """More pairs within reach than slots: the chunk runs again with more (a new size compiles it again)."""
@@ -289,6 +306,7 @@ class _Run:
         than half the skin in every step (a skin set small) costs a rebuild a step, not the run."""
         self.parts.append((c.records, c.elapsed))
         self.left -= c.ran
+        self.track = c.track
         self.state = _with_new_list(self.model, self.owner, c.state,
                                     at=_ahead(self.model, self.load, c.state, self.dt, self.damping))
         self.clock["rebuilds"] = self.clock.get("rebuilds", 0) + 1
@@ -310,18 +328,26 @@ class _Run:
         self.clock["kernel"].append(elapsed)
         self.stalled = 0
         self.state = self.done = c.state
+        self.track, self.stopped = c.track, c.stopped
         self.records.append(rec)
+        self.steps_run += len(rec["time"])
         if on_chunk is not None:
-            on_chunk(self._steps(0), self.state, rec)
-        report(self._steps(0), self.n_chunks * self.chunk, time.perf_counter() - self.t0)
+            on_chunk(self.steps_run, self.state, rec)
+        total = self.steps_run if self.stopped else self.n_chunks * self.chunk
+        report(self.steps_run, total, time.perf_counter() - self.t0)
 
     def _outcome(self, status: Status, failure: str | None = None) -> Outcome:
         state = self.done if status != Status.CONVERGED else self.state
         out, stats = _collect(self.model, state, self.records, self.chunk, self.reallocs, self.clock)
+        planned = self.n_chunks * self.chunk
         if status == Status.UNSTABLE:
-            stats.update(unstable=True, steps_planned=self.n_chunks * self.chunk, failure=failure)
+            stats.update(unstable=True, steps_planned=planned, failure=failure, stop_reason="unstable")
         elif status == Status.INTERRUPTED:
-            stats.update(interrupted=True, steps_planned=self.n_chunks * self.chunk)
+            stats.update(interrupted=True, steps_planned=planned, stop_reason="interrupted")
+        elif self.stopped:
+            stats.update(steps_planned=planned, stop_reason="after_peak")
+        else:
+            stats["stop_reason"] = "full_strain"
         return Outcome(state, out, stats, status)
 
 
@@ -355,7 +381,8 @@ def _collect(model, state, records, chunk, reallocs, clock):
     wall, compile_time = time.perf_counter() - clock["t0"], clock["compiling"].seconds
     setup = clock["loop"] - clock["t0"] - clock["setup_compile"]
     stats = {"setup_time": setup, "compile_time": compile_time, "run_time": wall - setup - compile_time,
-             "wall_time": wall, "kernel_time": float(np.sum(kernel)), "steps": len(records) * chunk,
+             "wall_time": wall, "kernel_time": float(np.sum(kernel)),
+             "steps": int(sum(len(r["time"]) for r in records)),
              "steps_per_second": chunk / per_chunk, "reallocations": reallocs,
              "contact_capacity": int(state.nbrs.idx.shape[1]) if model.contacts else 0,
              "contact_slots": clock.get("contact_slots", 0), "contacts_within_reach": clock.get("near_count", 0),

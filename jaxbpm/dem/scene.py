@@ -21,9 +21,10 @@ from jaxbpm.dem import quasistatic as quasi_static
 from jaxbpm.dem.curve import curve, peak_stats, plan_stats
 from jaxbpm.dem.integrator import integrate, Outcome
 from jaxbpm.dem.options import DEM
+from jaxbpm.dem.peak import peak_stop
 from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import restore_state, state_arrays, unpad_state
-from jaxbpm.dem.writers import check_frames, Writers, writers
+from jaxbpm.dem.writers import check_frames, write_frame, Writers, writers
 from jaxbpm.errors import SimulationInterrupted
 from jaxbpm.physics.model import default_params
 from jaxbpm.result import Result, settle, timed_result
@@ -62,7 +63,8 @@ def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Resul
                       vtu=options.vtu, overwrite=options.overwrite, resume=options.resume)
         the_plan = the_plan.starting_from(None if out.saved is None else restore_state(out.saved), out.steps_done)
         clock = _Clock(t0, time.perf_counter(), compiling.seconds, compiling)
-        run = _simulate(sample, the_plan, params, out, progress=options.progress, neighbors=options.neighbors)
+        run = _simulate(sample, the_plan, params, out, progress=options.progress, neighbors=options.neighbors,
+                        stop=_stop(scene, the_plan, out))
         stop = SimulationInterrupted(run.state, run.records, run.stats) if run.status == Status.INTERRUPTED else None
         result = finish(sample, scene, the_plan, run, out, clock, options.max_records)
     if stop is not None:
@@ -81,7 +83,16 @@ class _Clock:
     compiling: Any
 
 
-def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbors) -> Outcome:
+def _stop(scene, the_plan: Plan, out: Writers) -> tuple:
+    """The run's stop after the peak (:func:`jaxbpm.dem.peak.peak_stop`) and the peak before its start (a resumed
+    run's, from its record's earlier rows; else ``None``)."""
+    stop = peak_stop(scene, the_plan.model, the_plan.load, the_plan)
+    prior = out.prior
+    peak = float(np.max(scene.compressive_force(prior["reaction"]))) if prior and len(prior["reaction"]) else None
+    return stop, peak
+
+
+def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbors, stop=(None, None)) -> Outcome:
     """The run of the plan. Its outcome holds the sample's state (a padded run's cut to the sample); where it was
     interrupted the (padded) state is saved in the record file. A ``KeyboardInterrupt`` before the first chunk is
     raised (the record file says so)."""
@@ -89,13 +100,17 @@ def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbo
         run = integrate(the_plan.model, params, the_plan.load, dt=the_plan.dt, n_steps=the_plan.steps_left,
                         damping=the_plan.damping, chunk=the_plan.chunk, neighbors=neighbors,
                         progress=the_plan.progress(progress), dt_crit=the_plan.dt_crit[0], state=the_plan.start,
-                        on_chunk=out.on_chunk)
+                        on_chunk=out.on_chunk, stop=stop[0], peak=stop[1])
     except KeyboardInterrupt:  # before the first chunk (a resumed run's record keeps its saved state)
         if out.recorder is not None:
             out.recorder.finish("interrupted")
         raise
     if run.status == Status.INTERRUPTED and out.recorder is not None and out.recorder.steps > the_plan.steps_done:
         out.recorder.checkpoint(state_arrays(run.state))  # what resume= continues from
+    if run.stats.get("stop_reason") == "after_peak" and out.series is not None:
+        t = float(run.state.time)
+        if not out.series.steps or out.series.steps[-1][0] != t:  # the last frame: where the run stopped
+            write_frame(out.series, run.state, sample, t)
     if the_plan.size is None:
         return run
     return run._replace(state=unpad_state(run.state, sample.n_particles, sample.n_bonds))

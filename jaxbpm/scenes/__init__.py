@@ -17,8 +17,8 @@ Each scene's clamped groups take a mask, particle indices, a type, a region or a
 """
 
 from jaxbpm.scenes.base import (
-    METHODS, AxialScene, BaseScene, Scene, _build_model, _check_failure_rule, _is_axis, _loading, lateral_stats,
-    sample_breaks)
+    METHODS, AxialScene, BaseScene, Scene, _build_model, _check_failure_rule, _is_axis, _loading, force_weights,
+    lateral_stats, sample_breaks)
 from jaxbpm.scenes.bending import ThreePointBending
 from jaxbpm.scenes.groups import Group, Ids, Layer, Region, Type
 from jaxbpm.scenes.brazilian import BrazilianDisc
@@ -26,5 +26,5 @@ from jaxbpm.scenes.uniaxial import UniaxialCompression
 from jaxbpm.scenes.names import SCENE_NAMES, scene_from_name
 
 __all__ = ["UniaxialCompression", "ThreePointBending", "BrazilianDisc", "Scene", "BaseScene", "AxialScene", "METHODS",
-           "sample_breaks", "lateral_stats", "Group", "Ids", "Type", "Region", "Layer",
+           "sample_breaks", "lateral_stats", "force_weights", "Group", "Ids", "Type", "Region", "Layer",
            "SCENE_NAMES", "scene_from_name"]

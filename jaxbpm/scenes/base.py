@@ -22,7 +22,7 @@ from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model, build_model
 from jaxbpm.sample import Sample
 
-__all__ = ["Scene", "BaseScene", "AxialScene", "METHODS", "sample_breaks", "lateral_stats"]
+__all__ = ["Scene", "BaseScene", "AxialScene", "METHODS", "sample_breaks", "lateral_stats", "force_weights"]
 
 #: every solver of a scene: the explicit DEM, the static DSM, the stiffness tensor estimate STE
 METHODS = ("dem", "dsm", "ste")
@@ -54,6 +54,10 @@ class Scene(Protocol):
       wall_law, wall_stiffness: the walls' contact law (``"hertz"`` or ``"linear"``) and the linear law's stiffness
         [N/m] (``None``: the default of :func:`~jaxbpm.physics.model.build_model`).
       failure_rule: how a bond's stresses combine when it breaks (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
+
+    A scene may also have ``stop_after_peak`` (the strength scenes do): the DEM stops a run with breakage once the
+    force has fallen to that fraction of its peak (see :attr:`AxialScene.stop_after_peak`); a scene without it runs
+    to its full strain.
     """
 
     methods: tuple[str, ...]
@@ -241,6 +245,42 @@ def lateral_stats(scene: Scene, sample: Sample, displacement) -> dict:
     except SceneError:
         return {}
     return out if np.isfinite(out["poisson_ratio"]) else {}
+
+
+def force_weights(scene: Scene, n_reactions: int) -> np.ndarray:
+    """The weights that make a scene's load out of one step's reactions, so that a compiled run can measure it.
+
+    The load of every jaxbpm scene is a fixed linear combination of the reactions (``compressive_force``); the
+    weights are read by giving ``compressive_force`` each unit reaction in turn, and checked on a random one.
+
+    Args:
+      scene: the scene.
+      n_reactions: ``W + 2``, the reactions of one step (walls, then the fixed and the driven set).
+
+    Returns:
+      ``[n_reactions, 3]`` weights ``w`` with ``compressive_force(r) = sum(w * r[k])`` for every record ``k``.
+
+    Raises:
+      SceneError: a scene whose load is not linear in the reactions (set its ``stop_after_peak`` to ``None``).
+    """
+    size = 3 * n_reactions
+    basis = np.eye(size).reshape(size, n_reactions, 3)
+    unit = np.asarray(scene.compressive_force(basis), np.float64)
+    weights = unit.reshape(n_reactions, 3) if unit.shape == (size,) else np.zeros((n_reactions, 3))
+    probe = np.random.default_rng(0).standard_normal((2, n_reactions, 3))
+    got = np.asarray(scene.compressive_force(probe), np.float64)
+    linear = got.shape == (2,) and np.allclose(got, np.einsum("krc,rc->k", probe, weights), rtol=1e-12, atol=1e-12)
+    if unit.shape != (size,) or not linear:
+        raise SceneError(f"{type(scene).__name__}.compressive_force is not a linear combination of the reactions: a "
+                         "run cannot track its peak while it runs; give the scene stop_after_peak=None")
+    return weights
+
+
+def _check_stop_after_peak(value):
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and 0 < value < 1
+    if value is not None and not ok:
+        raise SceneError(f"stop_after_peak must be a fraction of the peak force in (0, 1), or None (the full strain), "
+                         f"got {value!r}")
 
 
 def _check_failure_rule(rule):
@@ -434,6 +474,11 @@ class AxialScene(BaseScene):
       failure_rule: how a bond's stresses combine when it breaks: ``"separate"`` (tension and shear checked apart,
         the parallel bond of PFC and MUSEN), ``"summed"`` (LAMMPS ``bpm/rotational``) or ``"max"`` (Yade's
         ``CohFrictPhys``); see :data:`jaxbpm.physics.bond.FAILURE_RULES`.
+      stop_after_peak: a DEM run with breakage stops once the force has fallen to this fraction of its peak, in
+        (0, 1) (default 0.7; PFC's usual stop is at 70-80 % of the peak); ``None``: it runs to the full strain.
+        The stop is armed once a bond has broken and the loading is past ``fit_range``, so the stiffness, the peak
+        and the curve up to the stop are those of the full run; the run's ``stats["stop_reason"]`` says why it
+        ended (:func:`jaxbpm.dem.peak.peak_stop`).
     """
 
     _FIELD_ORDER: ClassVar[tuple[str, ...]] = ()
@@ -450,6 +495,7 @@ class AxialScene(BaseScene):
     contact_law: Any = "hertz"
     cohesive: Any = None
     failure_rule: str = "separate"
+    stop_after_peak: float | None = 0.7
 
     def __repr__(self) -> str:
         names = self._FIELD_ORDER or tuple(f.name for f in dataclasses.fields(self))

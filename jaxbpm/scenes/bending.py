@@ -14,7 +14,8 @@ import numpy as np
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.loading import Loading
 from jaxbpm.sample import Sample
-from jaxbpm.scenes.base import BaseScene, _check_failure_rule, _check_fit_range, _extent, _is_axis, _loading
+from jaxbpm.scenes.base import (BaseScene, _check_failure_rule, _check_fit_range, _check_stop_after_peak,
+                                _extent, _is_axis, _loading)
 from jaxbpm.scenes.groups import _spec, clamped_groups
 
 __all__ = ["ThreePointBending"]
@@ -49,6 +50,9 @@ class ThreePointBending(BaseScene):
       supports, punch: the held and the pressed particles, in place of those found from the widths (give both or
         neither): each a boolean mask ``[n]``, a list of particle indices, a type, a region or a combination (see
         :mod:`jaxbpm.scenes.groups`; a :class:`~jaxbpm.scenes.groups.Layer` measures along ``axis``). Kept as given.
+      stop_after_peak: with breakage, the DEM run stops once the punch force has fallen to this fraction of its
+        peak, in (0, 1) (default 0.7); ``None``: it runs to the full ``strain`` (see
+        :class:`~jaxbpm.scenes.UniaxialCompression`).
 
     Raises:
       SceneError: an argument out of its range.
@@ -68,6 +72,7 @@ class ThreePointBending(BaseScene):
     failure_rule: str = "separate"
     supports: Any = None
     punch: Any = None
+    stop_after_peak: float | None = 0.7
 
     #: the solvers that model this scene (the STE models uniaxial compression only)
     methods = ("dem", "dsm")
@@ -77,6 +82,7 @@ class ThreePointBending(BaseScene):
 
     def __post_init__(self):
         _check_failure_rule(self.failure_rule)
+        _check_stop_after_peak(self.stop_after_peak)
         if not _is_axis(self.axis) or not _is_axis(self.span_axis) or self.axis == self.span_axis:
             raise SceneError(f"axis and span_axis must be two different axes of 0, 1, 2, got {self.axis!r} and "
                              f"{self.span_axis!r}")

@@ -13,7 +13,8 @@ import numpy as np
 
 from jaxbpm.errors import SceneError
 from jaxbpm.sample import Sample
-from jaxbpm.scenes.base import AxialScene, _check_failure_rule, _check_fit_range, _extent, _is_axis
+from jaxbpm.scenes.base import (AxialScene, _check_failure_rule, _check_fit_range, _check_stop_after_peak,
+                                _extent, _is_axis)
 from jaxbpm.scenes.groups import _spec, clamped_groups
 
 __all__ = ["BrazilianDisc"]
@@ -72,6 +73,8 @@ class BrazilianDisc(AxialScene):
       fixed, driven: the held and the moved particles, in place of the strips (give both or neither; they imply
         clamped platens, as ``platens="strips"``): each a boolean mask ``[n]``, a list of particle indices, a type, a
         region or a combination (see :mod:`jaxbpm.scenes.groups`). Kept as given.
+      stop_after_peak: as in :class:`~jaxbpm.scenes.UniaxialCompression` (the run stops once the platen force has
+        fallen to ``stop_after_peak`` of its peak, default 0.7; ``None``: the full ``strain``).
 
     Raises:
       SceneError: an argument out of its range.
@@ -80,7 +83,7 @@ class BrazilianDisc(AxialScene):
     _FIELD_ORDER: ClassVar[tuple[str, ...]] = (
         "axis", "disc_axis", "strain", "diameter", "thickness", "contacts", "rotations", "wall_law", "wall_stiffness",
         "fit_range", "breakage", "contact_law", "cohesive", "platens", "strip_width", "layer_thickness",
-        "failure_rule",
+        "failure_rule", "stop_after_peak",
         "fixed", "driven")
 
     axis: int = 0
@@ -101,6 +104,7 @@ class BrazilianDisc(AxialScene):
 
     def __post_init__(self):
         _check_failure_rule(self.failure_rule)
+        _check_stop_after_peak(self.stop_after_peak)
         if not _is_axis(self.axis) or not _is_axis(self.disc_axis) or self.axis == self.disc_axis:
             raise SceneError(f"axis (the load) and disc_axis must be two different axes of 0, 1, 2, got "
                              f"{self.axis!r} and {self.disc_axis!r}")

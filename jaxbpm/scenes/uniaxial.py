@@ -14,7 +14,8 @@ import numpy as np
 
 from jaxbpm.errors import SceneError
 from jaxbpm.sample import Sample
-from jaxbpm.scenes.base import AxialScene, _check_failure_rule, _check_fit_range, _is_axis
+from jaxbpm.scenes.base import (AxialScene, _check_failure_rule, _check_fit_range, _check_stop_after_peak,
+                                _is_axis)
 from jaxbpm.scenes.groups import _spec, clamped_groups
 
 __all__ = ["UniaxialCompression"]
@@ -58,6 +59,8 @@ class UniaxialCompression(AxialScene):
         checked apart, the parallel bond of PFC and MUSEN), ``"summed"`` (LAMMPS ``bpm/rotational``: all four
         utilisations summed) or ``"max"`` (Yade's ``CohFrictPhys``: each load on its own); see
         :data:`jaxbpm.physics.bond.FAILURE_RULES`. Choose the rule of the code the calibrated strengths are for.
+      stop_after_peak: with breakage, the DEM run stops once the force has fallen to this fraction of its peak, in
+        (0, 1) (default 0.7); ``None``: it runs to the full ``strain``. See :class:`~jaxbpm.scenes.base.AxialScene`.
 
     Raises:
       SceneError: an argument out of its range.
@@ -65,7 +68,8 @@ class UniaxialCompression(AxialScene):
 
     _FIELD_ORDER: ClassVar[tuple[str, ...]] = (
         "axis", "strain", "boundary", "fixed", "driven", "layer_thickness", "gauge_length", "area", "contacts",
-        "rotations", "wall_law", "wall_stiffness", "fit_range", "breakage", "contact_law", "cohesive", "failure_rule")
+        "rotations", "wall_law", "wall_stiffness", "fit_range", "breakage", "contact_law", "cohesive", "failure_rule",
+        "stop_after_peak")
 
     boundary: str = "layers"
     fixed: Any = None
@@ -93,6 +97,7 @@ class UniaxialCompression(AxialScene):
 
     def __post_init__(self):
         _check_failure_rule(self.failure_rule)
+        _check_stop_after_peak(self.stop_after_peak)
         if not _is_axis(self.axis):
             raise SceneError(f"axis must be the whole number 0, 1 or 2, got {self.axis!r}")
         if not (0 < self.strain < 0.5):

@@ -11,7 +11,7 @@ from jaxbpm import SceneError
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import build_model
 from jaxbpm.scenes import (METHODS, AxialScene, BaseScene, BrazilianDisc, Scene, ThreePointBending,
-                           UniaxialCompression, lateral_stats, sample_breaks)
+                           UniaxialCompression, force_weights, lateral_stats, sample_breaks)
 
 R = 1e-3
 SCENES = (UniaxialCompression(), UniaxialCompression.to_failure(), ThreePointBending(), BrazilianDisc())
@@ -108,12 +108,13 @@ def test_arguments_and_repr_are_the_scenes_own():
     assert repr(UniaxialCompression(strain=0.002)) == (
         "UniaxialCompression(axis=2, strain=0.002, boundary='layers', fixed=None, driven=None, layer_thickness=None, "
         "gauge_length=None, area=None, contacts=False, rotations=None, wall_law='hertz', wall_stiffness=None, "
-        "fit_range=(0.25, 1.0), breakage=None, contact_law='hertz', cohesive=None, failure_rule='separate')")
+        "fit_range=(0.25, 1.0), breakage=None, contact_law='hertz', cohesive=None, failure_rule='separate', "
+        "stop_after_peak=0.7)")
     assert repr(BrazilianDisc()) == (
         "BrazilianDisc(axis=0, disc_axis=2, strain=0.02, diameter=None, thickness=None, contacts=True, "
         "rotations=None, wall_law='hertz', wall_stiffness=None, fit_range=(0.05, 0.25), breakage=True, "
         "contact_law='hertz', cohesive=None, platens='strips', strip_width=None, layer_thickness=None, "
-        "failure_rule='separate', "
+        "failure_rule='separate', stop_after_peak=0.7, "
         "fixed=None, driven=None)")
     for cls in (UniaxialCompression, BrazilianDisc):
         assert issubclass(cls, AxialScene)
@@ -169,3 +170,38 @@ def test_a_scene_of_ones_own_is_solved_by_the_dsm(column):
     for method in ("dem", "ste"):  # the solvers it does not list refuse it
         with pytest.raises(SceneError, match=f"Squeeze needs method='dsm': the {method.upper()} does not model it"):
             jaxbpm.solve(column, Squeeze(), method)
+
+
+@pytest.mark.parametrize("scene, n_walls", [(UniaxialCompression(), 0), (UniaxialCompression(boundary="walls"), 2),
+                                            (BrazilianDisc(), 0), (BrazilianDisc(platens="walls"), 2),
+                                            (ThreePointBending(), 0), (Squeeze(), 0)])
+def test_force_weights_make_the_scenes_force(scene, n_walls):
+    """The weights a compiled run measures the force with give ``compressive_force`` of any reactions."""
+    reaction = np.random.default_rng(1).standard_normal((5, n_walls + 2, 3))
+    weights = force_weights(scene, n_walls + 2)
+    np.testing.assert_allclose(np.einsum("krc,rc->k", reaction, weights), scene.compressive_force(reaction),
+                               rtol=1e-13, atol=1e-13)
+
+
+def test_a_force_not_linear_in_the_reactions_is_refused():
+    @dataclasses.dataclass(frozen=True)
+    class Crushed(Squeeze):
+        def compressive_force(self, reaction):
+            return np.abs(reaction[:, 0, 2])  # (a magnitude: not linear)
+
+    with pytest.raises(SceneError, match="not a linear combination of the reactions.*stop_after_peak=None"):
+        force_weights(Crushed(), 2)
+
+
+@pytest.mark.parametrize("value", [0, 1, 1.5, -0.2, True, "0.7", float("nan")])
+def test_stop_after_peak_out_of_range_is_refused(value):
+    for cls in (UniaxialCompression, BrazilianDisc, ThreePointBending):
+        with pytest.raises(SceneError, match=r"stop_after_peak must be a fraction of the peak force in \(0, 1\)"):
+            cls(stop_after_peak=value)
+
+
+def test_stop_after_peak_defaults_to_seven_tenths():
+    for cls in (UniaxialCompression, BrazilianDisc, ThreePointBending):
+        assert cls().stop_after_peak == 0.7 and cls(stop_after_peak=None).stop_after_peak is None
+        assert cls(stop_after_peak=0.8) != cls()
+    assert UniaxialCompression.to_failure(stop_after_peak=0.75).stop_after_peak == 0.75

@@ -47,10 +47,11 @@ def test_the_disc_splits_in_tension_at_its_bts(disc, split):
     np.testing.assert_allclose([d, t], [disc.domain.hi[0], disc.domain.hi[2]])  # the cylinder domain, D = 2 t
     np.testing.assert_allclose(st["strength"], 2 * st["peak_force"] / (np.pi * d * t), rtol=1e-12)
     np.testing.assert_allclose(res.area, d * t) and np.testing.assert_allclose(res.gauge_length, d)
-    # elastic-brittle: a linear rise, then the split: the force falls to a fraction of the peak
+    # elastic-brittle: a linear rise, then the split: the force falls, and the run stops at 0.7 of the peak
     f = res.force
     peak = int(np.argmax(f))
-    assert 0.2 * len(f) < peak < 0.9 * len(f) and f[-1] < 0.5 * f[peak]
+    assert 0.2 * len(f) < peak < 0.95 * len(f) and f[-1] <= SCENE.stop_after_peak * f[peak] < f[-2]
+    assert st["stop_reason"] == "after_peak" and st["steps"] < st["steps_planned"]
     # it fails in tension, along the loaded diameter (x; the strips' centre line y = D / 2)
     assert st["broken_tensile"] > 50 and st["broken_tensile"] > 10 * st["broken_shear"]
     assert res.stiffness > 0 and np.isnan(res.youngs_modulus)
@@ -79,7 +80,7 @@ def test_records_and_the_breakage_map(disc, split):
     # the map of the last frame: broken bonds per particle and each bond's break mode; the crack runs along
     # the loaded diameter (bond midpoints within D / 5 of it) and crosses the disc from strip to strip
     files = sorted(out.glob("run_*.vtu"))
-    assert len(files) == 3
+    assert len(files) >= 2  # at rest, ..., where the run stopped after the peak (frames planned later: none)
     last = meshio.read(files[-1])
     mode = last.cell_data["break_mode"][1]
     np.testing.assert_array_equal(mode, np.asarray(res.state.broken))
