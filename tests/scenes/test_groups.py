@@ -120,7 +120,7 @@ def test_other_types_same_geometry_solve_alike(column):
     relabelled = column.replace(types=np.asarray(column.types) + 10)
     assert content_key(relabelled) != content_key(column)
     scene = UniaxialCompression(strain=1e-3)
-    for method, kw in (("dsm", {}), ("ste", {}), ("dem", {"transits": 5})):
+    for method, kw in (("dsm", {}), ("ste", {}), ("dem", {"transits": 5, "throw": False})):
         first = jaxbpm.solve(column, scene, method=method, **kw).stiffness
         with count_compilations() as n:  # the programs compiled for the first labelling serve the second
             assert jaxbpm.solve(relabelled, scene, method=method, **kw).stiffness == first
