@@ -18,6 +18,7 @@ import numpy as np
 
 from jaxbpm._compile import compile_clock
 from jaxbpm.dem.curve import curve, peak_stats, plan_stats
+from jaxbpm.dem.elastic_start import elastic_start, with_segment
 from jaxbpm.dem.integrator import integrate, Outcome
 from jaxbpm.dem.options import DEM
 from jaxbpm.dem.plan import Plan, plan
@@ -60,14 +61,29 @@ def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Resul
         out = writers(sample, scene, the_plan, record_to=options.record_to, snapshots=options.snapshots,
                       vtu=options.vtu, overwrite=options.overwrite, resume=options.resume)
         the_plan = the_plan.starting_from(None if out.saved is None else restore_state(out.saved), out.steps_done)
+        the_plan, start = _elastic(sample, scene, params, the_plan, out, options)
         clock = _Clock(t0, time.perf_counter(), compiling.seconds, compiling)
         run = _simulate(sample, the_plan, params, out, progress=options.progress, neighbors=options.neighbors)
+        if start is not None:
+            run.stats.update(start.stats)
+            run = run._replace(records=with_segment(run.records, start.records))
         stop = SimulationInterrupted(run.state, run.records, run.stats) if run.status == Status.INTERRUPTED else None
         result = finish(sample, scene, the_plan, run, out, clock, options.max_records)
     if stop is not None:
         stop.result = result
         raise stop
     return settle(result, options.throw)
+
+
+def _elastic(sample, scene, params, the_plan: Plan, out: Writers, options: DEM):
+    """The plan started from the DSM's elastic state (``start="elastic"``, not a resumed run) and that start (its
+    segment written to the record file as the first rows); else the plan as it is and ``None``."""
+    if options.start != "elastic" or out.saved is not None:
+        return the_plan, None
+    start = elastic_start(sample, scene, params, the_plan, safety=options.start_safety)
+    if start.state is not None and out.on_chunk is not None:
+        out.on_chunk(start.steps_done, start.state, start.records)
+    return the_plan.starting_from(start.state, start.steps_done), start
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,11 +100,14 @@ def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbo
     """The run of the plan. Its outcome holds the sample's state (a padded run's cut to the sample); where it was
     interrupted the (padded) state is saved in the record file. A ``KeyboardInterrupt`` before the first chunk is
     raised (the record file says so)."""
+    on_chunk, before = out.on_chunk, the_plan.steps_done
+    if on_chunk is not None and before:  # the writers count the steps of the whole run (VTU frames)
+        on_chunk = lambda done, state, rec, call=on_chunk: call(done + before, state, rec)  # noqa: E731
     try:
         run = integrate(the_plan.model, params, the_plan.load, dt=the_plan.dt, n_steps=the_plan.steps_left,
                         damping=the_plan.damping, chunk=the_plan.chunk, neighbors=neighbors,
                         progress=the_plan.progress(progress), dt_crit=the_plan.dt_crit[0], state=the_plan.start,
-                        on_chunk=out.on_chunk)
+                        on_chunk=on_chunk)
     except KeyboardInterrupt:  # before the first chunk (a resumed run's record keeps its saved state)
         if out.recorder is not None:
             out.recorder.finish("interrupted")
