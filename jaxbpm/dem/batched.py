@@ -181,6 +181,8 @@ def _check(sample, scene, options) -> None:
     if given:
         raise SceneError(f"solve_batch does not take {', '.join(given)} (files written per run): run those members "
                          "one by one with jaxbpm.solve")
+    if options.get("start", "rest") != "rest":
+        raise SceneError("solve_batch starts its members from rest: run start='elastic' one by one with jaxbpm.solve")
     if scene.contacts:
         raise SceneError(
             f"solve_batch runs bonds-only scenes, and this {type(scene).__name__} has contacts=True: its neighbour "

@@ -63,7 +63,7 @@ class ElasticStart(NamedTuple):
     stats: dict
 
 
-def elastic_start(sample, scene, params, the_plan, *, safety: float = SAFETY) -> ElasticStart:
+def elastic_start(sample, scene, params, the_plan, static, *, safety: float = SAFETY) -> ElasticStart:
     """The DSM-started state of a DEM run, or a start from rest where the DSM cannot give it.
 
     Args:
@@ -71,6 +71,10 @@ def elastic_start(sample, scene, params, the_plan, *, safety: float = SAFETY) ->
         scene: the scene.
         params: the parameters (checked).
         the_plan: the run's :class:`~jaxbpm.dem.plan.Plan` (model, time step, loading, steps, chunk).
+        static: the static solve, ``static(sample, scene, params, safety)`` returning ``(u, s_first, info)``: the
+            displacements (and rotation vectors) ``[n, 3 or 6]`` at the target displacement, the first-break scale
+            (:func:`first_break_scale`) and a dict of what the solve was; or a string, the reason it cannot give the
+            state (:func:`jaxbpm.elastic_field.dsm_field`, the DSM's, is what :func:`jaxbpm.solve` passes).
         safety: the start's fraction of the first-break scale, in (0, 1].
 
     Returns:
@@ -81,7 +85,7 @@ def elastic_start(sample, scene, params, the_plan, *, safety: float = SAFETY) ->
     reason = _unsupported(sample, scene, the_plan)
     if reason is not None:
         return _rest(reason)
-    field = _dsm_field(sample, scene, params, safety)
+    field = static(sample, scene, params, safety)
     if isinstance(field, str):
         return _rest(field)
     u, first, info = field
@@ -125,39 +129,6 @@ def _unsupported(sample, scene, the_plan) -> str | None:
     if not the_plan.breakage or sample.n_bonds == 0:
         return "no bond breaks in this run"
     return None
-
-
-def _dsm_field(sample, scene, params, safety):
-    """The DSM's field ``u [n, nd]`` at the target displacement, the first-break scale and the solve's info; or the
-    reason (a string) why there is none. With contacts the linearised DSM is solved again with the contacts
-    linearised at the start's scale when the first solve's differs from it by more than a quarter."""
-    from jaxbpm.dsm.options import DSM
-    from jaxbpm.dsm.scene import solve_scene
-
-    options = DSM(throw=False, nonlinear=False) if scene.contacts else DSM(throw=False)
-    res = solve_scene(sample, scene, params, options)
-    seconds, solves = res.wall_time, 1
-    if str(res.status) != "converged":
-        return f"the DSM did not converge ({res.status})"
-    model = scene.model(sample, contacts=False, breakage=True)
-    u = np.asarray(res.state, np.float64)[:sample.n_particles]
-    first = first_break_scale(model, params, u)
-    if scene.contacts and np.isfinite(first):
-        frac = float(np.clip(safety * min(first, 1.0), 1e-3, 1.0))
-        if abs(frac / res.stats["contact_fraction"] - 1.0) > 0.25:
-            # the same candidates (the first solve's reach): the same program, nothing compiled again
-            res = solve_scene(sample, scene, params,
-                              options.replace(contact_fraction=frac, contact_skin=res.stats["contact_skin"]))
-            seconds, solves = seconds + res.wall_time, 2
-            if str(res.status) != "converged":
-                return f"the DSM did not converge ({res.status})"
-            u = np.asarray(res.state, np.float64)[:sample.n_particles]
-            first = first_break_scale(model, params, u)
-    if not np.isfinite(first):
-        return "no bond reaches its strength under the DSM's load"
-    kind = "linearised contacts" if scene.contacts else "linear"
-    return u, first, {"dsm": kind, "dsm_time": seconds, "dsm_solves": solves,
-                      "contact_fraction": res.stats.get("contact_fraction")}
 
 
 def first_break_scale(model, params, u) -> float:

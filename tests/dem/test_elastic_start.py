@@ -10,6 +10,7 @@ import pytest
 import jaxbpm
 from jaxbpm.dem.elastic_start import break_scales, elastic_start, IMBALANCE
 from jaxbpm.dem.plan import plan
+from jaxbpm.elastic_field import dsm_field
 from jaxbpm.errors import OptionsError
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics.model import build_model, default_params
@@ -78,7 +79,7 @@ def test_break_scales_follow_the_mohr_coulomb_shear_strength():
 def test_the_start_is_where_the_dsm_puts_it_and_in_balance(rock):
     params = default_params(rock)
     the_plan = plan(rock, SCENE, params, transits=TRANSITS)
-    start = elastic_start(rock, SCENE, params, the_plan)
+    start = elastic_start(rock, SCENE, params, the_plan, dsm_field)
     info = start.stats["elastic_start"]
     assert start.steps_done % the_plan.chunk == 0 and start.steps_done > 0
     assert info["scale"] == pytest.approx(start.steps_done / the_plan.n_steps)
@@ -166,7 +167,7 @@ def test_where_the_dsm_cannot_give_the_state_it_starts_from_rest(rock, scene, re
     params = default_params(rock)
     the_plan = plan(rock, scene, params, transits=TRANSITS)
     with jaxbpm.count_compilations() as c, pytest.warns(UserWarning, match=f"starting from rest: .*{reason}"):
-        start = elastic_start(rock, scene, params, the_plan)
+        start = elastic_start(rock, scene, params, the_plan, dsm_field)
     assert c.count == 0  # refused before anything is solved
     assert start.state is None and start.steps_done == 0 and not start.records
     assert reason in start.stats["elastic_start"]["fallback"]
@@ -186,7 +187,7 @@ def test_with_contacts_the_start_uses_the_linearised_dsm(rock):
     the_plan = plan(rock, scene, params, transits=TRANSITS)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no fallback
-        start = elastic_start(rock, scene, params, the_plan)
+        start = elastic_start(rock, scene, params, the_plan, dsm_field)
     info = start.stats["elastic_start"]
     assert info["dsm"] == "linearised contacts"
     assert 0 < info["contact_share"] < 0.5 and info["imbalance"] < IMBALANCE
