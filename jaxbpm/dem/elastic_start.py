@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm._compile import capacity
 from jaxbpm.dem.state import DEMState
 from jaxbpm.physics import bond as bond_mod, rotation
 
@@ -284,7 +285,7 @@ def _bond_springs(model, x, theta):
 
 def _touching_pairs(sample, model, x):
     """``[C, 2]`` the pairs not bonded that overlap at positions ``x`` (their springs start empty, as in the
-    DEM)."""
+    DEM), padded with pairs ``(n, n)``."""
     from scipy.spatial import cKDTree
 
     n = sample.n_particles
@@ -294,7 +295,10 @@ def _touching_pairs(sample, model, x):
         pairs = pairs[np.linalg.norm(pos[pairs[:, 1]] - pos[pairs[:, 0]], axis=1) < r[pairs[:, 0]] + r[pairs[:, 1]]]
     if len(pairs):
         pairs = pairs[~np.asarray(model.bonded(jnp.asarray(pairs, np.int32)))]
-    return pairs.astype(np.int32)
+    # padded (pairs of particle n, never valid) to a size of the capacity ladder: one program for starts nearby
+    padded = np.full((capacity(len(pairs)), 2), model.n, np.int64)
+    padded[:len(pairs)] = pairs
+    return padded.astype(np.int32)
 
 
 @jax.jit
@@ -313,7 +317,7 @@ def _forces_at(model, params, x, q, bond_spring, pairs):
         on = jnp.full(model.bonds.shape[0], model.bond_contact != "replace")
         bonded = (bond_spring, still, on)
         zero = jnp.zeros((pairs.shape[0], 3), x.dtype)
-        contacts = (pairs, jnp.ones(pairs.shape[0], bool), zero, zero, zero)
+        contacts = (pairs, pairs[:, 0] < model.n, zero, zero, zero)
     force, moment, parts = model.forces(x, q, params, None, contacts, None, None, bonded)
     bonds_only, _, per_bond = bond_mod.bond_forces(x, q if model.rotations else None, model.bonds, model.r0,
                                                    model.stiffness(params))
