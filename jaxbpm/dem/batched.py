@@ -86,7 +86,7 @@ def solve_batch(sample: Sample, scene, params_batch, *, method="dem", vectorize:
         round-off amplified by the local damping).
       **options: the DEM's options (:class:`~jaxbpm.dem.options.DEM`; ``neighbors`` is accepted and unused), not
         ``record_to``, ``snapshots``, ``vtu``, ``resume`` or ``overwrite`` (files are written per run: use
-        ``solve``).
+        ``solve``), nor ``start="elastic"`` (the members start from rest).
 
     Returns:
       One :class:`~jaxbpm.result.Result` per member, in order, each with its status.

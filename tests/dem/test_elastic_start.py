@@ -207,3 +207,15 @@ def test_bad_start_options_are_refused(kw, match):
     with pytest.raises(OptionsError, match=match):
         jaxbpm.DEM(**kw)
     assert jaxbpm.DEM(start="elastic", start_safety=0.95).start == "elastic"
+
+
+def test_a_batch_refuses_the_elastic_start(rock):
+    params = default_params(rock)
+    with jaxbpm.count_compilations() as c, pytest.raises(jaxbpm.SceneError, match="starts its members from rest"):
+        jaxbpm.dem.solve_batch(rock, SCENE, [params, params], start="elastic")
+    assert c.count == 0
+
+
+def test_the_dem_alone_asks_for_the_static_solve(rock):
+    with pytest.raises(OptionsError, match="start='elastic' needs the static solve"):
+        jaxbpm.dem.solve_scene(rock, SCENE, None, jaxbpm.DEM(start="elastic"))
