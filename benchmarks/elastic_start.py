@@ -3,8 +3,9 @@
 Specimens of ``--n`` particles (as ``benchmarks/lab_strengths.py`` makes them: a cylinder for UCS, a disc for BTS, a
 beam for three-point bending; bonds, Hertz-Mindlin contacts, breakage). Each scene runs once per start to compile,
 then from rest and with ``start="elastic"`` at each loading rate of ``--transits`` (one compiled chunk for all:
-``--chunk``), each ``--repeat`` times (the least wall time counts). The strength's spread over the loading rates of the runs from rest is the run-to-run scatter the
-elastic start's difference is set against. Prints a table and saves JSON.
+``--chunk``), each ``--repeat`` times (the least wall time counts). The strength's spread over the loading rates
+of the runs from rest is the run-to-run scatter the elastic start's difference is set against. Prints a table and
+saves JSON.
 
     python benchmarks/elastic_start.py [--n 1000] [--scenes ucs bts flexural] [--transits 40 80 160]
 """
@@ -52,7 +53,8 @@ def run(sample, scene, transits, chunk, start, repeat=1, safety=None):
     wall = min(walls)
     st = res.stats
     first = float(np.nanmin(np.asarray(res.state.broken_time))) * st["speed"] / (st["speed"] * st["loading_time"])
-    out = {"strength": st["strength"], "wall_s": wall, "walls_s": walls, "compile_s": res.compile_time, "steps": st["steps"],
+    out = {"strength": st["strength"], "wall_s": wall, "walls_s": walls, "compile_s": res.compile_time,
+           "steps": st["steps"],
            "peak_fraction": st["displacement_at_peak"] / (st["speed"] * st["loading_time"]),
            "first_break_fraction": first, "youngs_modulus": res.youngs_modulus, "stiffness": res.stiffness}
     if start == "elastic":
@@ -76,7 +78,8 @@ def main(argv=None):
     rows = {}
     for key, (sample, scene) in specimens(args.n, args.scenes).items():
         print(f"{key}: {sample.n_particles} particles, {sample.n_bonds} bonds, {scene!r}", flush=True)
-        first = {s: run(sample, scene, args.transits[0], args.chunk, s, safety=args.safety) for s in ("rest", "elastic")}
+        first = {s: run(sample, scene, args.transits[0], args.chunk, s, safety=args.safety)
+                 for s in ("rest", "elastic")}
         print(f"  first calls (compiling): rest {first['rest']['wall_s']:.1f} s, elastic "
               f"{first['elastic']['wall_s']:.1f} s", flush=True)
         runs = []

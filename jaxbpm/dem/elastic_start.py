@@ -13,7 +13,8 @@ DSM's elastic segment: one row per skipped step, the reactions of the start stat
 
 Where the DSM cannot give the state the run starts from rest and says why (``stats["elastic_start"]["fallback"]``,
 and a warning): walls (their gaps close as the load goes), the cohesive contact law, no breakage, a DSM solve that
-did not converge, contacts that carry most of the load, a start state out of balance (contacts that slide), a first break within the first chunk.
+did not converge, contacts that carry most of the load, a start state out of balance (contacts that slide), a first
+break within the first chunk.
 """
 
 from __future__ import annotations
