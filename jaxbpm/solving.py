@@ -5,6 +5,7 @@ from __future__ import annotations
 from jaxbpm import dem, dsm, ste
 from jaxbpm._options import METHODS, resolve_options, SolverOptions
 from jaxbpm.auto import solve_auto
+from jaxbpm.elastic_field import dsm_field
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.model import check_params
 from jaxbpm.result import Result
@@ -98,4 +99,6 @@ def _dispatch(sample, scene, params, options: SolverOptions) -> Result:
         return dsm.solve_scene(sample, scene, params, options)
     if options.method == "ste":
         return ste.solve_scene(sample, scene, params, options)
+    if options.start == "elastic":  # the DSM's elastic state is where the run starts
+        return dem.solve_scene(sample, scene, params, options, static=dsm_field)
     return dem.solve_scene(sample, scene, params, options)

@@ -93,7 +93,7 @@ def solve_batch(sample: Sample, scene, params_batch, *, method="dem", vectorize:
         round-off amplified by the local damping).
       **options: the DEM's options (:class:`~jaxbpm.dem.options.DEM`; ``neighbors`` is accepted and unused), not
         ``record_to``, ``snapshots``, ``vtu``, ``resume`` or ``overwrite`` (files are written per run: use
-        ``solve``).
+        ``solve``), nor ``start="elastic"`` (the members start from rest).
 
     Returns:
       One :class:`~jaxbpm.result.Result` per member, in order, each with its status.
@@ -190,6 +190,8 @@ def _check(sample, scene, options) -> None:
     if given:
         raise SceneError(f"solve_batch does not take {', '.join(given)} (files written per run): run those members "
                          "one by one with jaxbpm.solve")
+    if options.get("start", "rest") != "rest":
+        raise SceneError("solve_batch starts its members from rest: run start='elastic' one by one with jaxbpm.solve")
     if scene.contacts:
         raise SceneError(
             f"solve_batch runs bonds-only scenes, and this {type(scene).__name__} has contacts=True: its neighbour "

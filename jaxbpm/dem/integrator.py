@@ -203,6 +203,10 @@ class _Run:
         settings = neighbors or NeighborSettings(skin=0.5 * self.r_min)
         self.owner = neighbors_owner(model, settings, model.positions0)
         at = model.positions0 if state is None else state.positions
+        if state is not None and state.nbrs is None:
+            # a start of its own (the DSM's elastic state): the list keeps the slots of a run from rest where its
+            # pairs fit there, and with them that run's compiled chunk
+            self.owner.allocate(model.positions0)
         nbrs = self.owner.allocate(at)
         if NEAR_MARGIN is not None and model.contact_law != "cohesive":
             margin = NEAR_MARGIN * settings.skin

@@ -3,8 +3,8 @@
 
 from __future__ import annotations
 
-from jaxbpm._options import (flag, optional, optional_path, option, positive, progress, shown, SolverOptions,
-                             unit_interval, whole)
+from jaxbpm._options import (choice, flag, optional, optional_path, option, positive, progress, shown,
+                             SolverOptions, unit_interval, whole)
 from jaxbpm.dem.neighbors import NeighborSettings
 from jaxbpm.errors import OptionsError
 
@@ -58,6 +58,13 @@ class DEM(SolverOptions):
         giving the same records and stiffness as an uninterrupted run (to round-off). Give the same sample, scene and
         options: the record's time step, speed, damping, chunk and sample fingerprint must agree, else an error
         names what differs.
+      start: where the run starts: ``"rest"``, or ``"elastic"``: at ``start_safety`` x the displacement at which the
+        DSM's elastic state has its first bond at its strength (:mod:`jaxbpm.dem.elastic_start`), from the DSM's
+        displacements and the loading's velocity field, its records beginning with the DSM's elastic segment
+        (``stats["elastic_segment"]`` rows). Where the DSM cannot give that state (walls, the cohesive contact law,
+        no breakage, contacts that carry most of the load or slide) the run starts from rest with a warning and
+        ``stats["elastic_start"]["fallback"]`` saying why. A resumed run continues from its saved state.
+      start_safety: ``start="elastic"``: the start's fraction of the first-break displacement, in (0, 1].
 
     A ``KeyboardInterrupt`` during the run (Ctrl-C, or raised by the ``progress`` callable) raises
     :class:`~jaxbpm.errors.SimulationInterrupted`, whose ``result`` is the result of the part that was run (status
@@ -86,3 +93,5 @@ class DEM(SolverOptions):
     throw: bool = option(True, flag)
     overwrite: bool = option(False, flag)
     resume: object = option(None, optional_path)
+    start: str = option("rest", choice("rest", "elastic"))
+    start_safety: float = option(0.9, unit_interval())

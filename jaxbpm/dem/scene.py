@@ -19,13 +19,14 @@ import numpy as np
 from jaxbpm._compile import compile_clock
 from jaxbpm.dem import quasistatic as quasi_static
 from jaxbpm.dem.curve import curve, peak_stats, plan_stats
+from jaxbpm.dem.elastic_start import elastic_start, with_segment
 from jaxbpm.dem.integrator import integrate, Outcome
 from jaxbpm.dem.options import DEM
 from jaxbpm.dem.peak import peak_stop
 from jaxbpm.dem.plan import Plan, plan
 from jaxbpm.dem.state import restore_state, state_arrays, unpad_state
 from jaxbpm.dem.writers import check_frames, write_frame, Writers, writers
-from jaxbpm.errors import SimulationInterrupted
+from jaxbpm.errors import OptionsError, SimulationInterrupted
 from jaxbpm.physics.model import default_params
 from jaxbpm.result import Result, settle, timed_result
 from jaxbpm.scenes import lateral_stats
@@ -34,7 +35,7 @@ from jaxbpm.status import Status
 __all__ = ["solve_scene", "finish"]
 
 
-def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Result:
+def solve_scene(sample, scene, params=None, options: DEM | None = None, *, static=None) -> Result:
     """Run the DEM on ``scene`` and return its result.
 
     Args:
@@ -42,16 +43,23 @@ def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Resul
       scene: the scene.
       params: parameters checked by :func:`jaxbpm.physics.model.check_params` (``None``: the sample's own).
       options: the :class:`~jaxbpm.dem.options.DEM` options (``None``: the defaults).
+      static: with ``start="elastic"``, the static solve that gives the start (see
+        :func:`jaxbpm.dem.elastic_start.elastic_start`; :func:`jaxbpm.solve` passes the DSM's,
+        :func:`jaxbpm.elastic_field.dsm_field`).
 
     Returns:
       The :class:`~jaxbpm.result.Result` (``state``: the :class:`~jaxbpm.dem.DEMState` at the end), with its status.
 
     Raises:
+      OptionsError: ``start="elastic"`` without ``static``.
       SceneError: options that do not fit the scene or the run.
       InstabilityError: with ``options.throw``, a run that blew up (carrying the result of what ran before).
       SimulationInterrupted: a ``KeyboardInterrupt`` during the run, carrying the result of the part that was run.
     """
     options = DEM() if options is None else options
+    if options.start == "elastic" and static is None:
+        raise OptionsError("start='elastic' needs the static solve that gives the start: run it with jaxbpm.solve, "
+                           "or pass static=jaxbpm.elastic_field.dsm_field")
     t0 = time.perf_counter()
     with compile_clock() as compiling:  # (the setup's compilations count as compile time)
         check_frames(options.snapshots, options.vtu)
@@ -62,15 +70,30 @@ def solve_scene(sample, scene, params=None, options: DEM | None = None) -> Resul
         out = writers(sample, scene, the_plan, record_to=options.record_to, snapshots=options.snapshots,
                       vtu=options.vtu, overwrite=options.overwrite, resume=options.resume)
         the_plan = the_plan.starting_from(None if out.saved is None else restore_state(out.saved), out.steps_done)
+        the_plan, start = _elastic(sample, scene, params, the_plan, out, options, static)
         clock = _Clock(t0, time.perf_counter(), compiling.seconds, compiling)
         run = _simulate(sample, the_plan, params, out, progress=options.progress, neighbors=options.neighbors,
                         stop=_stop(scene, the_plan, out))
+        if start is not None:
+            run.stats.update(start.stats)
+            run = run._replace(records=with_segment(run.records, start.records))
         stop = SimulationInterrupted(run.state, run.records, run.stats) if run.status == Status.INTERRUPTED else None
         result = finish(sample, scene, the_plan, run, out, clock, options.max_records)
     if stop is not None:
         stop.result = result
         raise stop
     return settle(result, options.throw)
+
+
+def _elastic(sample, scene, params, the_plan: Plan, out: Writers, options: DEM, static):
+    """The plan started from the DSM's elastic state (``start="elastic"``, not a resumed run) and that start (its
+    segment written to the record file as the first rows); else the plan as it is and ``None``."""
+    if options.start != "elastic" or out.saved is not None:
+        return the_plan, None
+    start = elastic_start(sample, scene, params, the_plan, static, safety=options.start_safety)
+    if start.state is not None and out.on_chunk is not None:
+        out.on_chunk(start.steps_done, start.state, start.records)
+    return the_plan.starting_from(start.state, start.steps_done), start
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,11 +119,14 @@ def _simulate(sample, the_plan: Plan, params, out: Writers, *, progress, neighbo
     """The run of the plan. Its outcome holds the sample's state (a padded run's cut to the sample); where it was
     interrupted the (padded) state is saved in the record file. A ``KeyboardInterrupt`` before the first chunk is
     raised (the record file says so)."""
+    on_chunk, before = out.on_chunk, the_plan.steps_done
+    if on_chunk is not None and before:  # the writers count the steps of the whole run (VTU frames)
+        on_chunk = lambda done, state, rec, call=on_chunk: call(done + before, state, rec)  # noqa: E731
     try:
         run = integrate(the_plan.model, params, the_plan.load, dt=the_plan.dt, n_steps=the_plan.steps_left,
                         damping=the_plan.damping, chunk=the_plan.chunk, neighbors=neighbors,
                         progress=the_plan.progress(progress), dt_crit=the_plan.dt_crit[0], state=the_plan.start,
-                        on_chunk=out.on_chunk, stop=stop[0], peak=stop[1])
+                        on_chunk=on_chunk, stop=stop[0], peak=stop[1])
     except KeyboardInterrupt:  # before the first chunk (a resumed run's record keeps its saved state)
         if out.recorder is not None:
             out.recorder.finish("interrupted")

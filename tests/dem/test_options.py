@@ -11,10 +11,10 @@ from jaxbpm.scenes import UniaxialCompression
 
 DEFAULTS = dict(dt=None, safety=0.5, damping=0.7, loading_time=None, transits=40.0, chunk=None, progress=False,
                 neighbors=None, max_records=2000, record_to=None, snapshots=None, vtu=None, pad=True, throw=True,
-                overwrite=False, resume=None)
+                overwrite=False, resume=None, start="rest", start_safety=0.9)
 BAD = dict(dt=-1e-7, safety=0.0, damping=1.0, loading_time=np.inf, transits=0, chunk=0, progress="yes",
            neighbors=0.5, max_records=2.5, record_to=3, snapshots=0, vtu=1.0, pad=1, throw=None, overwrite="no",
-           resume=7)
+           resume=7, start="elastc", start_safety=0.0)
 
 
 def test_the_defaults():
