@@ -165,6 +165,8 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
     disp, force, stiffness, keep = curve(scene, rec, the_plan.speed, the_plan.target, max_records,
                                          strict=False)  # (too few records: not quasi-static, below)
     stats.update(plan_stats(the_plan, the_plan.dt_crit[0], interrupted))
+    if "steps_planned" in stats:  # the whole run's (integrate plans the steps left of a resumed or started run)
+        stats["steps_planned"] = the_plan.n_steps
     # wall = setup (before the first chunk, less the compilations in it) + compile + run (the rest)
     setup = clock.t_sim - clock.t0 - clock.setup_compile + stats["setup_time"]
     compile_time = clock.compiling.seconds
@@ -181,8 +183,9 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
     if out.recorder is not None:
         wall = time.perf_counter() - clock.t0
         stats.update(wall_time=wall, run_time=wall - setup - compile_time)
+        # (steps_planned is the record's own, set when it was made: a resumed run's integrate plans fewer)
         out.recorder.finish("complete" if status == Status.CONVERGED else str(status),
-                            {k: v for k, v in stats.items() if k not in ("broken_curve", "padded_to")})
+                            {k: v for k, v in stats.items() if k not in ("broken_curve", "padded_to", "steps_planned")})
     result = timed_result("dem", clock.t0, stiffness=stiffness, youngs_modulus=youngs,
                           gauge_length=the_plan.gauge_length, area=the_plan.area, displacement=disp[keep],
                           force=force[keep], setup_time=setup, compile_time=compile_time, stats=stats,
