@@ -673,7 +673,7 @@ def markdown_table(runs, sizes, imported=None) -> str:
             "|---|---|---|---|---|---|"]
     groups = [(str(n), {m: runs[f"{m}/{n}"] for m in ("dem", "dsm", "ste") if f"{m}/{n}" in runs}) for n in sizes]
     if imported:
-        groups.append((" imported, own groups", imported))
+        groups.append((" imported, own groups", {m: imported[m] for m in ("dem", "dsm", "ste") if m in imported}))
     for label, by_method in groups:
         dem = by_method.get("dem", {}).get("cold")
         for m, rec in by_method.items():
