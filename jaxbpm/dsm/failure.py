@@ -12,8 +12,10 @@ clamped layers (uniaxial compression between layers, three-point bending, the Br
    the critical bond is removed (with it every intact bond within ``group_tol`` of the same scale);
 4. solve again from the previous solution (warm-started CG), and repeat.
 
-The peak force is the largest event load. The run stops once an event load has fallen to ``stop_fraction`` of the
-peak, when no intact bond carries load (the sample split apart), or after ``max_events``.
+The peak force is the largest event load. Under displacement control the sample stays at the largest event
+displacement reached so far (an event below it snaps back: it breaks at once); the run stops once the load that the
+damaged sample carries there has fallen to ``stop_fraction`` of the peak (a single event's load drops and recovers
+again and again, so it is no stop), when no intact bond carries load (the sample split apart), or after ``max_events``.
 
 Broken bonds that close become contacts (``contacts=True``): a broken bond whose ends approach in the current
 solution carries a linear normal spring (the bond's normal stiffness times ``contact_stiffness``, compression only,
@@ -61,7 +63,8 @@ class StaticFailure(SolverOptions):
 
     Attributes:
       max_events: events at most.
-      stop_fraction: stop once an event's load has fallen to this fraction of the peak (PFC's usual 0.7-0.8).
+      stop_fraction: stop once the load at the largest displacement reached has fallen to this fraction of the peak
+        (PFC's usual 0.7-0.8).
       group_tol: bonds whose critical scale lies within this relative tolerance of the event's break in the same
         event (0: one bond per event, ties aside).
       tol: the CG's relative residual at each solve.
@@ -117,7 +120,8 @@ class FailureResult:
       closed: ``[events]`` the broken bonds closed (contact springs) at each event's solve.
       events: the events run.
       stiffness: the intact sample's stiffness ``F_unit / delta`` [N/m].
-      status: why it stopped: ``"past_peak"`` (the load fell to ``stop_fraction`` of the peak), ``"split"`` (no
+      status: why it stopped: ``"past_peak"`` (the load at the largest displacement reached fell to
+        ``stop_fraction`` of the peak), ``"split"`` (no
         intact bond carries load), ``"max_events"``.
       wall_time: seconds in all.
       setup_time: seconds of setup (the linear DSM's setup, the Jacobians, the first preconditioner).
@@ -322,8 +326,8 @@ def _contact_solve(ctx: _Context, factor, state, x0, tol, maxiter, passes, conta
 
 
 def _events(ctx: _Context, factor, carry, limit, stop_fraction, group_tol, tol, maxiter, passes, contacts, chunk):
-    """Up to ``limit`` (at most ``chunk``) events from ``carry = (state [nb], u [n, nd], peak, f0)`` (``f0``: the
-    intact sample's unit reaction, 0 before the first event), stopping within the call as :func:`failure_solve`
+    """Up to ``limit`` (at most ``chunk``) events from ``carry = (state [nb], u [n, nd], peak, f0, reach)`` (``f0``:
+    the intact sample's unit reaction, 0 before the first event; ``reach``: the largest event scale so far), stopping within the call as :func:`failure_solve`
     says: ``(carry, records, count, stop)``, ``records`` ``[8, chunk]`` (scale, load, broken, iterations, closed,
     residual, unsettled, critical bond) of which the first ``count`` columns are set, ``stop`` the reason (0 none,
     1 past the peak, 2 split)."""
@@ -331,7 +335,7 @@ def _events(ctx: _Context, factor, carry, limit, stop_fraction, group_tol, tol, 
     rule = ctx.model.failure_rule
 
     def body(c):
-        state, u, peak, f0, k, stop, rec = c
+        state, u, peak, f0, reach, k, stop, rec = c
         state, u, f_unit, res, its, unsettled = _contact_solve(ctx, factor, state, u, tol, maxiter, passes,
                                                                    contacts)
         normal, shear, twist, bend = unit_bond_loads(ctx.model, ctx.jp, u)
@@ -344,20 +348,24 @@ def _events(ctx: _Context, factor, carry, limit, stop_fraction, group_tol, tol, 
         # a bond that breaks in compression starts as a closed contact (the next solve checks it)
         fresh = jnp.where((normal < 0) & contacts, CLOSED, OPEN).astype(state.dtype)
         state = jnp.where(remove, fresh, state)
+        # under displacement control the sample is at the largest displacement reached so far: past the peak once the
+        # load of this state there has fallen to stop_fraction of the peak
+        held = f_unit * reach
+        reach = jnp.where(split, reach, jnp.maximum(reach, s_min))
+        stop = jnp.where(split, 2, jnp.where((held < stop_fraction * peak) & (peak > 0), 1, 0)).astype(jnp.int32)
         peak = jnp.maximum(peak, load)
-        stop = jnp.where(split, 2, jnp.where(load < stop_fraction * peak, 1, 0)).astype(jnp.int32)
         row = (jnp.where(split, jnp.inf, s_min), load, jnp.sum(remove).astype(dtype), its.astype(dtype),
                jnp.sum(state == CLOSED).astype(dtype), res, unsettled.astype(dtype), jnp.argmin(scales).astype(dtype))
         rec = rec.at[:, k].set(jnp.stack([jnp.asarray(v, dtype) for v in row]))
-        return state, u, peak, f0, k + 1, stop, rec
+        return state, u, peak, f0, reach, k + 1, stop, rec
 
     def more(c):
-        return (c[4] < limit) & (c[5] == 0)
+        return (c[5] < limit) & (c[6] == 0)
 
     zero = jnp.zeros((), jnp.int32)
-    state, u, peak, f0, k, stop, rec = jax.lax.while_loop(
+    state, u, peak, f0, reach, k, stop, rec = jax.lax.while_loop(
         more, body, tuple(carry) + (zero, zero, jnp.zeros((8, chunk), dtype)))
-    return (state, u, peak, f0), rec, k, stop
+    return (state, u, peak, f0, reach), rec, k, stop
 
 
 events_program = Program(_events, static_argnames=("maxiter", "passes", "contacts", "chunk"))
@@ -468,7 +476,7 @@ def failure_solve(sample, scene, params=None, options: StaticFailure | None = No
     compile_time = setup_compile + max(clock.seconds, prep_compile)
     setup_time = time.perf_counter() - t0 - compile_time
     zero = jnp.zeros((), setup.guess.dtype)
-    carry = (jnp.zeros(setup.model.bonds.shape[0], jnp.int8), setup.guess, zero, zero)
+    carry = (jnp.zeros(setup.model.bonds.shape[0], jnp.int8), setup.guess, zero, zero, zero)
     records, kernel, calls, status = [], 0.0, 0, "max_events"
     while sum(r.shape[1] for r in records) < options.max_events:
         limit = min(options.chunk, options.max_events - sum(r.shape[1] for r in records))
