@@ -41,13 +41,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm._compile import Program, put, strong
-from jaxbpm._options import fraction, option, positive, SolverOptions, whole, flag, choice, optional
+from jaxbpm._options import choice, flag, fraction, option, optional, positive, SolverOptions, unit_interval, whole
+from jaxbpm.dsm.krylov import cg
 from jaxbpm.dsm.linear import _setup_for
 from jaxbpm.dsm.operator import (
     _apply_packed, _pair_dofs, _scatter_pairs, block_diagonal, packed_jacobians, reduced_jacobians)
-from jaxbpm.dsm.krylov import cg
 from jaxbpm.dsm.preconditioner import CholeskyBlocks, coarse_matrix, Preconditioner
-from jaxbpm.errors import SceneError
+from jaxbpm.errors import OptionsError, SceneError
 from jaxbpm.physics import bond as bond_mod
 
 __all__ = ["StaticFailure", "FailureResult", "failure_solve", "critical_scales", "unit_bond_loads"]
@@ -83,8 +83,7 @@ class StaticFailure(SolverOptions):
 
     max_events: int = option(4000, whole)
     stop_fraction: float = option(0.7, fraction)
-    group_tol: float = option(0.0, lambda name, v: None if (isinstance(v, (int, float)) and not isinstance(v, bool)
-                                                            and 0 <= v < 1) else _bad(name, v, "lie in [0, 1)"))
+    group_tol: float = option(0.0, unit_interval(lo_open=False, hi_closed=False))
     tol: float = option(1e-6, positive)
     maxiter: int | None = option(None, optional(whole))
     contacts: bool = option(True, flag)
@@ -95,12 +94,6 @@ class StaticFailure(SolverOptions):
     preconditioner: str = option("auto", choice("auto", "two-level", "jacobi"))
     aggregate_size: float | None = option(None, optional(positive))
     regularisation: float = option(1e-9, positive)
-
-
-def _bad(name, v, what):
-    from jaxbpm.errors import OptionsError
-
-    raise OptionsError(f"{name} must {what}, got {v!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -121,13 +114,15 @@ class FailureResult:
       events: the events run.
       stiffness: the intact sample's stiffness ``F_unit / delta`` [N/m].
       status: why it stopped: ``"past_peak"`` (the load at the largest displacement reached fell to
-        ``stop_fraction`` of the peak), ``"split"`` (no
-        intact bond carries load), ``"max_events"``.
+        ``stop_fraction`` of the peak), ``"split"`` (no intact bond carries load), ``"max_events"``.
       wall_time: seconds in all.
-      setup_time: seconds of setup (the linear DSM's setup, the Jacobians, the first preconditioner).
+      setup_time: seconds of setup (the linear DSM's setup, the Jacobians, the ground springs).
       compile_time: seconds compiling.
-      kernel_time: seconds running the event programs.
-      stats: further figures (``"bonds"``, ``"rule"``, ``"compilations"``, ``"calls"``).
+      kernel_time: seconds running the event programs and the coarse factors.
+      stats: further figures: ``"bonds"``, ``"rule"``, ``"calls"`` (compiled calls), ``"compilations"`` (of the
+        events program in this process), ``"group_tol"``, ``"contacts"``, ``"max_residual"``,
+        ``"unsettled_contacts"`` (events whose closed set still changed after ``contact_passes`` solves),
+        ``"bonds_broken"``, ``"bonds_broken_to_peak"``, ``"cg_iterations"``.
     """
 
     peak_force: float
@@ -327,10 +322,10 @@ def _contact_solve(ctx: _Context, factor, state, x0, tol, maxiter, passes, conta
 
 def _events(ctx: _Context, factor, carry, limit, stop_fraction, group_tol, tol, maxiter, passes, contacts, chunk):
     """Up to ``limit`` (at most ``chunk``) events from ``carry = (state [nb], u [n, nd], peak, f0, reach)`` (``f0``:
-    the intact sample's unit reaction, 0 before the first event; ``reach``: the largest event scale so far), stopping within the call as :func:`failure_solve`
-    says: ``(carry, records, count, stop)``, ``records`` ``[8, chunk]`` (scale, load, broken, iterations, closed,
-    residual, unsettled, critical bond) of which the first ``count`` columns are set, ``stop`` the reason (0 none,
-    1 past the peak, 2 split)."""
+    the intact sample's unit reaction, 0 before the first event; ``reach``: the largest event scale so far), stopping
+    within the call as :func:`failure_solve` says: ``(carry, records, count, stop)``, ``records`` ``[8, chunk]``
+    (scale, load, broken, iterations, closed, residual, unsettled, critical bond) of which the first ``count`` columns
+    are set, ``stop`` the reason (0 none, 1 past the peak, 2 split)."""
     dtype = ctx.jp.dtype
     rule = ctx.model.failure_rule
 
@@ -419,8 +414,6 @@ def _coarse_factor(ctx: _Context, state, contacts):
 def _check_inputs(sample, scene, options):
     """The checks of :func:`failure_solve` (before any setup)."""
     if options is not None and not isinstance(options, StaticFailure):
-        from jaxbpm.errors import OptionsError
-
         raise OptionsError(f"options must be a StaticFailure, got {type(options).__name__}")
     if getattr(scene, "uses_walls", False):
         raise SceneError("the static failure solver needs a scene with clamped layers (loading strips, supports), "
@@ -450,7 +443,7 @@ def failure_solve(sample, scene, params=None, options: StaticFailure | None = No
 
     Raises:
       SceneError: a scene with walls or without layers, a sample without bonds, bonds that cannot break (no finite
-        strength), or a free cluster that nothing holds.
+        strength) or that the scene does not load, or a free cluster that nothing holds.
       OptionsError: options that are not :class:`StaticFailure`.
     """
     from jaxbpm._compile import compile_clock
@@ -512,6 +505,7 @@ def _result(sample, scene, setup, rec, status, t0, setup_time, compile_time, ker
     return FailureResult(
         peak_force=float(load[k]), strength=float(scene.strength(float(load[k]), sample)),
         peak_displacement=float(scale[k] * delta), peak_event=k, displacement=scale * delta, force=load,
-        broken=broken.astype(int), critical_bond=critical.astype(int), cg_iterations=iterations.astype(int), closed=closed.astype(int),
-        events=len(load), stiffness=float(f_unit / delta), status=status, wall_time=time.perf_counter() - t0,
-        setup_time=setup_time, compile_time=compile_time, kernel_time=kernel, stats=stats)
+        broken=broken.astype(int), critical_bond=critical.astype(int), cg_iterations=iterations.astype(int),
+        closed=closed.astype(int), events=len(load), stiffness=float(f_unit / delta), status=status,
+        wall_time=time.perf_counter() - t0, setup_time=setup_time, compile_time=compile_time, kernel_time=kernel,
+        stats=stats)
