@@ -7,6 +7,7 @@ separate failure rule). The DEM runs from rest over each ``--transits`` (its def
 transits; slower loading shows how far its peak is from the quasi-static one). Prints a table and saves JSON.
 
     python benchmarks/static_failure.py [--n 2000] [--cases bts,flexural,ucs] [--transits 30,300] [--max-events 600]
+        [--tol 1e-6] [--group-tol 0]
 """
 
 from __future__ import annotations
@@ -88,6 +89,7 @@ def main(argv=None):
     ap.add_argument("--group-tol", type=float, default=0.0, help="StaticFailure.group_tol")
     ap.add_argument("--no-contacts", action="store_true", help="broken bonds never close (StaticFailure.contacts)")
     ap.add_argument("--max-events", type=int, default=600, help="StaticFailure.max_events")
+    ap.add_argument("--tol", type=float, default=1e-6, help="StaticFailure.tol (the CG's relative residual)")
     ap.add_argument("--threads", type=int, default=None, help="pin to this many cores")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
@@ -95,7 +97,8 @@ def main(argv=None):
     enable_x64()
     from jaxbpm.dsm import StaticFailure
 
-    options = StaticFailure(group_tol=args.group_tol, contacts=not args.no_contacts, max_events=args.max_events)
+    options = StaticFailure(group_tol=args.group_tol, contacts=not args.no_contacts, max_events=args.max_events,
+                            tol=args.tol)
     transits = [float(t) for t in args.transits.split(",") if t.strip()]
     out = args.out or f"results/static_failure_{args.n}.json"
     cases = {}
@@ -103,7 +106,7 @@ def main(argv=None):
         cases[key] = run_case(key, args.n, transits, options)
         write_json(out, {"benchmark": "static_failure", "machine": machine_info(), "n": args.n, "cases": cases,
                          "options": {"group_tol": args.group_tol, "contacts": not args.no_contacts,
-                                     "max_events": args.max_events},
+                                     "max_events": args.max_events, "tol": args.tol},
                          "transits": transits, "peak_rss_gib": peak_rss_gib()})
     print(f"\n{'case':9s} {'static N':>9s} {'events':>7s} {'static s':>9s} " + " ".join(
         f"{'DEM' + format(t, 'g') + ' N':>10s} {'gap %':>7s} {'DEM s':>7s}" for t in transits))
