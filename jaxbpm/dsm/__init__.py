@@ -35,10 +35,13 @@ The package, one module per part (each can be read and tested alone):
 * :mod:`~jaxbpm.dsm.linear` -- the linear scene solves (bonds only; linearised contacts), one compiled program each;
 * :mod:`~jaxbpm.dsm.newton` -- the nonlinear scene solve (Newton-Krylov over load steps);
 * :mod:`~jaxbpm.dsm.scene` -- :func:`solve_scene`, what ``jaxbpm.solve(..., method="dsm")`` runs;
-* :mod:`~jaxbpm.dsm.functions` -- pure functions of the parameters (:func:`stiffness_function`, :func:`load_cases`).
+* :mod:`~jaxbpm.dsm.functions` -- pure functions of the parameters (:func:`stiffness_function`, :func:`load_cases`);
+* :mod:`~jaxbpm.dsm.failure` -- the static failure solver (:func:`failure_solve`: bonds removed one event at a time,
+  sequentially linear analysis).
 """
 
 from jaxbpm.dsm.boundary import affine_field, contact_candidates, free_mask
+from jaxbpm.dsm.failure import critical_scales, failure_solve, FailureResult, StaticFailure
 from jaxbpm.dsm.functions import load_cases, stiffness_function
 from jaxbpm.dsm.krylov import cg, linear_solve, tangent_operator
 from jaxbpm.dsm.linear import LINEAR_STIFFNESS_TOL
@@ -53,4 +56,5 @@ __all__ = ["solve_scene", "stiffness_function", "load_cases", "linear_solve", "t
            "reduced_jacobians", "bond_jacobians", "full_jacobians", "packed_jacobians", "contact_jacobians",
            "symmetrised", "stiffness_product", "block_diagonal", "BondGeometry", "bond_geometry", "CoarseSpace",
            "coarse_space", "Preconditioner", "CholeskyBlocks", "build_preconditioner", "free_mask", "affine_field",
-           "contact_candidates", "LINEAR_STIFFNESS_TOL"]
+           "contact_candidates", "LINEAR_STIFFNESS_TOL", "failure_solve", "StaticFailure", "FailureResult",
+           "critical_scales"]
