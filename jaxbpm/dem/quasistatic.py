@@ -121,9 +121,10 @@ def check(scene, the_plan, records: dict, displacement, force, stats: dict, stat
         status: the run's status so far.
 
     Returns:
-        ``status``, or ``NOT_QUASI_STATIC`` for a run that ran to its end but fails :func:`verdict` (``stats``'
-        ``failure`` says why and which ``transits`` would pass). A failure run (bonds break) keeps its status: its
-        ``quasi_static`` says whether its peak was reached quasi-statically (``quasi_static_note`` why not).
+        ``status``, or ``NOT_QUASI_STATIC`` for an elastic run of a bonded sample that ran to its end but fails
+        :func:`verdict` (``stats``' ``failure`` says why and which ``transits`` would pass). A failure run (bonds
+        break) keeps its status: its ``quasi_static`` says whether its peak was reached quasi-statically
+        (``quasi_static_note`` why not); so does a granular sample (no bonds, or the cohesive law).
     """
     found = measures(scene, records, displacement, force, the_plan.target, the_plan.speed,
                      elastic=not the_plan.breakage)
@@ -134,7 +135,9 @@ def check(scene, the_plan, records: dict, displacement, force, stats: dict, stat
     stats.update(found, quasi_static=passed, transits=transits)
     if passed or status != Status.CONVERGED:
         return status
-    if the_plan.breakage:
+    if the_plan.breakage or not model.bonds.shape[0] or model.contact_law == "cohesive":
+        # a failure run, or a granular sample (no bonds; the cohesive law): its curve is no elastic answer and its
+        # ends may carry next to nothing; the measures and the note are reported, the status kept
         stats["quasi_static_note"] = why
         return status
     stats["failure"] = why

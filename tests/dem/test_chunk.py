@@ -39,10 +39,10 @@ def test_bonds_only_dem_does_not_import_jax_md():
             "r = jaxbpm.solve(s, jaxbpm.scenes.UniaxialCompression(strain=0.002), method='dem', transits=5); "
             "print(r.stiffness > 0, 'jax_md' in sys.modules); "
             "scene = jaxbpm.scenes.UniaxialCompression(strain=0.002, contacts=True); "
-            "c = jaxbpm.solve(s, scene, method='dem', transits=2); "
+            "c = jaxbpm.solve(s, scene, method='dem', transits=2, throw=False); "
             "print(c.stiffness > 0, c.stats['contact_list'], any(m.startswith('jax_md') for m in sys.modules)); "
             "jaxbpm.dem.neighbors.HOST_LIST_MIN = 1 << 62; "
-            "c = jaxbpm.solve(s, scene, method='dem', transits=2); "
+            "c = jaxbpm.solve(s, scene, method='dem', transits=2, throw=False); "
             "print(c.stiffness > 0, c.stats['contact_list'], 'jax_md.partition' in sys.modules, "
             "any(m in sys.modules for m in ('jax_md', 'jax_md.rigid_body', 'jax_md.energy')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)

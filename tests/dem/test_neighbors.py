@@ -38,7 +38,7 @@ def test_host_candidate_list_runs_as_jax_md_list_through_breakage(monkeypatch):
                                                          "shear_strength": 5e6},
                                  particle_material={"E": 1e9, "nu": 0.25, "density": 2500.0, "friction": 0.5,
                                                     "restitution": 0.5}).largest_cluster()
-    scene = jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02)
+    scene = jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02, stop_after_peak=None)  # the whole run
     _jax_md_lists(monkeypatch)
     cell = jaxbpm.solve(s, scene, "dem", transits=30, damping=0.0)
     _host_lists(monkeypatch)
