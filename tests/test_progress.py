@@ -11,7 +11,7 @@ def _lines(text: str) -> list[str]:
 
 
 def test_bar_shows_its_count_fraction_and_postfix(capsys):
-    b = progress.bar("DEM step", total=10)
+    b = progress.bar("DEM step", total=10, lines=False)
     b.update(4)
     b.set_postfix_str("max overlap 0.3")
     b.close()
@@ -22,11 +22,11 @@ def test_bar_shows_its_count_fraction_and_postfix(capsys):
 
 
 def test_bar_without_total_counts_and_a_disabled_bar_writes_nothing(capsys):
-    c = progress.bar("FIRE step")
+    c = progress.bar("FIRE step", lines=False)
     c.update(3)
     c.close()
     assert _lines(capsys.readouterr().err)[-1].startswith("FIRE step: 3step [")
-    d = progress.bar("hidden", total=5, disable=True)
+    d = progress.bar("hidden", total=5, disable=True, lines=False)
     d.update(5)
     d.set_postfix_str("x")
     d.close()
@@ -34,7 +34,7 @@ def test_bar_without_total_counts_and_a_disabled_bar_writes_nothing(capsys):
 
 
 def test_say_prints_above_an_open_bar_and_a_bar_not_left_is_erased(capsys):
-    b = progress.bar("half", total=4, leave=False)
+    b = progress.bar("half", total=4, leave=False, lines=False)
     b.update(2)
     progress.say("packed")
     b.close()
@@ -43,3 +43,30 @@ def test_say_prints_above_an_open_bar_and_a_bar_not_left_is_erased(capsys):
     assert re.search(r"\r *\r$", text)  # the bar erased on close
     progress.say("done")
     assert capsys.readouterr().err == "done\n"
+
+
+def test_where_stderr_is_no_terminal_progress_is_written_as_lines(capsys, monkeypatch):
+    """A log file reads line by line: a line per tenth of the work and one at the close, no carriage return."""
+    b = progress.bar("DEM steps", total=100)  # pytest's captured stderr is no terminal
+    assert isinstance(b, progress.Lines)
+    for _ in range(100):
+        b.update(1)
+        b.set_postfix_str("strain 0.1 %", refresh=False)
+    b.close()
+    text = capsys.readouterr().err
+    assert "\r" not in text
+    lines = text.splitlines()
+    assert len(lines) == 11  # the first step, 10 % ... 90 %, then the close at 100 %
+    assert lines[-1].startswith("DEM steps: 100% 100/100 step, ") and lines[-1].endswith(", strain 0.1 %")
+    assert lines[4].startswith("DEM steps:  40% 40/100 step")
+    # without a total: a line every LINE_INTERVAL seconds
+    monkeypatch.setattr(progress, "LINE_INTERVAL", 0.0)
+    c = progress.bar("FIRE step", unit="FIRE step", leave=False)
+    c.update(3)
+    c.close()
+    written = capsys.readouterr().err.splitlines()
+    assert len(written) == 1 and written[0].startswith("FIRE step: 3 FIRE step, ")  # (not left: no line at close)
+    d = progress.bar("hidden", total=5, disable=True)
+    d.update(5)
+    d.close()
+    assert capsys.readouterr().err == ""
