@@ -273,3 +273,14 @@ def foreign_packing(n: int, seed: int, path: str, *, slab: float = 0.08, gap: fl
         fh.write("\n".join(lines) + "\n")
     return {"particles": len(x), "bonds": len(bonds), "types": {int(k): int((types == k).sum()) for k in (1, 2, 3)},
             "seconds": time.perf_counter() - t}
+
+
+def read_foreign_packing(path):
+    """``(sample, seconds)``: the packing of :func:`foreign_packing` read from its LAMMPS data file as a user would
+    (``read_lammps_data`` with a bond radius ratio of 0.5 and bonds of E 1 GPa, nu 0.25; the file has no coefficients).
+    Call after enabling x64."""
+    import jaxbpm.interop.formats
+
+    t = time.perf_counter()
+    sample = jaxbpm.interop.formats.read_lammps_data(path, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    return sample, time.perf_counter() - t

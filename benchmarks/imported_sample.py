@@ -38,7 +38,8 @@ import os
 import sys
 import time
 
-from _common import enable_x64, foreign_packing, machine_info, machine_load, pin, table, write_json
+from _common import (enable_x64, foreign_packing, machine_info, machine_load, pin, read_foreign_packing, table,
+                     write_json)
 
 STRAIN = 0.002
 METHODS = ("ste", "dsm", "dem")
@@ -62,12 +63,6 @@ def _timed(jaxbpm, sample, scene, method) -> dict:
     return out
 
 
-def _read(jaxbpm, path):
-    t = time.perf_counter()
-    sample = jaxbpm.interop.formats.read_lammps_data(path, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
-    return sample, time.perf_counter() - t
-
-
 def measure(args) -> dict:
     import jaxbpm
     from jaxbpm.scenes import Type, UniaxialCompression
@@ -78,7 +73,7 @@ def measure(args) -> dict:
     if not os.path.exists(path):
         log(f"making the packing ({args.n} spheres) -> {path}")
         made = foreign_packing(args.n, args.seed, path)
-    sample, read_s = _read(jaxbpm, path)
+    sample, read_s = read_foreign_packing(path)
     log(f"read {path}: {sample.n_particles} particles, {sample.n_bonds} bonds in {read_s:.2f} s")
     layers = UniaxialCompression(axis=2, strain=STRAIN)
     fixed, driven = layers.layers(sample)
@@ -94,7 +89,7 @@ def measure(args) -> dict:
             rows.append({"sample": "imported", "scene": name, "method": method, "first": first, "second": second})
             log(f"  {method} {name:16s} first {first['call_s']:.3f} s, second {second['call_s'] * 1e3:.1f} ms "
                 f"(setup {second['setup_s'] * 1e3:.1f}, run {second['run_s'] * 1e3:.1f}) K {second['stiffness']:.6g}")
-    again, _ = _read(jaxbpm, path)
+    again, _ = read_foreign_packing(path)
     fresh = {}
     for method in ("dsm", "ste"):
         fresh[method] = _timed(jaxbpm, again, scenes["own"], method)

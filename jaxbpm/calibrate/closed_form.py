@@ -45,8 +45,13 @@ def one_scale_answer(problem: Problem, values: np.ndarray, outputs: np.ndarray) 
     Returns:
       ``(answer [1], predicted outputs [m])`` (exact for one free scale).
     """
+    return _least_squares(problem, (np.asarray(outputs) / values[0])[:, None])
+
+
+def _least_squares(problem: Problem, jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The moduli (clipped to their bounds) whose linear responses ``jac [m, n]`` best meet the weighted targets, and
+    the outputs they give, ``jac @ moduli``."""
     r, t = _weighted_rows(problem)
-    jac = (np.asarray(outputs) / values[0])[:, None]
     answer = problem.space.clip(np.linalg.lstsq(r[:, None] * jac, r * t, rcond=None)[0])
     return answer, jac @ answer
 
@@ -87,7 +92,7 @@ def closed_form(problem: Problem, *, tol: float = 0.05, max_iterations: int = 6,
     progress = _common.progress_fn(progress)
     history = History(space.names, problem.target_names)
     evals0 = problem.evaluations
-    r, t = _weighted_rows(problem)
+    r, _ = _weighted_rows(problem)  # (the rows weight the rank check)
     v = space.initial.copy()
     notes = [f"closed form: {why}"]
     answer = pred = None
@@ -112,8 +117,7 @@ def closed_form(problem: Problem, *, tol: float = 0.05, max_iterations: int = 6,
         if np.linalg.matrix_rank(a, tol=1e-10 * np.abs(a).max()) < n:
             raise CalibrationError("the targets do not determine the free moduli (their responses are linearly "
                                    "dependent); tie components or add targets on other scenes")
-        new = space.clip(np.linalg.lstsq(a, r * t, rcond=None)[0])
-        pred = jac @ new
+        new, pred = _least_squares(problem, jac)
         change = np.max(np.abs(new / v - 1.0))
         answer = new
         if n == 1 or change < step_tol:

@@ -56,8 +56,8 @@ def measures(scene, records: dict, displacement: np.ndarray, force: np.ndarray, 
     if elastic:
         sel = scene.fit_mask(displacement, target)
     else:  # up to the peak: the strength is read there
-        sel = np.arange(len(force)) <= int(np.argmax(force))
-        sel &= displacement >= 0.05 * displacement[int(np.argmax(force))]
+        peak = int(np.argmax(force))
+        sel = (np.arange(len(force)) <= peak) & (displacement >= 0.05 * displacement[peak])
     if sel.sum() < 3:
         return nan
     r = np.asarray(records["reaction"])[sel]
@@ -66,11 +66,13 @@ def measures(scene, records: dict, displacement: np.ndarray, force: np.ndarray, 
     load = np.sqrt(np.mean((0.5 * (a - b)) ** 2))
     imbalance = float(np.sqrt(np.mean((a + b) ** 2)) / load) if load > 0 else float("inf")
     speed_ratio = float(np.max(np.asarray(records["vmax"])[sel]) / speed) if speed > 0 else float("nan")
-    u, f = displacement[sel], force[sel]
-    coef = np.polyfit(u, f, 1)
-    scale = np.sqrt(np.mean(f ** 2))
-    residual = float(np.sqrt(np.mean((np.polyval(coef, u) - f) ** 2)) / scale) if scale > 0 else float("inf")
-    return {"imbalance": imbalance, "speed_ratio": speed_ratio, "fit_residual": residual if elastic else float("nan"),
+    residual = float("nan")
+    if elastic:  # (a failure run's curve is no line)
+        u, f = displacement[sel], force[sel]
+        scale = np.sqrt(np.mean(f ** 2))
+        misfit = np.sqrt(np.mean((np.polyval(np.polyfit(u, f, 1), u) - f) ** 2))
+        residual = float(misfit / scale) if scale > 0 else float("inf")
+    return {"imbalance": imbalance, "speed_ratio": speed_ratio, "fit_residual": residual,
             "quasi_static_records": int(sel.sum())}
 
 
