@@ -395,12 +395,14 @@ def speed_accuracy(results, reference, ax=None, *, run_time: bool = False):
 
 def _point(ax, k, lab, r, y, zero, ref_result, ref_name, run_time) -> None:
     """One result on the speed-accuracy chart (with its run time, hollow, when asked)."""
+    import textwrap
+
     colour = f"C{k % 10}"
-    text = f"{lab}: wall {r.wall_time:.3g} s"
+    text = textwrap.fill(lab, 90) + f"\n    wall {r.wall_time:.3g} s"
     if ref_result is not None:
         text += f" ({_faster(r.wall_time, ref_result.wall_time, ref_name)} in wall time)"
     if run_time:
-        text += f"; run {r.run_time:.3g} s"
+        text += f", run {r.run_time:.3g} s"
         if ref_result is not None:
             text += f" ({_faster(r.run_time, ref_result.run_time, ref_name)} in run time)"
     if zero:
