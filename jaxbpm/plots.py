@@ -248,7 +248,7 @@ def crack_pattern(sample, modes, ax=None, *, positions=None, normal: int = 1, or
     if np.any((modes < 0) | (modes > max(BREAK_MODES))):
         raise ValueError(f"crack_pattern: break modes are 0 (intact) or {BREAK_MODES}, got {np.unique(modes)}")
     x = np.asarray(sample.positions if positions is None else positions, np.float64)
-    ax = new_axes(ax, (5.5, 5.5))
+    ax = new_axes(ax, (5.0, 6.5))
     inside, axes, where = _slab(sample, x, bonds, normal, origin, thickness)
     for code, name in [(0, "intact")] + sorted(BREAK_MODES.items()):
         pick = inside & (modes == code)
@@ -262,8 +262,8 @@ def crack_pattern(sample, modes, ax=None, *, positions=None, normal: int = 1, or
     ax.set_ylabel(f"{names[axes[1]]} [m]")
     ax.set_aspect("equal")
     ax.autoscale_view()
-    ax.set_title(f"broken bonds by mode{where}", fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title(f"broken bonds by mode\n{where}", fontsize=9)
+    _legend(ax)
     return ax
 
 
@@ -272,7 +272,7 @@ def _slab(sample, x, bonds, normal, origin, thickness):
     if x.ndim != 2 or x.shape[0] != int(sample.n_particles):
         raise ValueError(f"crack_pattern: positions must be [{int(sample.n_particles)}, dim], got {x.shape}")
     if x.shape[1] == 2:
-        return np.ones(bonds.shape[0], bool), [0, 1], " (the whole 2D sample)"
+        return np.ones(bonds.shape[0], bool), [0, 1], "the whole 2D sample"
     if normal not in (0, 1, 2):
         raise ValueError(f"crack_pattern: normal is the axis normal to the section, 0, 1 or 2; got {normal!r}")
     if thickness is None:
@@ -285,8 +285,8 @@ def _slab(sample, x, bonds, normal, origin, thickness):
     inside = np.abs(mid - origin) <= 0.5 * thickness
     axes = [a for a in range(3) if a != normal]
     name = "xyz"[normal]
-    where = (", all bonds projected along " + name if not np.isfinite(thickness) else
-             f", section {name} = {origin:.3g} m, {thickness:.3g} m thick")
+    where = (f"all bonds projected along {name}" if not np.isfinite(thickness) else
+             f"section {name} = {origin:.3g} m, {thickness:.3g} m thick")
     return inside, axes, where
 
 
