@@ -79,9 +79,13 @@ def method_label(method: str) -> str:
     return method.upper() if method in METHOD_NAMES else method
 
 
+_TWIN = "broken bonds axis"  # the gid of the twin axes :func:`stress_strain` draws the broken bonds on
+
+
 def _siblings(ax) -> list:
-    """``ax`` and the axes that share its x axis (its ``twinx``), ``ax`` first."""
-    return [ax] + [a for a in ax.get_shared_x_axes().get_siblings(ax) if a is not ax]
+    """``ax`` and its twin (the broken bonds' y axis, where there is one), ``ax`` first."""
+    return [ax] + [a for a in ax.get_shared_x_axes().get_siblings(ax) if a is not ax and a.get_gid() == _TWIN
+                   and a.get_position().bounds == ax.get_position().bounds]
 
 
 def drawn(ax) -> dict[str, np.ndarray]:
@@ -200,9 +204,9 @@ def _peak(ax, result, name: str, colour) -> None:
 def _broken(ax, strain, stats: dict, name: str) -> None:
     """The broken bonds along a DEM curve on the twin y axis of ``ax`` (made once, shared by later calls)."""
     count = np.asarray(stats.get("broken_curve", np.zeros((len(strain), 2))), np.float64).reshape(len(strain), -1)
-    twins = [a for a in _siblings(ax)[1:] if a.get_gid() == "broken bonds axis"]
+    twins = _siblings(ax)[1:]
     twin = twins[0] if twins else ax.twinx()
-    twin.set_gid("broken bonds axis")
+    twin.set_gid(_TWIN)
     total = int(stats["broken_tensile"]) + int(stats["broken_shear"])
     twin.plot(strain, count.sum(axis=1), ":", color="0.35", lw=1.3, gid=f"broken {name}",
               label=f"{name}: broken bonds, right axis ({int(stats['broken_tensile'])} tension, "
@@ -254,7 +258,7 @@ def crack_pattern(sample, modes, ax=None, *, positions=None, normal: int = 1, or
         pick = inside & (modes == code)
         segments = x[bonds[pick]][:, :, axes]
         total = int(np.sum(modes == code))
-        label = None if code == 0 else f"{name}: {int(pick.sum())} in the section, {total} in all"
+        label = f"{name}: {int(pick.sum())} in the section, {total} in all"
         ax.add_collection(LineCollection(segments, colors=_MODE_COLOURS[name], linewidths=0.6 if code == 0 else 2.0,
                                          gid=f"bonds {name}", label=label, zorder=1 if code == 0 else 2))
     names = "xyz"
@@ -431,6 +435,8 @@ def calibration(history, axes=None):
     Raises:
       ValueError: an empty history, or not four axes.
     """
+    from matplotlib.ticker import MaxNLocator
+
     if not len(history):
         raise ValueError("calibration plot: the history has no rows")
     if axes is None:
@@ -462,4 +468,5 @@ def calibration(history, axes=None):
         a.legend(fontsize=7)
     for a in axes:
         a.grid(True, alpha=0.3)
+        a.xaxis.set_major_locator(MaxNLocator(integer=True))
     return axes

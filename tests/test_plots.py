@@ -204,6 +204,20 @@ def test_dsm_and_ste_draw_beside_the_dem(failure):
     assert any("broken bonds" in t for t in labels)  # the twin axis's line is in the one legend
 
 
+def test_plots_on_shared_axes_keep_to_their_own():
+    fig = Figure(layout="constrained")
+    left, right = fig.subplots(1, 2, sharex=True)
+    broken = dict(broken_tensile=3, broken_shear=1, broken_curve=np.tile([[3, 1]], (11, 1)), peak_force=1e5,
+                  displacement_at_peak=1e-3)
+    _result("dem", 1e8, 1.0, 0.5, **broken).plot(left, label="one")
+    _result("dem", 2e8, 1.0, 0.5, **broken).plot(right, label="two")
+    _RESULTS["dsm"].plot(ax=left)
+    assert sorted(plots.drawn(left)) == ["broken one", "curve one", "end DSM", "modulus DSM", "peak one"]
+    assert sorted(plots.drawn(right)) == ["broken two", "curve two", "peak two"]
+    assert not any("two" in t.get_text() for t in left.get_legend().get_texts())
+    np.testing.assert_array_equal(plots.drawn(left)["broken one"][:, 1], 4)
+
+
 def test_the_crack_pattern_draws_each_broken_bond_by_mode(failure):
     res, _, rock = failure
     mode = np.asarray(res.state.broken)
