@@ -120,6 +120,11 @@ def test_demo(tmp_path, capsys, monkeypatch):
     for name, row in methods.items():
         assert abs(row["difference_to_dem"]) < (0.15 if name == "ste" else 1e-2), row
     assert "vs DEM" in stdout
+    # the table says which ratio is which and spells out the methods; the calibration's levels are explained
+    assert "run ratio" in stdout and "wall ratio" in stdout and "the whole call (setup + compile + run)" in stdout
+    for name in cli._DEMO_NAMES.values():
+        assert name in stdout
+    assert "(calibrated: " in stdout
     # the calibration reaches the target, checked by the DEM, and the chart is written
     cal = report["calibration"]
     assert cal["errors"]["youngs_modulus"] < 0.01 and cal["evaluations"] <= 8

@@ -14,7 +14,7 @@ import pytest
 from matplotlib.figure import Figure
 
 from jaxbpm import cli, io, plots
-from jaxbpm.calibrate.history import History, plot_history
+from jaxbpm.calibrate.history import CalibrationResult, History, plot_history
 from jaxbpm.result import Result
 from jaxbpm.sample import Sample
 
@@ -277,6 +277,9 @@ def test_speed_accuracy_marks_the_front_of_any_results():
     np.testing.assert_allclose(got["run ste"], [[0.01, 0.08]], rtol=1e-9)
     with pytest.raises(ValueError, match="positive"):
         plots.speed_accuracy(results, reference=0.0)
+    import jaxbpm
+
+    assert jaxbpm.plots is plots  # (loaded on first use, as the other submodules)
 
 
 # ------------------------------------------------------------------------------------------------ calibration
@@ -296,5 +299,11 @@ def test_the_calibration_plot_draws_targets_parameters_and_times():
     np.testing.assert_allclose(got["loss"][:, 1], h.column("loss"))
     fig = plot_history(h)  # the old call: a Figure
     assert isinstance(fig, Figure) and len(fig.axes) == 4
+    res = CalibrationResult(values={"bond_E": 1.3e9}, params={}, errors={"youngs_modulus": -0.002}, converged=True,
+                            method="adam", solver="dsm", evaluations=5, iterations=5, wall_time=2.6, tol=0.01,
+                            history=h)
+    assert isinstance(res.plot(), Figure)
+    own = Figure().subplots(2, 2)
+    assert list(res.plot(axes=own)) == list(own.ravel()) and plots.drawn(own[1, 1])["time dem"].shape == (1, 2)
     with pytest.raises(ValueError, match="four axes"):
         h.plot(axes[:2])
