@@ -161,11 +161,12 @@ def stress_strain(result, ax=None, *, label: str | None = None):
     """
     ax = new_axes(ax, (6.4, 6.4))
     name = method_label(result.method) if label is None else label
+    spelt = METHOD_NAMES.get(result.method, name) if label is None else label  # (the first legend entry's)
     strain, stress = np.asarray(result.strain, np.float64), np.asarray(result.stress, np.float64) / 1e6
     stats = result.stats if isinstance(result.stats, dict) else {}
     modulus = float(result.youngs_modulus)
     if result.method == "dem" and len(strain) > 2:
-        line, = ax.plot(strain, stress, "-", lw=1.5, gid=f"curve {name}", label=f"{name}: stress-strain curve")
+        line, = ax.plot(strain, stress, "-", lw=1.5, gid=f"curve {name}", label=f"{spelt}: stress-strain curve")
         colour = line.get_color()
         if "fit_strain" in stats:
             e, s = np.asarray(stats["fit_strain"], np.float64), np.asarray(stats["fit_stress"], np.float64) / 1e6
@@ -178,7 +179,7 @@ def stress_strain(result, ax=None, *, label: str | None = None):
         end = float(strain[-1]) if len(strain) else 0.0
         e = np.array([0.0, end])
         line, = ax.plot(e, modulus * e / 1e6, "-", lw=1.2, gid=f"modulus {name}",
-                        label=f"{name}: E = {_pa(modulus)} (a line of slope E)")
+                        label=f"{spelt}: E = {_pa(modulus)} (a line of slope E)")
         ax.plot([end], [modulus * end / 1e6], "o", color=line.get_color(), gid=f"end {name}")
     ax.set_xlabel("strain [-] (compression positive)")
     ax.set_ylabel("stress [MPa]")
@@ -322,12 +323,13 @@ def pareto_front(times: Sequence[float], errors: Sequence[float], tie: float = 0
 
 
 def _named(results) -> list[tuple[str, Any]]:
-    """``[(label, result)]`` of a mapping or a sequence of results (labelled by method, numbered when repeated)."""
+    """``[(label, result)]`` of a mapping or a sequence of results (labelled by their method spelt out, numbered when
+    repeated)."""
     if isinstance(results, Mapping):
         return [(str(k), r) for k, r in results.items()]
     out, seen = [], {}
     for r in results:
-        base = method_label(r.method)
+        base = METHOD_NAMES.get(r.method, r.method)
         seen[base] = seen.get(base, 0) + 1
         out.append((base if seen[base] == 1 else f"{base} #{seen[base]}", r))
     return out
@@ -350,7 +352,8 @@ def speed_accuracy(results, reference, ax=None, *, run_time: bool = False):
     vertical line marks its wall time. Each legend entry gives the times and their ratio to the reference's.
 
     Args:
-      results: ``{label: Result}`` or a sequence of results (labelled by method).
+      results: ``{label: Result}`` or a sequence of results (labelled by their method, e.g. ``"DSM (direct stiffness
+        method: static solve)"``).
       reference: a :class:`~jaxbpm.result.Result` (one of ``results`` or another), or the reference E [Pa] (a
         measured modulus).
       ax: the ``Axes`` to draw on (``None``: a new figure's).
