@@ -222,15 +222,14 @@ def crack_pattern(sample, modes, ax=None, *, positions=None, normal: int = 1, or
     """The broken bonds of a failure run by mode, in a section through the sample.
 
     The bonds whose midpoints lie within a slab of ``thickness`` around the plane ``x[normal] = origin`` are drawn
-    projected on that plane: intact bonds in light grey, bonds broken in tension red, in shear blue. A 2D sample
-    is drawn whole (it is its own section).
+    projected on that plane: intact bonds in light grey, bonds broken in tension red, in shear blue.
 
     Args:
       sample: the :class:`~jaxbpm.sample.Sample` the run was of.
       modes: ``[nb]`` each bond's break mode: 0 intact, 1 tension, 2 shear (``result.state.broken`` of a DEM run;
         :meth:`jaxbpm.result.Result.plot_cracks` passes it).
       ax: the ``Axes`` to draw on (``None``: a new figure's).
-      positions: ``[n, dim]`` the particles' centres to draw (default: the sample's, at rest; e.g.
+      positions: ``[n, 3]`` the particles' centres to draw (default: the sample's, at rest; e.g.
         ``result.state.positions`` for the deformed sample).
       normal: the axis (0, 1, 2) normal to the section plane (default 1: the x-z plane, the load axis z upright).
       origin: the plane's coordinate along ``normal`` [m] (default: the middle of the sample's extent).
@@ -241,8 +240,8 @@ def crack_pattern(sample, modes, ax=None, *, positions=None, normal: int = 1, or
       (``[m, 2, 2]``, in the plane's coordinates [m]).
 
     Raises:
-      ValueError: ``modes`` of another length than the sample's bonds, an unknown mode, or a bad ``normal`` or
-        ``thickness``.
+      ValueError: ``modes`` of another length than the sample's bonds, an unknown mode, positions of another shape,
+        or a bad ``normal`` or ``thickness``.
     """
     from matplotlib.collections import LineCollection
 
@@ -274,10 +273,8 @@ def crack_pattern(sample, modes, ax=None, *, positions=None, normal: int = 1, or
 
 def _slab(sample, x, bonds, normal, origin, thickness):
     """The bonds within the slab, the two axes of the plane and the title's words for the section."""
-    if x.ndim != 2 or x.shape[0] != int(sample.n_particles):
-        raise ValueError(f"crack_pattern: positions must be [{int(sample.n_particles)}, dim], got {x.shape}")
-    if x.shape[1] == 2:
-        return np.ones(bonds.shape[0], bool), [0, 1], "the whole 2D sample"
+    if x.shape != (int(sample.n_particles), 3):
+        raise ValueError(f"crack_pattern: positions must be [{int(sample.n_particles)}, 3], got {x.shape}")
     if normal not in (0, 1, 2):
         raise ValueError(f"crack_pattern: normal is the axis normal to the section, 0, 1 or 2; got {normal!r}")
     if thickness is None:

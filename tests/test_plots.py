@@ -245,6 +245,15 @@ def test_the_section_keeps_the_bonds_whose_midpoints_are_in_the_slab():
         plots.crack_pattern(sample, [0, 1, 2])
     with pytest.raises(ValueError, match="break modes are 0"):
         plots.crack_pattern(sample, [0, 1, 3, 0])
+    with pytest.raises(ValueError, match="positions must be"):
+        plots.crack_pattern(sample, [0, 1, 2, 0], positions=np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="thickness"):
+        plots.crack_pattern(sample, [0, 1, 2, 0], thickness=0.0)
+    with pytest.raises(ValueError, match="normal"):
+        plots.crack_pattern(sample, [0, 1, 2, 0], normal=3)
+    deformed = np.asarray(sample.positions) + [1e-3, 0.0, 0.0]  # drawn where given
+    got = plots.drawn(plots.crack_pattern(sample, [1, 0, 0, 0], positions=deformed, origin=0.0, thickness=1e-3))
+    np.testing.assert_array_equal(got["bonds tension"], deformed[[[0, 1]]][:, :, [0, 2]])
 
 
 # ------------------------------------------------------------------------------------------------ speed vs accuracy
@@ -278,6 +287,9 @@ def test_speed_accuracy_marks_the_front_of_any_results():
     np.testing.assert_allclose(got["run ste"], [[0.01, 0.08]], rtol=1e-9)
     with pytest.raises(ValueError, match="positive"):
         plots.speed_accuracy(results, reference=0.0)
+    listed = plots.drawn(plots.speed_accuracy([_RESULTS["dsm"], _RESULTS["dsm stol 1e-3"], _RESULTS["ste"]], 1e8))
+    dsm, ste = plots.METHOD_NAMES["dsm"], plots.METHOD_NAMES["ste"]
+    assert {f"point {dsm}", f"point {dsm} #2", f"point {ste}"} <= set(listed)  # a list: labelled by method
     import jaxbpm
 
     assert jaxbpm.plots is plots  # (loaded on first use, as the other submodules)
