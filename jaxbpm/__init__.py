@@ -46,7 +46,7 @@ __all__ = [
 
 # submodules loaded on first use (``jaxbpm.dsm``, ``jaxbpm.calibrate``, ...): ``import jaxbpm`` stays cheap
 _LAZY = ("generate", "io", "scenes", "dem", "dsm", "ste", "sweep", "calibrate", "interop",
-         "physics", "sample", "result", "status")
+         "physics", "sample", "result", "status", "plots")
 # names loaded on first use: name -> the module that defines it
 _LAZY_NAMES = {
     "Sample": "jaxbpm.sample", "BondMaterials": "jaxbpm.sample", "ParticleMaterial": "jaxbpm.sample",

@@ -59,7 +59,7 @@ def _types(sample: Sample) -> np.ndarray:
 
 
 def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = None,
-               bond_data: Mapping[str, Any] | None = None) -> pathlib.Path:
+               bond_data: Mapping[str, Any] | None = None, break_mode=None) -> pathlib.Path:
     """Write particles and bonds to a VTK file for ParaView, atomically.
 
     The points are the particle centres [m]. Two cell blocks: ``vertex`` (one cell per particle, in particle
@@ -69,21 +69,26 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
     Point data: ``radius`` [m], ``mass`` [kg], ``coordination`` (bonds per particle), ``type`` (``Sample.types``),
     then ``point_data``.
     Cell data, per bond: ``bond_radius`` [m], ``material`` (component index), ``length`` [m] (initial bond
-    length), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
-    the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for ``material``.
-    In ParaView, glyph the points with spheres scaled by ``radius`` and show the lines as tubes.
+    length), with ``break_mode`` also ``broken`` (1: the bond broke) and ``break_mode`` (0 intact, 1 tension,
+    2 shear), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
+    the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for the integer ones.
+    In ParaView, glyph the points with spheres scaled by ``radius`` and show the lines as tubes; colour them by
+    ``break_mode`` (or threshold ``broken`` at 1) to see the cracks of a failure run.
 
     Args:
       path: ``*.vtu`` (VTK XML unstructured grid, preferred) or ``*.vtk`` (legacy); the suffix picks the format.
       sample: the sample.
       point_data: ``{name: [n] or [n, k]}`` extra per-particle fields (e.g. displacement ``[n, 3]``).
       bond_data: ``{name: [nb] or [nb, k]}`` extra per-bond fields (e.g. bond force ``[nb]``).
+      break_mode: ``[nb]`` how each bond broke, 0 intact, 1 tension, 2 shear (a DEM result's ``state.broken``), or
+        ``None``.
 
     Returns:
       ``path`` as a :class:`pathlib.Path`.
 
     Raises:
-      SampleError: a user field has the wrong shape or type, or reuses a built-in name (the field is named).
+      SampleError: a user field has the wrong shape or type, or reuses a built-in name (the field is named); a
+        ``break_mode`` of the wrong length or with a code other than 0, 1, 2.
       SampleFileError: the suffix is neither ``.vtu`` nor ``.vtk``.
       TypeError: ``sample`` is not a :class:`Sample`.
     """
@@ -110,6 +115,12 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
         "material": np.asarray(sample.bond_material, dtype=np.int32),
         "length": np.asarray(sample.bond_length, dtype=np.float64),
     }
+    if break_mode is not None:
+        mode = np.asarray(break_mode).reshape(-1)
+        if mode.shape != (nb,) or not np.all(np.isin(mode, (0, 1, 2))):
+            raise SampleError(f"break_mode: expected [{nb}] codes 0 (intact), 1 (tension), 2 (shear), got shape "
+                              f"{mode.shape} with values {np.unique(mode)[:5]}")
+        bdata.update(broken=(mode != 0).astype(np.int32), break_mode=mode.astype(np.int32))
     bdata.update({k: v.astype(np.float64) for k, v in
                   user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
 
@@ -118,7 +129,7 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
         cells.append(("line", np.asarray(sample.bonds, dtype=np.int64)))
     cell_data = {}
     for name, arr in bdata.items():
-        filler = np.full((n,) + arr.shape[1:], -1 if name == "material" else np.nan, dtype=arr.dtype)
+        filler = np.full((n,) + arr.shape[1:], -1 if np.issubdtype(arr.dtype, np.integer) else np.nan, dtype=arr.dtype)
         cell_data[name] = [filler, arr] if nb else [filler]
     mesh = meshio.Mesh(np.asarray(sample.positions, dtype=np.float64), cells, point_data=pdata,
                        cell_data=cell_data)

@@ -29,6 +29,11 @@ _GENERATE_DEFAULTS = {"mean_radius": None, "spread": 0.05, "packing_fraction": N
                       "E": 1.0e9, "nu": 0.25}
 _DEMO_DIR = "jaxbpm-demo"
 _DEMO_FILES = ("demo_sample.h5", "demo_results.json", "demo_speed_accuracy.png")  # what the demo writes there
+# the demo's methods: label (in demo_results.json) -> what it is
+_DEMO_NAMES = {"dem": "DEM, explicit discrete element method (time integration; the reference)",
+               "dsm": "DSM, direct stiffness method (static equilibrium, default tolerance)",
+               "dsm stol 1e-3": "DSM with stiffness_tol=1e-3 (stops once the stiffness settles to 0.1 %)",
+               "ste": "STE, stiffness tensor estimate (local tensors, no global solve)"}
 _FORCE_HELP = "replace an existing sample or record at the output path (never an input of the command)"
 
 
@@ -174,20 +179,10 @@ def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: 
     runs = (("dem", "dem", {"progress": not quiet}), ("dsm", "dsm", {}),
             ("dsm stol 1e-3", "dsm", {"stiffness_tol": 1e-3}), ("ste", "ste", {}))
     for label, method, options in runs:
-        print(f"\nuniaxial compression, {label} ...", flush=True)
+        print(f"\nuniaxial compression, {_DEMO_NAMES[label]} ...", flush=True)
         out["results"][label] = jaxbpm.solve(body, scene, method=method, **options)
+    table = _demo_table(out["results"])
     dem = out["results"]["dem"]
-    table = []
-    print(f"\n{'method':<15}{'K [N/m]':>13}{'E [Pa]':>13}{'vs DEM':>10}{'compile [s]':>13}{'run [s]':>10}"
-          f"{'speed-up':>10}")
-    for label, res in out["results"].items():
-        diff = res.stiffness / dem.stiffness - 1.0
-        speedup = dem.run_time / res.run_time if res.run_time > 0 else float("nan")
-        print(f"{label:<15}{res.stiffness:>13.6g}{res.youngs_modulus:>13.6g}{100 * diff:>9.3f}%"
-              f"{res.compile_time:>13.3f}{res.run_time:>10.4f}{speedup:>10.1f}")
-        table.append({"method": label, "stiffness": res.stiffness, "youngs_modulus": res.youngs_modulus,
-                      "difference_to_dem": diff, "compile_time": res.compile_time, "run_time": res.run_time,
-                      "wall_time": res.wall_time, "speedup_run": speedup})
     report: dict[str, Any] = {"particles": body.n_particles, "bonds": body.n_bonds, "strain": scene.strain,
                               "results": table}
     if calibrate:
@@ -209,42 +204,47 @@ def run_demo(out_dir, n: int = 2000, seed: int = 0, quiet: bool = False, solve: 
                                  "check": check, "notes": cal.notes}
     path_json = write_json(out_dir / "demo_results.json", report)
     print(f"wrote {path_json}")
-    png = _demo_chart(out_dir / "demo_speed_accuracy.png", table, body)
+    png = _demo_chart(out_dir / "demo_speed_accuracy.png", out["results"], body)
     print(f"wrote {png}")
     return out
 
 
-def _demo_chart(path, table, sample):
-    """Run time against difference to the DEM, one point per method (log-log), wall time beside run time; saved
-    atomically to ``path`` (the format from its suffix). Uses no global matplotlib state."""
-    from matplotlib.figure import Figure
+def _demo_table(results: dict) -> list[dict]:
+    """Print the demo's comparison (each method against the DEM, with run- and wall-time speed-ups) and its key;
+    returns its rows."""
+    dem = results["dem"]
+    print(f"\n{'method':<15}{'K [N/m]':>13}{'E [Pa]':>13}{'vs DEM':>10}{'compile [s]':>13}{'run [s]':>10}"
+          f"{'wall [s]':>10}{'run ratio':>11}{'wall ratio':>12}")
+    table = []
+    for label, res in results.items():
+        diff = res.stiffness / dem.stiffness - 1.0
+        run_ratio = dem.run_time / res.run_time if res.run_time > 0 else float("nan")
+        wall_ratio = dem.wall_time / res.wall_time if res.wall_time > 0 else float("nan")
+        print(f"{label:<15}{res.stiffness:>13.6g}{res.youngs_modulus:>13.6g}{100 * diff:>9.3f}%"
+              f"{res.compile_time:>13.3f}{res.run_time:>10.4f}{res.wall_time:>10.3f}{run_ratio:>10.1f}x"
+              f"{wall_ratio:>11.1f}x")
+        table.append({"method": label, "description": _DEMO_NAMES[label], "stiffness": res.stiffness,
+                      "youngs_modulus": res.youngs_modulus, "difference_to_dem": diff,
+                      "compile_time": res.compile_time, "run_time": res.run_time, "wall_time": res.wall_time,
+                      "speedup_run": run_ratio, "speedup_wall": wall_ratio})
+    print("\n".join(f"  {label}: {name}" for label, name in _DEMO_NAMES.items()))
+    print("  vs DEM: the stiffness's difference to the DEM's; run: the compiled program alone; wall: the whole call "
+          "(setup + compile + run)\n  run ratio, wall ratio: the DEM's run or wall time over the method's (how many "
+          "times faster)")
+    return table
 
-    from jaxbpm.io import atomic_write
 
-    fig = Figure(figsize=(7.5, 5.5))
-    fig.set_layout_engine("constrained")
-    ax = fig.add_subplot()
-    for k, row in enumerate(table):
-        err = max(abs(row["difference_to_dem"]) * 100, 1e-3)
-        color = f"C{k}"
-        ax.scatter(row["run_time"], err, s=60, color=color, zorder=3,
-                   label=f"{row['method']}: run {row['run_time']:.3g} s, wall {row['wall_time']:.3g} s")
-        if row["wall_time"] > row["run_time"]:  # wall time (compilation included) on the same accuracy
-            ax.scatter(row["wall_time"], err, s=60, facecolors="none", edgecolors=color, zorder=3)
-            ax.plot([row["run_time"], row["wall_time"]], [err, err], color=color, lw=1, alpha=0.5)
-        # alternate the label above and below the point so that neighbours do not overlap
-        ax.annotate(f"{row['method']} ({row['speedup_run']:.0f}x)", (row["run_time"], err), fontsize=8,
-                    xytext=(6, 8 if k % 2 == 0 else -14), textcoords="offset points", color=color)
-    ax.scatter([], [], s=60, facecolors="none", edgecolors="grey", label="open: wall time (with compilation)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("time [s]: filled = run time (compilation excluded), open = wall time")
-    ax.set_ylabel("|stiffness difference to DEM| [%] (DEM: floor 1e-3)")
-    ax.set_title(f"speed against accuracy: {sample.n_particles} particles, {sample.n_bonds} bonds")
-    ax.grid(True, which="both", alpha=0.3)
-    fig.legend(fontsize=8, loc="outside lower center", ncols=2)  # below the axes: covers no point
-    suffix = pathlib.Path(path).suffix.lstrip(".") or "png"
-    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=suffix))
+def _demo_chart(path, results: dict, sample):
+    """Wall time against the error of E, one point per method, the DEM the reference (a dotted line: its own error
+    is 0), run times hollow beside the wall times, the Pareto front marked (:func:`jaxbpm.plots.speed_accuracy`);
+    saved atomically to ``path`` (the format from its suffix). Uses no global matplotlib state."""
+    from jaxbpm.plots import save, speed_accuracy
+
+    named = {f"{label}: {_DEMO_NAMES[label]}": res for label, res in results.items()}
+    ax = speed_accuracy(named, reference=results["dem"], run_time=True)
+    ax.set_title(f"speed against accuracy: {sample.n_particles} particles, {sample.n_bonds} bonds, uniaxial "
+                 "compression\n(reference: the DEM; 'x faster': the DEM's time over the method's)", fontsize=9)
+    return save(ax, path)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -252,8 +252,14 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     if args.out.exists() and not args.out.is_dir():
         raise OutputPathError(f"--out {args.out}: the file exists; the demo writes a folder, give a folder path")
-    if args.out.is_dir():  # a demo folder is reused: its demo files are replaced, nothing else is touched
+    if args.out.is_dir():  # a demo folder is reused only with --force: its demo files replaced, nothing else
+        earlier = [name for name in _DEMO_FILES if (args.out / name).exists()]
+        if earlier and not args.force:
+            raise OutputPathError(f"--out {args.out} holds an earlier demo's files ({', '.join(earlier)}): pass "
+                                  "--force to replace them, or give another --out folder")
         check_outputs({f"--out ({name})": args.out / name for name in _DEMO_FILES}, {}, force=True)
+        if earlier:
+            print(f"replacing the earlier demo's files in {args.out} (--force): {', '.join(earlier)}")
     run_demo(args.out, n=args.n, seed=args.seed, quiet=args.quiet, solve=not args.no_solve,
              calibrate=not args.no_calibrate)
     return 0
@@ -390,8 +396,8 @@ def _add_demo(sub) -> None:
                                    "OUT/demo_results.json and the speed-against-accuracy chart "
                                    "OUT/demo_speed_accuracy.png.")
     p.add_argument("--out", type=pathlib.Path, default=pathlib.Path(_DEMO_DIR),
-                   help=f"output directory (default: ./{_DEMO_DIR}); a folder of an earlier demo is reused, its demo "
-                        "files replaced")
+                   help=f"output directory (default: ./{_DEMO_DIR}); a folder that holds an earlier demo's files is "
+                        "refused unless --force")
     p.add_argument("--n", type=_positive_int, default=2000, help="number of particles (default: 2000)")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default: 0)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -399,6 +405,8 @@ def _add_demo(sub) -> None:
                    help="only generate and save the sample (skip the DEM/DSM comparison)")
     p.add_argument("--no-calibrate", action="store_true", dest="no_calibrate",
                    help="skip the calibration step")
+    p.add_argument("--force", action="store_true",
+                   help="replace the files of an earlier demo in --out (its other files are left alone)")
     p.set_defaults(func=_cmd_demo)
 
 # commands whose options come from another module (it imports JAX): name -> one-line help, name -> loader

@@ -508,5 +508,6 @@ def plot_local_map(path, lmap, *, direction: int = 2, slice_axis: int = 1, thick
     ax.set_ylabel(f"{'xyz'[axes[1]]} [m]")
     ax.set_aspect("equal")
     ax.set_title(f"STE local stiffness, slice normal to {'xyz'[slice_axis]}")
-    suffix = pathlib.Path(path).suffix.lstrip(".") or "png"
-    return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=suffix))
+    from jaxbpm.plots import save
+
+    return save(fig, path)

@@ -112,6 +112,45 @@ class Result:
         return np.interp(strains, np.r_[0.0, e] if e[0] > 0 else e, np.r_[self.stress[0], self.stress]
                          if e[0] > 0 else self.stress)
 
+    def plot(self, ax=None, *, label: str | None = None):
+        """The loading curve, stress [MPa] against strain (:func:`jaxbpm.plots.stress_strain`): a DEM run's curve
+        with the line of its modulus, its peak and its broken bonds; a DSM's or STE's line of slope E. Drawn on one
+        ``ax``, results compare: ``ax = dem.plot(); dsm.plot(ax=ax)``.
+
+        Args:
+          ax: the Matplotlib ``Axes`` to draw on (``None``: a new figure's).
+          label: the name in the legend (default: the method).
+
+        Returns:
+          The ``Axes``.
+        """
+        from jaxbpm.plots import stress_strain
+
+        return stress_strain(self, ax, label=label)
+
+    def plot_cracks(self, sample, ax=None, **section):
+        """The bonds this DEM run broke, by mode (tension, shear), in a section through ``sample``
+        (:func:`jaxbpm.plots.crack_pattern`).
+
+        Args:
+          sample: the sample the run was of.
+          ax: the Matplotlib ``Axes`` to draw on (``None``: a new figure's).
+          **section: ``positions``, ``normal``, ``origin``, ``thickness`` of :func:`jaxbpm.plots.crack_pattern`.
+
+        Returns:
+          The ``Axes``.
+
+        Raises:
+          ValueError: a result without break modes (a DSM or STE solve, which breaks no bond).
+        """
+        from jaxbpm.plots import crack_pattern
+
+        modes = getattr(self.state, "broken", None)
+        if modes is None:
+            raise ValueError(f"plot_cracks: a {self.method.upper()} result has no broken bonds (only the DEM breaks "
+                             "bonds: solve with method='dem' on a scene with breakage)")
+        return crack_pattern(sample, np.asarray(modes), ax, **section)
+
     def summary(self) -> str:
         """The result as lines of text: method, stiffness, modulus, times and the scalar stats."""
         lines = [

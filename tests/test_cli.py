@@ -120,6 +120,11 @@ def test_demo(tmp_path, capsys, monkeypatch):
     for name, row in methods.items():
         assert abs(row["difference_to_dem"]) < (0.15 if name == "ste" else 1e-2), row
     assert "vs DEM" in stdout
+    # the table says which ratio is which and spells out the methods; the calibration's levels are explained
+    assert "run ratio" in stdout and "wall ratio" in stdout and "the whole call (setup + compile + run)" in stdout
+    for name in cli._DEMO_NAMES.values():
+        assert name in stdout
+    assert "(calibrated: " in stdout
     # the calibration reaches the target, checked by the DEM, and the chart is written
     cal = report["calibration"]
     assert cal["errors"]["youngs_modulus"] < 0.01 and cal["evaluations"] <= 8
@@ -136,6 +141,20 @@ def test_demo_defaults(tmp_path, monkeypatch, capsys):
     assert (tmp_path / "jaxbpm-demo" / "demo_sample.h5").is_file()
     result = cli.run_demo(tmp_path / "again", n=7, seed=1, quiet=True, solve=False)
     assert result["sample_path"] == tmp_path / "again" / "demo_sample.h5" and result["sample"].n_particles == 5
+
+
+def test_a_second_demo_into_the_same_folder_says_so(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(generate, "from_shape", lambda shape, n, **kw: _chain(5), raising=False)
+    out_dir = tmp_path / "demo"
+    assert _run(capsys, "demo", "--no-solve", "--out", out_dir)[0] == 0
+    (out_dir / "notes.txt").write_text("mine")
+    first = (out_dir / "demo_sample.h5").read_bytes()
+    code, _, err = _run(capsys, "demo", "--no-solve", "--out", out_dir, "--seed", 3)
+    assert code == 2 and "earlier demo's files (demo_sample.h5)" in err and "--force" in err
+    assert (out_dir / "demo_sample.h5").read_bytes() == first  # nothing was written
+    code, out, _ = _run(capsys, "demo", "--no-solve", "--out", out_dir, "--force")
+    assert code == 0 and "replacing the earlier demo's files" in out
+    assert (out_dir / "notes.txt").read_text() == "mine"  # the folder's other files are left alone
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["generate", "--help"], ["info", "--help"], ["export-vtk", "--help"],
@@ -291,8 +310,8 @@ def test_demo_reuses_its_folder_but_not_a_file(tmp_path, capsys, monkeypatch):
     afile.write_text("keep")
     code, _, err = _run(capsys, "demo", "--out", afile, "--no-solve", "--quiet")
     assert code == 2 and "--out" in err and "folder" in err and afile.read_text() == "keep"
-    for _ in range(2):  # the second run replaces the demo's own files
-        assert _run(capsys, "demo", "--out", tmp_path / "d", "--no-solve", "--quiet")[0] == 0
+    for force in ([], ["--force"]):  # the second run replaces the demo's own files (with --force)
+        assert _run(capsys, "demo", "--out", tmp_path / "d", "--no-solve", "--quiet", *force)[0] == 0
     (tmp_path / "e" / "demo_sample.h5").mkdir(parents=True)
-    code, _, err = _run(capsys, "demo", "--out", tmp_path / "e", "--no-solve", "--quiet")
+    code, _, err = _run(capsys, "demo", "--out", tmp_path / "e", "--no-solve", "--quiet", "--force")
     assert code == 2 and "directory" in err

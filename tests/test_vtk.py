@@ -87,3 +87,20 @@ def test_export_vtk_writes_the_particle_types(tmp_path):
     sample = _chain(types=[5, 1, 1, 2, 2, 2])
     mesh = meshio.read(io.export_vtk(tmp_path / "t.vtu", sample))
     np.testing.assert_array_equal(mesh.point_data["type"], [5, 1, 1, 2, 2, 2])
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".vtk"])
+def test_export_vtk_writes_the_broken_bonds_by_mode(tmp_path, suffix):
+    sample = _multi()
+    n, nb = sample.n_particles, sample.n_bonds
+    mode = np.array([0, 1, 2, 0, 2, 2, 1])
+    mesh = meshio.read(io.export_vtk(tmp_path / f"s{suffix}", sample, break_mode=mode))
+    line = [c.type for c in mesh.cells].index("line")
+    np.testing.assert_array_equal(mesh.cell_data["break_mode"][line], mode)
+    assert mesh.cell_data["broken"][line].sum() == np.count_nonzero(mode) == 5
+    np.testing.assert_array_equal(mesh.cell_data["broken"][line], mode != 0)
+    assert (mesh.cell_data["break_mode"][1 - line] == -1).all() and len(mesh.cell_data["broken"][1 - line]) == n
+    for bad in (mode[:-1], np.r_[mode[:-1], 3]):
+        with pytest.raises(SampleError, match="break_mode"):
+            io.export_vtk(tmp_path / "bad.vtu", sample, break_mode=bad)
+    assert nb == len(mode)

@@ -59,6 +59,20 @@ class History:
     def __len__(self) -> int:
         return len(self.rows)
 
+    def plot(self, axes=None):
+        """Draw the calibration's course (:func:`jaxbpm.plots.calibration`): the objective, each target's error,
+        the parameters' path and the runs' wall time against the iteration.
+
+        Args:
+          axes: four Matplotlib ``Axes`` to draw on (``None``: a new 2 x 2 figure's).
+
+        Returns:
+          The four ``Axes``.
+        """
+        from jaxbpm.plots import calibration
+
+        return calibration(self, axes)
+
     def column(self, name: str) -> np.ndarray:
         """One field of every row.
 
@@ -137,6 +151,14 @@ def load_history(path) -> History:
     return h
 
 
+#: what a multi-fidelity level did (``CalibrationResult.levels[i]["action"]``), as :meth:`CalibrationResult.table`
+#: explains it
+_ACTIONS = {"calibrated": "the parameters calibrated on this solver",
+            "corrected": "one free scale: the closed form applied to a solve of the previous answer, exact here",
+            "accepted": "the previous level's answer was within tol on this solver, kept",
+            "escalated": "the previous level's answer was not within tol on this solver, so it was calibrated here"}
+
+
 @dataclasses.dataclass
 class CalibrationResult:
     """Outcome of a calibration.
@@ -193,16 +215,24 @@ class CalibrationResult:
                  "band": self.band}
         return self.history.save(path, extra=extra)
 
-    def plot(self, path=None):
-        """:func:`plot_history` of this result's history.
+    def plot(self, path=None, *, axes=None):
+        """The course of the calibration (:meth:`History.plot`): a figure saved to ``path``, or drawn on ``axes``.
 
         Args:
           path: where to save the figure (the format from its suffix); None: not saved.
+          axes: four Matplotlib ``Axes`` to draw on (then they are returned; ``path`` saves their figure).
 
         Returns:
-          The :class:`matplotlib.figure.Figure`.
+          The :class:`matplotlib.figure.Figure` (:func:`plot_history`), or the four ``Axes`` when ``axes`` is given.
         """
-        return plot_history(self.history, path)
+        if axes is None:
+            return plot_history(self.history, path)
+        drawn = self.history.plot(axes)
+        if path is not None:
+            from jaxbpm.plots import save
+
+            save(drawn[0], path)
+        return drawn
 
     def table(self) -> str:
         """The answer, its errors, the calibrator and solver, the cost, each level and the notes, as text.
@@ -225,6 +255,8 @@ class CalibrationResult:
         for lv in self.levels:
             lines.append(f"  level {lv['solver']:<8} {lv['action']:<11} {lv['evaluations']:>3} evaluations "
                          f"{lv['wall_time']:8.2f} s  max error {100 * lv['max_error']:.3f} %")
+        actions = dict.fromkeys(lv["action"] for lv in self.levels if lv.get("action") in _ACTIONS)
+        lines += [f"  ({action}: {_ACTIONS[action]})" for action in actions]
         for note in self.notes:
             lines.append(f"note: {note}")
         return "\n".join(lines)
@@ -236,10 +268,11 @@ class CalibrationResult:
 
 
 def plot_history(history: History, path=None):
-    """Plot loss, largest error per target and parameter values against the iteration.
+    """The course of a calibration as a figure (:func:`jaxbpm.plots.calibration`: objective, each target's error,
+    the parameters' path and the runs' wall time against the iteration), saved to ``path`` when given.
 
     The figure is made without pyplot or any global matplotlib state (in a notebook, show it as a cell's last
-    expression).
+    expression). To draw on axes of your own, use :meth:`History.plot`.
 
     Args:
       history: a :class:`History`.
@@ -248,29 +281,9 @@ def plot_history(history: History, path=None):
     Returns:
       The :class:`matplotlib.figure.Figure`.
     """
-    from matplotlib.figure import Figure
-
-    it = history.column("iteration")
-    fig = Figure(figsize=(12, 3.5))
-    fig.set_layout_engine("constrained")
-    axes = fig.subplots(1, 3)
-    axes[0].semilogy(it, np.maximum(history.column("loss"), 1e-300), "o-")
-    axes[0].set(xlabel="iteration", ylabel="loss L", title="objective")
-    errs = np.abs(np.asarray([r["errors"] for r in history.rows]).reshape(len(it), -1))
-    for k, name in enumerate(history.target_names):
-        axes[1].semilogy(it, np.maximum(errs[:, k], 1e-300) * 100, "o-", label=name)
-    axes[1].set(xlabel="iteration", ylabel="|relative error| [%]", title="targets")
-    axes[1].legend(fontsize=8)
-    vals = np.asarray([r["values"] for r in history.rows])
-    for k, name in enumerate(history.parameter_names):
-        axes[2].plot(it, vals[:, k] / vals[0, k], "o-", label=name)
-    axes[2].set(xlabel="iteration", ylabel="value / first value", title="parameters")
-    axes[2].legend(fontsize=8)
+    fig = history.plot()[0].figure
     if path is not None:
-        import pathlib
+        from jaxbpm.plots import save
 
-        from jaxbpm.io import atomic_write
-
-        suffix = pathlib.Path(path).suffix.lstrip(".") or "png"
-        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=120, format=suffix))
+        save(fig, path)
     return fig

@@ -34,7 +34,7 @@ from jaxbpm import _interrupt
 from jaxbpm._compile import compile_clock
 from jaxbpm.dem import quasistatic
 from jaxbpm.dem.chunk import _run_chunk
-from jaxbpm.dem.curve import curve, peak_stats, plan_stats
+from jaxbpm.dem.curve import curve, fit_line, peak_stats, plan_stats
 from jaxbpm.dem.integrator import _progress_fn
 from jaxbpm.dem.peak import peak_stop, tracker
 from jaxbpm.dem.plan import Plan, plan
@@ -323,6 +323,7 @@ def _member_result(sample, scene, the_plan: Plan, ran: _Chunks, host, b: int, ti
         stats.update(steps_planned=the_plan.n_steps, stop_reason="after_peak")
     stats.update(plan_stats(the_plan, the_plan.dt_crit[b], ran.interrupted))
     stats.update(peak_stats(scene, sample, rec, disp, force, keep, the_plan.breakage))
+    stats.update(fit_line(scene, disp, force, the_plan.target, the_plan.gauge_length, the_plan.area))
     if not ran.interrupted:
         status = quasistatic.check(scene, the_plan, rec, disp, force, stats, status)
     stats["batch"] = {"size": n_batch, "index": b, "vectorize": vectorize, "dt": the_plan.dt,

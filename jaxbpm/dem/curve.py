@@ -7,7 +7,7 @@ import numpy as np
 
 from jaxbpm.errors import SceneError
 
-__all__ = ["curve", "peak_stats", "modulus", "plan_stats"]
+__all__ = ["curve", "fit_line", "peak_stats", "modulus", "plan_stats"]
 
 
 def curve(scene, records: dict, speed: float, target: float, max_records: int, strict: bool = True):
@@ -38,6 +38,32 @@ def curve(scene, records: dict, speed: float, target: float, max_records: int, s
         stiffness = float("nan")
     keep = np.unique(np.linspace(0, len(disp) - 1, min(max_records, len(disp))).astype(int))
     return disp, force, stiffness, keep
+
+
+def fit_line(scene, disp, force, target: float, gauge_length: float, area: float) -> dict:
+    """The least-squares line that gives the stiffness (over the scene's fit range), as strain and stress at its ends.
+
+    Args:
+        scene: the scene (its fit range).
+        disp: ``[steps]`` displacements [m].
+        force: ``[steps]`` forces [N].
+        target: the displacement at the end of the loading [m].
+        gauge_length: the strain's length [m].
+        area: the stress's section [m^2].
+
+    Returns:
+        ``fit_strain`` and ``fit_stress`` [Pa]: ``(first, last)`` of the records in the fit range, on the line
+        (its slope in stress over strain is the modulus ``K l / A``); empty with fewer than two records there.
+    """
+    disp, force = np.asarray(disp, np.float64), np.asarray(force, np.float64)
+    sel = scene.fit_mask(disp, target) if len(disp) else np.zeros(0, bool)
+    if sel.sum() < 2:
+        return {}
+    slope, intercept = np.polyfit(disp[sel], force[sel], 1)
+    ends = np.array([disp[sel].min(), disp[sel].max()])
+    stress = (slope * ends + intercept) / area
+    return {"fit_strain": (float(ends[0] / gauge_length), float(ends[1] / gauge_length)),
+            "fit_stress": (float(stress[0]), float(stress[1]))}
 
 
 def peak_stats(scene, sample, records: dict, disp, force, keep, breakage: bool) -> dict:

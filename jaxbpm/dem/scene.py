@@ -18,7 +18,7 @@ import numpy as np
 
 from jaxbpm._compile import compile_clock
 from jaxbpm.dem import quasistatic as quasi_static
-from jaxbpm.dem.curve import curve, peak_stats, plan_stats
+from jaxbpm.dem.curve import curve, fit_line, peak_stats, plan_stats
 from jaxbpm.dem.elastic_start import elastic_start, with_segment
 from jaxbpm.dem.integrator import integrate, Outcome
 from jaxbpm.dem.options import DEM
@@ -177,6 +177,7 @@ def finish(sample, scene, the_plan: Plan, run: Outcome, out: Writers, clock, max
         stats["vtu"] = str(out.series.path)
         stats["vtu_frames"] = len(out.series.steps)
     stats.update(peak_stats(scene, sample, rec, disp, force, keep, the_plan.breakage))
+    stats.update(fit_line(scene, disp, force, the_plan.target, the_plan.gauge_length, the_plan.area))
     status = quasi_static.check(scene, the_plan, rec, disp, force, stats, status)
     stats.update(_lateral(scene, sample, run.state, stats, the_plan.breakage, status))
     youngs = scene.modulus(stiffness, sample)

@@ -166,8 +166,8 @@ def write_frame(series, state, sample, t: float) -> None:
         t: the frame's time [s].
 
     The frame holds positions, velocity and force per particle, broken bonds per particle by mode
-    (``broken_tensile``, ``broken_shear``), and per bond ``intact``, ``break_mode`` (0 intact, 1 tensile, 2 shear)
-    and ``broken_time`` (NaN while intact).
+    (``broken_tensile``, ``broken_shear``), and per bond ``intact``, ``broken``, ``break_mode`` (0 intact,
+    1 tensile, 2 shear) and ``broken_time`` (NaN while intact).
     """
     n, nb = sample.n_particles, sample.n_bonds
     if state is None:  # at rest

@@ -19,11 +19,12 @@ class VTUSeries:
     collection ``<stem>.pvd`` (rewritten atomically after every step, so it is valid even if a run stops).
 
     Each step: points = particle centres (``positions`` or reference + ``displacement``), a ``vertex`` cell per
-    particle and a ``line`` cell per bond (broken bonds stay, with ``intact`` 0, so every step has the same cells).
+    particle and a ``line`` cell per bond (broken bonds stay, with ``intact`` 0 and ``broken`` 1, so every step has
+    the same cells).
     Point data: ``radius``, ``displacement`` [m], ``broken_bonds`` (count per particle), ``coordination`` (intact
     bonds), ``type`` (``Sample.types``), then ``point_data`` (e.g. velocity, force, local stiffness). Cell data per
-    bond: ``intact``, ``material``, then ``bond_data`` (e.g. force, break_mode); vertex cells carry NaN (-1 for
-    integers).
+    bond: ``intact``, ``broken``, ``material``, then ``bond_data`` (e.g. force, break_mode); vertex cells carry NaN
+    (-1 for integers).
     """
 
     def __init__(self, pvd_path, sample: Sample):
@@ -123,7 +124,8 @@ def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data
              "coordination": np.bincount(b[ok].ravel(), minlength=n).astype(np.int32),
              "type": np.ones(n, np.int32) if s.types is None else np.asarray(s.types, np.int32)}
     pdata.update(user_data("point_data", point_data, n, "particle", set(pdata)))
-    bdata = {"intact": ok.astype(np.int32), "material": np.asarray(s.bond_material, np.int32)}
+    bdata = {"intact": ok.astype(np.int32), "broken": (~ok).astype(np.int32),
+             "material": np.asarray(s.bond_material, np.int32)}
     bdata.update({k: v.astype(np.float64) for k, v in
                   user_data("bond_data", bond_data, nb, "bond", set(bdata)).items()})
     return pos, pdata, bdata

@@ -8,7 +8,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import SceneError
-from jaxbpm.dem.curve import curve, peak_stats, plan_stats
+from jaxbpm.dem.curve import curve, fit_line, peak_stats, plan_stats
 from jaxbpm.scenes import UniaxialCompression
 
 R = 1e-3
@@ -32,6 +32,22 @@ def test_a_straight_curve_gives_its_slope():
     np.testing.assert_allclose(stiffness, k, rtol=1e-9)
     assert len(keep) == 10 and keep[0] == 0 and keep[-1] == 99
     assert len(curve(SCENE, rec, speed, target, max_records=1000)[3]) == 100
+
+
+def test_the_fit_line_is_the_least_squares_line_of_the_fit_range():
+    speed, k, f0 = 2.0, 3.5e6, 7.0  # a straight curve with an offset, bent beyond the fit range
+    disp = speed * 1e-6 * np.arange(1, 101)
+    lo, hi = SCENE.fit_range
+    target = 0.6 * disp[-1]
+    force = k * disp + f0 + np.where(disp > hi * target, -1e9 * (disp - hi * target) ** 2, 0.0)
+    length, area = 0.01, 2e-5
+    line = fit_line(SCENE, disp, force, target, length, area)
+    inside = disp[(disp >= lo * target * (1 - 1e-9)) & (disp <= hi * target * (1 + 1e-9))]
+    assert len(inside) > 10 and inside[-1] < disp[-1]
+    np.testing.assert_allclose(line["fit_strain"], [inside[0] / length, inside[-1] / length], rtol=1e-12)
+    np.testing.assert_allclose(line["fit_stress"], [(k * inside[0] + f0) / area, (k * inside[-1] + f0) / area],
+                               rtol=1e-9)
+    assert fit_line(SCENE, disp[:1], force[:1], disp[-1], length, area) == {}
 
 
 def test_a_curve_cut_short():

@@ -35,6 +35,7 @@ def test_vtu_series_read_back(tmp_path):
         np.testing.assert_array_equal(mesh.point_data["broken_bonds"], broken)
         intact = [c for c in mesh.cell_data["intact"] if len(c) == nb][0]
         np.testing.assert_array_equal(intact, frame["intact"])
+        np.testing.assert_array_equal(mesh.cell_data["broken"][1], ~frame["intact"])  # (ParaView thresholds it)
         force = [c for c in mesh.cell_data["force"] if len(c) == nb][0]
         np.testing.assert_allclose(force, frame["bond_data"]["force"])
     assert not list(tmp_path.glob(".*.tmp"))  # atomic writes leave no temporary files
