@@ -76,13 +76,15 @@ def kernel_env(extra: dict | None = None) -> dict:
     return env
 
 
-def execute(path: pathlib.Path, *, env: dict | None = None, timeout: int = 900):
+def execute(path: pathlib.Path, *, env: dict | None = None, timeout: int = 900, km=None):
     """Run the notebook at ``path`` in a new kernel; returns the executed notebook (``nbformat.NotebookNode``).
 
     Args:
       path: the ``.ipynb`` file.
       env: the kernel's environment (default :func:`kernel_env`).
       timeout: seconds a cell may take.
+      km: a started ``jupyter_client.KernelManager`` to run in instead of a new kernel (left running; its
+        execution counts go on from the last notebook it ran).
 
     Returns:
       The notebook with its outputs and ``metadata["jaxbpm"]`` (``version``, ``code_sha256``, ``small``).
@@ -94,10 +96,13 @@ def execute(path: pathlib.Path, *, env: dict | None = None, timeout: int = 900):
     from nbclient import NotebookClient
 
     nb = nbformat.read(path, as_version=4)
-    with tempfile.TemporaryDirectory(prefix=f"jaxbpm-{path.stem}-") as cwd:
-        client = NotebookClient(nb, timeout=timeout, kernel_name="python3", record_timing=False,
-                                resources={"metadata": {"path": cwd}})
-        client.execute(env=env or kernel_env())  # start_kernel's keywords: the kernel's environment
+    if km is not None:
+        NotebookClient(nb, km=km, timeout=timeout, record_timing=False).execute()
+    else:
+        with tempfile.TemporaryDirectory(prefix=f"jaxbpm-{path.stem}-") as cwd:
+            client = NotebookClient(nb, timeout=timeout, kernel_name="python3", record_timing=False,
+                                    resources={"metadata": {"path": cwd}})
+            client.execute(env=env or kernel_env())  # start_kernel's keywords: the kernel's environment
     nb.metadata[METADATA_KEY] = {"version": jaxbpm_version(), "code_sha256": code_digest(nb), "small": True}
     return nb
 

@@ -4,10 +4,12 @@ Stored: every code cell has run, in order, with no error output; every figure a 
 ``image/png`` output); ``metadata["jaxbpm"]`` names the jaxbpm version and the SHA-256 of the code cells that made
 the outputs, and both must be the current ones (``python notebooks/execute.py`` stores them again).
 
-Run: each notebook is executed in a fresh Jupyter kernel (``nbclient`` + ``ipykernel``, through
+Run: each notebook is executed in a Jupyter kernel (``nbclient`` + ``ipykernel``, through
 ``notebooks/execute.py``) at its small size (``JAXBPM_NOTEBOOK_SMALL=1``), in a temporary directory, with the
 suite's persistent compilation cache and strict JAX settings; a cell that raises fails the test with the cell and
-its traceback. Each notebook asserts a physical outcome of its own (e.g. the DSM within 5 % of the DEM, a calibrated
+its traceback. The notebooks a test process runs share one kernel, each in a fresh namespace (``%reset -f``), so
+they share imports and compiled programs as they did when run as scripts in the test process;
+``python notebooks/execute.py`` runs each in a kernel of its own. Each notebook asserts a physical outcome of its own (e.g. the DSM within 5 % of the DEM, a calibrated
 modulus confirmed by a DEM run), so a failing check fails the test. The figures drawn now must be those stored.
 """
 
@@ -125,13 +127,56 @@ def _kernel_env() -> dict:
         "JAX_NUMPY_RANK_PROMOTION": "raise", "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")})
 
 
+@pytest.fixture(scope="module")
+def kernel(tmp_path_factory):
+    """One kernel for the notebooks a test process runs (each in a fresh namespace: ``%reset -f`` before it), so
+    they share its imports and compiled programs as one Python process would; started in a temporary directory."""
+    from jupyter_client.manager import KernelManager
+
+    km = KernelManager(kernel_name="python3")
+    km.start_kernel(env=_kernel_env(), cwd=str(tmp_path_factory.mktemp("kernel")))
+    yield km
+    km.shutdown_kernel(now=True)
+
+
+def _reset(km):
+    kc = km.client()
+    kc.start_channels()
+    try:
+        kc.wait_for_ready(timeout=120)
+        reply = kc.execute_interactive("%reset -f\nimport matplotlib.pyplot as plt\nplt.close('all')\ndel plt",
+                                       timeout=120)
+        assert reply["content"]["status"] == "ok", reply["content"]
+    finally:
+        kc.stop_channels()
+
+
 @pytest.mark.parametrize("path", [_param(p) for p in NOTEBOOKS])
-def test_notebook_runs_in_a_kernel(path):
+def test_notebook_runs_in_a_kernel(path, kernel):
     from nbclient.exceptions import CellExecutionError
 
+    _reset(kernel)
     try:
-        nb = execute.execute(path, env=_kernel_env(), timeout=600)
+        nb = execute.execute(path, km=kernel, timeout=600)
     except CellExecutionError as err:
         pytest.fail(f"{path.name}: a cell failed\n{err}", pytrace=False)
-    assert not stored_problems(nb), (path.name, stored_problems(nb))
+    problems = [p for p in stored_problems(nb) if "execution counts" not in p]  # the kernel's counts go on
+    assert not problems, (path.name, problems)
     assert _cells_with_figures(nb) == _cells_with_figures(_notebook(path)), "the figures drawn are not those stored"
+
+
+def test_a_cell_that_raises_fails(kernel, tmp_path):
+    import nbformat
+    from nbclient.exceptions import CellExecutionError
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("x = 1"),
+                                         nbformat.v4.new_code_cell("assert x == 2, 'x is not 2'")])
+    path = tmp_path / "failing.ipynb"
+    nbformat.write(nb, path)
+    _reset(kernel)
+    with pytest.raises(CellExecutionError, match="x is not 2"):
+        execute.execute(path, km=kernel, timeout=60)
+    _reset(kernel)  # the namespace a notebook leaves is gone before the next
+    with pytest.raises(CellExecutionError, match="NameError"):
+        nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print(x)")]), path)
+        execute.execute(path, km=kernel, timeout=60)
