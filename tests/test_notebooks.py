@@ -92,6 +92,12 @@ def test_the_five_notebooks_are_stored_executed():
         assert not stored_problems(nb), f"{path.name}: {stored_problems(nb)}{hint}"
 
 
+def test_the_version_stored_is_jaxbpms():
+    import jaxbpm
+
+    assert execute.jaxbpm_version() == jaxbpm.__version__
+
+
 def test_stored_problems_are_found():
     """The check above fails a notebook saved without outputs, with an error, or from another version or code."""
     nb = _notebook(NOTEBOOK_DIR / "01_quick_start.ipynb")
@@ -140,6 +146,8 @@ def kernel(tmp_path_factory):
 
 
 def _reset(km):
+    if not km.is_alive():  # a notebook that killed its kernel fails alone, not the ones after it
+        km.restart_kernel(now=True)
     kc = km.client()
     kc.start_channels()
     try:
