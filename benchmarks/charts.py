@@ -28,7 +28,7 @@ SOURCES = {
                        "gpu/dem_throughput_1m_float64.json", "gpu/dem_throughput_float32.json",
                        "gpu/dem_throughput_1m_float32.json"],
     "vs_lammps": ["vs_lammps.json", "vs_lammps_contacts_8k.json", "vs_lammps_contacts_100k.json"],
-    "solver_scaling": ["scaling_10k_1m.json"],
+    "solver_scaling": ["scaling_10k_1m.json", "gpu/scaling_float64.json"],
 }
 
 
@@ -129,16 +129,17 @@ def vs_lammps(results: Path) -> Figure | None:
     return fig
 
 
-def scaling_points(results: Path) -> dict[str, list[tuple[int, float]]]:
+def scaling_points(results: Path, name: str = "scaling_10k_1m.json") -> dict[str, list[tuple[int, float]]]:
     """Run time against particle count per solver, and the fitted exponents.
 
     Args:
         results: the results directory.
+        name: the ``scaling.py`` results file (the GPU's: ``gpu/scaling_float64.json``).
 
     Returns:
-        ``{solver: [(particles, run seconds), ...]}`` from ``scaling_10k_1m.json`` (empty when it is missing).
+        ``{solver: [(particles, run seconds), ...]}`` from ``name`` (empty when it is missing).
     """
-    data = _load(results, "scaling_10k_1m.json")
+    data = _load(results, name)
     if data is None:
         return {}
     out: dict[str, list[tuple[int, float]]] = {}
@@ -150,20 +151,25 @@ def scaling_points(results: Path) -> dict[str, list[tuple[int, float]]]:
 
 
 def solver_scaling(results: Path) -> Figure | None:
-    """Run time of the DSM and the STE against particle count (log-log) with the fitted exponents."""
+    """Run time of the DSM and the STE against particle count (log-log) with the fitted exponents, on the CPU and
+    (dashed, where ``gpu/scaling_float64.json`` exists) on the GPU."""
     points = scaling_points(results)
     if not points:
         return None
     fits = _load(results, "scaling_10k_1m.json").get("fits", {})
+    gpu = scaling_points(results, "gpu/scaling_float64.json")
     fig = _figure()
     ax = fig.add_subplot()
     for k, (method, pts) in enumerate(sorted(points.items())):
         n, run = zip(*pts)
         fit = (fits.get(method) or {}).get("run_s")
-        label = method.upper() + (f" (~ n^{fit['exponent']:.2f})" if fit else "")
+        label = method.upper() + ", CPU" + (f" (~ n^{fit['exponent']:.2f})" if fit else "")
         ax.plot(n, run, "o-", label=label, color=f"C{k}")
+        if gpu.get(method):
+            n, run = zip(*gpu[method])
+            ax.plot(n, run, "s--", label=f"{method.upper()}, GPU float64", color=f"C{k}", alpha=0.7)
     ax.set(xscale="log", yscale="log", xlabel="particles", ylabel="run time [s]",
-           title="Run time against size, one process on 2 cores (scaling.py)")
+           title="Run time against size: CPU (2 cores), GPU (H200) (scaling.py)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     return fig

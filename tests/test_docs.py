@@ -1,7 +1,9 @@
 """The documentation: the README stays a newcomer's page, every ``python`` code block of the README and of the docs
 runs as written (page by page, one fresh namespace per page, in a temporary directory), ``py`` fragments parse,
 every public symbol has a docstring, and the site builds with ``mkdocs build --strict`` (no broken link, no
-docstring the API pages cannot render)."""
+docstring the API pages cannot render). The built site (one build, shared by the tests that read it) has a page per
+notebook with the figures it stores, every image a page shows, and no relative link of its HTML pages pointing
+nowhere; the solver and workflow pages open with a figure."""
 
 import ast
 import importlib
@@ -11,6 +13,8 @@ import os
 import re
 import subprocess
 import sys
+import urllib.parse
+from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
@@ -94,12 +98,117 @@ def test_every_public_symbol_has_a_docstring():
     assert not missing, f"public symbols without a docstring: {missing}"
 
 
-def test_site_builds_strictly(tmp_path):
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """The site, built once with ``mkdocs build --strict`` (the tests that read it share an xdist worker)."""
+    out = tmp_path_factory.mktemp("site") / "site"
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
-    run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
+    run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)],
                          cwd=ROOT, capture_output=True, text=True, env=env, timeout=600)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert (tmp_path / "site" / "api" / "core" / "index.html").is_file()
+    return out
+
+
+@pytest.mark.xdist_group("docs-site")
+def test_site_builds_strictly(site):
+    assert (site / "api" / "core" / "index.html").is_file()
+    assert (site / "index.html").is_file()
+
+
+class _Links(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.links = []
+
+    def handle_starttag(self, tag, attrs):
+        self.links += [v for k, v in attrs if k in ("href", "src") and v]
+
+
+def broken_links(site: Path) -> list[str]:
+    """``page: link`` for every relative ``href``/``src`` of the site's HTML pages whose target is not in the site."""
+    broken = []
+    for page in sorted(site.rglob("*.html")):
+        parser = _Links()
+        parser.feed(page.read_text(encoding="utf-8"))
+        for link in parser.links:
+            target = urllib.parse.urlsplit(link)
+            if target.scheme or target.netloc or not target.path:  # another site, data:, mailto:, a #fragment
+                continue
+            path = urllib.parse.unquote(target.path)
+            resolved = (site / path.lstrip("/")) if path.startswith("/") else (page.parent / path)
+            if not (resolved.is_file() or (resolved / "index.html").is_file()):
+                broken.append(f"{page.relative_to(site)}: {link}")
+    return broken
+
+
+@pytest.mark.xdist_group("docs-site")
+def test_site_has_no_broken_internal_link(site, tmp_path):
+    assert not broken_links(site), broken_links(site)[:20]
+    # the check finds one
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "index.html").write_text('<a href="../b/">b</a><img src="../img/x.png"><a href="#top">t</a>'
+                                               '<a href="https://example.org/x">x</a>', encoding="utf-8")
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "index.html").write_text("", encoding="utf-8")
+    assert broken_links(tmp_path) == ["a/index.html: ../img/x.png"]
+
+
+_IMAGE = re.compile(r"!\[[^\]]*\]\(([^)\s]+)\)|<img [^>]*src=\"([^\"]+)\"")
+
+
+def _images(path: Path) -> list[str]:
+    text = path.read_text(encoding="utf-8")
+    return [a or b for a, b in _IMAGE.findall(text) if not (a or b).startswith(("http:", "https:", "data:"))]
+
+
+@pytest.mark.xdist_group("docs-site")
+def test_every_image_of_the_docs_is_in_the_site(site):
+    docs = ROOT / "docs"
+    shown = 0
+    for page in sorted(docs.rglob("*.md")):
+        for image in _images(page):
+            source = (page.parent / image).resolve()
+            assert source.is_file(), f"{page.relative_to(ROOT)} shows {image}, which does not exist"
+            assert (site / source.relative_to(docs)).is_file(), f"{image} of {page.name} is not in the site"
+            shown += 1
+    assert shown >= 20, shown  # the benchmarks page and the eight pages that open with a figure
+
+
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+
+
+@pytest.mark.xdist_group("docs-site")
+def test_every_notebook_is_a_page_with_its_figures(site):
+    """Each stored notebook is a page under Notebooks, with every figure it stores (inline PNGs)."""
+    import json
+
+    nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    assert len(NOTEBOOKS) >= 5
+    for path in NOTEBOOKS:
+        assert f"notebooks/{path.name}" in nav, f"{path.name} is not in the nav of mkdocs.yml"
+        page = site / "notebooks" / path.stem / "index.html"
+        assert page.is_file(), f"no page for {path.name}"
+        html = page.read_text(encoding="utf-8")
+        stored = sum("image/png" in out.get("data", {}) for cell in json.loads(path.read_text(encoding="utf-8"))["cells"]
+                     for out in cell.get("outputs", []))
+        assert stored and html.count("data:image/png;base64,") >= stored, (path.name, stored)
+
+
+# the solver and workflow pages open with a figure: an image before any other paragraph
+FIGURE_FIRST = ["index.md", "getting-started.md", "dem.md", "dsm.md", "ste.md", "methods.md", "strength.md",
+                "calibration.md"]
+
+
+def opening(path: Path) -> str:
+    """The first block of a page after its title (paragraphs are separated by blank lines)."""
+    body = path.read_text(encoding="utf-8").split("\n", 1)[1].strip()
+    return body.split("\n\n", 1)[0]
+
+
+@pytest.mark.parametrize("name", FIGURE_FIRST)
+def test_pages_open_with_a_figure(name):
+    first = opening(ROOT / "docs" / name)
+    assert _images(ROOT / "docs" / name) and first.lstrip().startswith(("![", "<img", "<figure")), first[:200]
 
 
 def test_benchmark_figures_are_traceable():
