@@ -70,6 +70,21 @@ def test_nonlinear_dsm_is_a_pure_differentiable_function(packing):
     assert ks[1] > ks[0]
 
 
+def test_linear_contacts_gradient_matches_finite_differences(packing):
+    """The linear law's E* and k_n / k_s as params: the implicit gradient of the nonlinear DSM's K against central
+    finite differences (stiffer contacts, stiffer sample; a larger kratio, softer shear springs, a softer sample)."""
+    scene = UniaxialCompression(strain=0.002, contacts=True, contact_law="linear")
+    f = dsm.stiffness_function(packing, scene, jaxbpm.DSM(dofs=3, tol=1e-10, load_steps=2))
+    p = dict(default_params(packing), contact_emod=jnp.asarray(1e9), contact_kratio=jnp.asarray(1.21))
+    grad = jax.grad(f)(p)
+    for key in ("contact_emod", "contact_kratio"):
+        x = float(p[key])
+        h = 1e-4 * x
+        fd = (f({**p, key: jnp.asarray(x + h)}) - f({**p, key: jnp.asarray(x - h)})) / (2 * h)
+        np.testing.assert_allclose(float(grad[key]), float(fd), rtol=1e-5)
+    assert float(grad["contact_emod"]) > 0 > float(grad["contact_kratio"])
+
+
 _VMAP_REPEATS = """
 import sys, jax
 jax.config.update("jax_enable_x64", True)
