@@ -117,7 +117,7 @@ def test_tangent_matches_finite_differences_of_the_dem_force():
     n = d0 / jnp.linalg.norm(d0)
 
     def forces(z):
-        u, w = z[[0, 1, 2, 6, 7, 8]].reshape(2, 3), z[[3, 4, 5, 9, 10, 11]].reshape(2, 3)
+        u, w = z[np.array([0, 1, 2, 6, 7, 8])].reshape(2, 3), z[np.array([3, 4, 5, 9, 10, 11])].reshape(2, 3)
         slip = u[1] - u[0] + jnp.cross(w[1], -R2 * n) - jnp.cross(w[0], R1 * n)
         zero = jnp.zeros((1, 3))
         q = rotation.from_rotation_vector(w)
