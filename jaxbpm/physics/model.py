@@ -405,6 +405,8 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         else:
             mu = pm.friction if linear is None or linear.friction is None else linear.friction
             rotations = sample.n_bonds > 0 or (contacts and float(mu) > 0)
+    if linear is not None and contacts:
+        _warn_rest_overlaps(sample, linear.params(pm))
     dtype = _float_dtype()
     if dtype != np.float64:
         warnings.warn("jaxbpm: JAX is running in float32; bonded-particle stiffness solves lose precision. "
@@ -461,6 +463,25 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         contact_law="cohesive" if law is not None else "hertz" if linear is None else "linear",
         bond_block=BOND_BLOCK if bonds.shape[0] >= BLOCKED_FROM and jax.default_backend() == "cpu" else None,
     )
+
+
+def _warn_rest_overlaps(sample: Sample, p) -> None:
+    """Warn when bonded particles overlap at rest: PFC's linear law (absolute overlap) pushes them apart from the
+    start with ``k_n delta``, large beside Hertz's ``delta^1.5`` force, and a generated sample is not balanced there."""
+    if not sample.n_bonds:
+        return
+    b, rad = np.asarray(sample.bonds), np.asarray(sample.radii, np.float64)
+    r_i, r_j = rad[b[:, 0]], rad[b[:, 1]]
+    overlap = r_i + r_j - np.asarray(sample.bond_length, np.float64)
+    rel = overlap / np.minimum(r_i, r_j)
+    over = rel > 1e-9
+    if over.any():
+        kn = float(p.emod) * np.pi * np.minimum(r_i, r_j) ** 2 / (r_i + r_j)
+        warnings.warn(f"linear contacts: {int(over.sum())} of {sample.n_bonds} bonded pairs overlap at rest (up to "
+                      f"{float(rel.max()):.3g} of the smaller radius): the linear law (k_n delta) pushes them apart "
+                      f"from the start, with up to {float(np.max(kn * np.maximum(overlap, 0.0))):.3g} N, which the "
+                      "bonds hold and the particles' motion relaxes; for a sample at rest, shrink the radii below the "
+                      "bond lengths (sample.replace(radii=...))", stacklevel=3)
 
 
 def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxbpm
 from jaxbpm import dsm
@@ -70,6 +71,7 @@ def test_nonlinear_dsm_is_a_pure_differentiable_function(packing):
     assert ks[1] > ks[0]
 
 
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the packing overlaps at rest
 def test_linear_contacts_gradient_matches_finite_differences(packing):
     """The linear law's E* and k_n / k_s as params: the implicit gradient of the nonlinear DSM's K against central
     finite differences (stiffer contacts, stiffer sample; a larger kratio, softer shear springs, a softer sample)."""

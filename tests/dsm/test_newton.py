@@ -46,6 +46,7 @@ def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
 
 
 @pytest.mark.xdist_group(SHARED)
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the packing overlaps at rest
 def test_linear_contacts_dsm_matches_dem(packing):
     """PFC's linear contacts: the DSM (the same law, static) against the DEM on a packing whose contacts carry most
     of the stiffness (half of its bonded pairs overlap slightly at rest: a linear contact is stiff from first touch)."""

@@ -3,6 +3,7 @@ deformability stiffness, shear increments k_s ds, the Coulomb cap, the dashpots'
 finite differences of the DEM's force function, and its scene-level checks."""
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -166,3 +167,16 @@ def test_linear_law_defaults_and_bad_parameters():
         build_model(_pair_sample(1e-6), contacts=True, contact_law="linear", cohesive={"c0": 1.0})
     with pytest.raises(SceneError, match="unknown contact law 'lineer'"):
         build_model(_pair_sample(1e-6), contacts=True, contact_law="lineer")
+
+
+def test_bonded_pairs_overlapping_at_rest_are_warned_about():
+    pos = np.array([[0, 0, 0], [R1 + R2 - 1e-6, 0, 0]])
+    s = jaxbpm.Sample.from_arrays(pos, [R1, R2], [[0, 1]], bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    kn = EMOD * math.pi * R1**2 / (R1 + R2)
+    with pytest.warns(UserWarning, match=f"1 of 1 bonded pairs overlap at rest .*up to {kn * 1e-6:.3g} N"):
+        build_model(s, contacts=True, contact_law=linear.LinearLaw(emod=EMOD))
+    touching = s.replace(positions=np.array([[0, 0, 0], [R1 + R2, 0, 0]]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        build_model(touching, contacts=True, contact_law="linear")
+        build_model(s, contacts=True)  # Hertz-Mindlin: no warning
