@@ -209,7 +209,8 @@ def _check_rmul(v, sample):
     rmul = float(_value("pb_rmul", v, lambda x: np.isfinite(x) & (x > 0), "finite and > 0"))
     if sample is None:
         raise ConventionError("PFC pb_rmul sets the sample's bond radii (r_b = pb_rmul min(R1, R2)), not a "
-                              "parameter: build the sample with bond_radius_ratio=pb_rmul, and pass sample= to check it")
+                              "parameter: build the sample with bond_radius_ratio=pb_rmul, and pass sample= to check "
+                              "it")
     if sample.n_bonds and not math.isclose(_rmul(sample), rmul, rel_tol=REL):
         raise ConventionError(f"PFC pb_rmul = {rmul:.6g}, but this sample's bonds have {_rmul(sample):.6g}: use "
                               f"sample.replace(bond_radius_ratio={rmul:.6g})")

@@ -86,10 +86,11 @@ def check_params(params, sample: Sample) -> dict:
     ``bond_tensile_strength`` and ``bond_shear_strength`` >= 0 [Pa] (``inf``: never breaks), ``bond_friction_angle`` in
     [0, pi/2) [rad], ``bond_moment_factor`` in [0, 1]. Optional scalars of the contact laws: ``contact_E`` > 0 [Pa],
     ``contact_nu`` in (-1, 0.5) (Hertz-Mindlin, cohesive), ``contact_emod`` > 0 [Pa] and ``contact_kratio`` > 0 (the
-    linear law's E* and k_n / k_s), ``friction`` >= 0, ``restitution`` in (0, 1], ``cohesion_initial`` and ``cohesion_max``
-    >= 0 [Pa] (``cohesion_max`` >= ``cohesion_initial`` when both are given), ``cohesion_from_stress`` >= 0. Any other
-    key is an error (a misspelt key would otherwise be ignored). Values must be real numbers (not booleans, complex
-    numbers or strings); traced values (inside ``jit``/``grad``/``vmap``) are not checked.
+    linear law's E* and k_n / k_s), ``friction`` >= 0, ``restitution`` in (0, 1], ``cohesion_initial`` and
+    ``cohesion_max`` >= 0 [Pa] (``cohesion_max`` >= ``cohesion_initial`` when both are given),
+    ``cohesion_from_stress`` >= 0. Any other key is an error (a misspelt key would otherwise be ignored). Values must
+    be real numbers (not booleans, complex numbers or strings); traced values (inside ``jit``/``grad``/``vmap``) are
+    not checked.
 
     Args:
         params: the parameter dict.

@@ -98,6 +98,7 @@ def _free_run(model, s, dt, n_steps):
     return final
 
 
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the cluster overlaps at rest on purpose
 def test_linear_contacts_time_step_is_safe_and_the_run_stable():
     s, model = _linear_cluster()
     exact = 2.0 / np.sqrt(_linear_omega2_max(s, model))
