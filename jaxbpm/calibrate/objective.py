@@ -43,8 +43,9 @@ def base_params(sample, keys=(), scene=None) -> dict:
       sample: a :class:`~jaxbpm.Sample`.
       keys: extra entries: ``"bond_tensile_strength"``, ``"bond_shear_strength"`` (from the sample's bond material
         table); ``"contact_E"``, ``"contact_nu"``, ``"friction"``, ``"restitution"`` (from its particle material,
-        scalars); ``"cohesion_initial"``, ``"cohesion_from_stress"``, ``"cohesion_max"`` (from the cohesive law of
-        ``scene``).
+        scalars); ``"contact_emod"``, ``"contact_kratio"`` (from the linear contact law of ``scene``, or its defaults
+        for the particle material); ``"cohesion_initial"``, ``"cohesion_from_stress"``, ``"cohesion_max"`` (from the
+        cohesive law of ``scene``).
       scene: a scene, or a mapping of scenes (the first with ``contact_law="cohesive"`` gives the cohesive entries).
 
     Returns:
@@ -60,7 +61,8 @@ def base_params(sample, keys=(), scene=None) -> dict:
     table = {"bond_tensile_strength": "tensile_strength", "bond_shear_strength": "shear_strength"}
     particle = {"contact_E": "E", "contact_nu": "nu", "friction": "friction", "restitution": "restitution"}
     cohesive = {"cohesion_initial": "c0", "cohesion_from_stress": "kc", "cohesion_max": "c_max"}
-    known = sorted(out) + sorted(table) + sorted(particle) + sorted(cohesive)
+    linear = {"contact_emod": "emod", "contact_kratio": "kratio"}
+    known = sorted(out) + sorted(table) + sorted(particle) + sorted(linear) + sorted(cohesive)
     for key in keys:
         if key in out:
             continue
@@ -71,6 +73,8 @@ def base_params(sample, keys=(), scene=None) -> dict:
             out[key] = jnp.asarray(np.asarray(value, dtype=np.float64).reshape(-1))
         elif key in particle:
             out[key] = jnp.asarray(np.float64(getattr(sample.particle_material, particle[key])))
+        elif key in linear:
+            out[key] = _linear_entry(sample, scene, linear[key])
         elif key in cohesive:
             scenes = list(scene.values()) if isinstance(scene, Mapping) else [scene]
             laws = [sc.cohesive_law for sc in scenes if sc.cohesive_law is not None]
@@ -81,6 +85,16 @@ def base_params(sample, keys=(), scene=None) -> dict:
         else:
             raise CalibrationError(f"no parameter entry {key!r} (entries: {known})")
     return out
+
+
+def _linear_entry(sample, scene, field: str):
+    """A scalar of the linear contact law of the first scene that has one (or of its defaults)."""
+    from jaxbpm.physics.linear import LinearLaw
+
+    scenes = list(scene.values()) if isinstance(scene, Mapping) else [scene]
+    laws = [law for law in (getattr(sc, "linear_law", None) for sc in scenes) if law is not None]
+    p = (laws[0] if laws else LinearLaw()).params(sample.particle_material)
+    return jnp.asarray(np.float64(getattr(p, field)))
 
 
 def _linear_scene(scene) -> bool:

@@ -248,6 +248,10 @@ def transit_time(sample, model: Model, params, length: float) -> float:
             from jaxbpm.physics.cohesive import normal_stiffness
 
             kn = float(normal_stiffness(r, r, 0.01 * r, float(model.cohesive.E)))
+        elif model.contact_law == "linear":
+            from jaxbpm.physics.linear import normal_stiffness as linear_stiffness
+
+            kn = float(linear_stiffness(r, r, float(model.hertz_params(params).emod), model.dim))
         else:
             kn = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r)
         spacing = 2.0 * r

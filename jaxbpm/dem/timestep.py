@@ -27,7 +27,8 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
     estimate unchanged to the last bit, and a reordered, translated or scaled copy of the sample gets the same time
     step (scaled) to round-off.
     Contacts and walls add ``z k_c / m`` with the Hertz (or cohesive-law) stiffness at an overlap of
-    ``contact_overlap`` times the smallest radius (z = 12 neighbours, 1 wall).
+    ``contact_overlap`` times the smallest radius (z = 12 neighbours, 1 wall); the linear law's stiffness is
+    constant: its larger of k_n and the shear spring with the rotation's lever (``_linear_omega2``).
 
     Args:
         model: the run's model.
@@ -61,6 +62,8 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
         k_c = float(cohesive_mod.normal_stiffness(r_min, r_min, delta, float(c.E)))
         gamma = float(cohesive_mod.restitution_damping(float(c.restitution)))
         omega2 += 12 * k_c / m_min / (np.sqrt(1.0 + gamma**2) - gamma) ** 2
+    elif model.contacts and model.contact_law == "linear":
+        omega2 += 12 * _linear_omega2(model, params, r_min) / m_min
     elif model.contacts:
         k_c = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r_min * delta)
         omega2 += 12 * k_c / m_min
@@ -71,6 +74,24 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
     if omega2 <= 0:
         raise InstabilityError("cannot estimate a time step: the model has no stiffness (no bonds, contacts or walls)")
     return 2.0 / np.sqrt(omega2)
+
+
+def _linear_omega2(model: Model, params, r_min: float) -> float:
+    """``k m / m`` of the stiffest mode of one linear contact on a particle of the smallest radius and mass ``m``: the
+    normal spring ``k_n = E* A / L`` (largest between two of the smallest particles: ``pi E* r_min / 2`` in 3D), or
+    the shear spring ``k_s = k_n / kratio`` on the contact point, which moves with the particle's translation and
+    rotation (``1 / m + r^2 / I = 3.5 / m`` for a solid sphere, ``1 / m`` without rotations); the dashpots lower the
+    stable step of an explicit scheme by ``sqrt(1 + beta^2) - beta``."""
+    from jaxbpm.physics.linear import normal_stiffness
+
+    p = model.hertz_params(params)
+    kn = float(normal_stiffness(r_min, r_min, float(p.emod), model.dim))
+    lever = 3.5 if model.rotations else 1.0
+    k = max(kn, lever * kn / float(p.kratio))
+    if p.beta is not None:
+        beta = float(p.beta)
+        k /= (np.sqrt(1.0 + beta**2) - beta) ** 2
+    return k
 
 
 #: wave vectors (per largest radius) and phases of the power iteration's start, one row per DOF: lengths about 2.5

@@ -49,7 +49,8 @@ def stiffness_function(sample, scene, options: DSM | None = None, *, n_materials
     """A pure function ``params -> K`` [N/m] of the DSM on ``scene``: the linear solve (clamped layers, bonds
     only), or with contacts or walls the nonlinear one (:func:`jaxbpm.dsm.newton.newton_outputs`: Newton over
     ``options.load_steps`` load steps to ``options.tol``, K the least-squares slope over the scene's fit range, as
-    :func:`jaxbpm.solve` reports it). ``params`` may then also hold ``contact_E`` and ``contact_nu``.
+    :func:`jaxbpm.solve` reports it). ``params`` may then also hold ``contact_E`` and ``contact_nu`` (Hertz-Mindlin),
+    or ``contact_emod``, ``contact_kratio`` and ``friction`` (the linear law).
 
     It can be ``jit``-ed, differentiated (``jax.grad``: implicit differentiation through the CG solve) and
     ``vmap``-ped over parameter sets, e.g. ``jax.vmap(f)({"bond_E": E_batch, "bond_nu": nu_batch})``. A call with

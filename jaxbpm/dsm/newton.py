@@ -142,8 +142,9 @@ _TANGENT_TOL = 1e-10  # GMRES tolerance of the implicit derivative's linear solv
 
 
 def _system(prob: NewtonProblem, params) -> _NewtonSystem:
-    """The Newton system at ``params``: the contacts' Hertz-Mindlin parameters from ``params`` (``contact_E``,
-    ``contact_nu``) where given, no Coulomb limit without slip, the bonds' preconditioner."""
+    """The Newton system at ``params``: the contacts' Hertz-Mindlin (or linear-law) parameters from ``params``
+    (:meth:`~jaxbpm.physics.model.Model.hertz_params`) where given, no Coulomb limit without slip, the bonds'
+    preconditioner."""
     model = prob.model
     if model.contacts:
         contact = model.hertz_params(params)

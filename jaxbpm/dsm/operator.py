@@ -27,16 +27,31 @@ def _contact_slip(model: Model, pairs, d, w):
     """Relative tangential displacement of the contact points of ``pairs [C, 2]`` since rest, as ``(x, y, z)``
     components: ``u_j - u_i + theta_j x (-r_j n) - theta_i x (r_i n)`` (the contact law keeps its tangential part),
     with ``d`` the current pair vectors (components) and ``w`` the pairs' reduced DOFs ``[3 or 9, C]``: ``u_j -
-    u_i``, then (with rotations) ``theta_i`` and ``theta_j``."""
+    u_i``, then (with rotations) ``theta_i`` and ``theta_j``.
+
+    With the linear law (:mod:`jaxbpm.physics.linear`), whose shear stiffness does not vanish as a contact closes, a
+    pair apart at rest counts only the slip since it touched: the share ``delta / approach`` of it (overlap over the
+    approach of the centres since rest), exact where the pair's relative motion is proportional along the load path.
+    Hertz-Mindlin's k_t grows from zero with the overlap and takes the whole slip."""
     dxi = tuple(w[c] for c in range(3))
-    if not model.rotations:
+    if model.rotations:
+        inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        n = tuple(c * inv for c in d)
+        r_i, r_j = model.radii[pairs[:, 0]], model.radii[pairs[:, 1]]
+        a = vec.cross(tuple(w[6 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
+        b = vec.cross(tuple(w[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
+        dxi = tuple(dxi[c] + a[c] - b[c] for c in range(3))
+    if model.contact_law != "linear":
         return dxi
-    inv = 1.0 / jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    n = tuple(c * inv for c in d)
-    r_i, r_j = model.radii[pairs[:, 0]], model.radii[pairs[:, 1]]
-    a = vec.cross(tuple(w[6 + c] for c in range(3)), tuple(-r_j * n[c] for c in range(3)))
-    b = vec.cross(tuple(w[3 + c] for c in range(3)), tuple(r_i * n[c] for c in range(3)))
-    return tuple(dxi[c] + a[c] - b[c] for c in range(3))
+    i, j = pairs[:, 0], pairs[:, 1]
+    p0 = model.positions0.T
+    rest = jnp.sqrt(sum((p0[c, j] - p0[c, i]) ** 2 for c in range(3)))
+    dist = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    reach = model.radii[i] + model.radii[j]
+    approach = rest - dist
+    since = jnp.clip((reach - dist) / jnp.where(approach > 0, approach, 1.0), 0.0, 1.0)
+    share = jnp.where(rest <= reach, 1.0, since)
+    return tuple(share * c for c in dxi)
 
 
 def _pair_dofs(model: Model, pairs, u):

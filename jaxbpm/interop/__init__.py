@@ -1,12 +1,13 @@
 """Interoperability with other DEM codes: their bond parameter conventions (:mod:`~jaxbpm.interop.conventions`:
 PFC, LAMMPS, Yade, MUSEN, translated exactly to and from jaxbpm's bond law), exchange formats
 (:mod:`~jaxbpm.interop.formats`: LAMMPS data and dump files, CSV, VTU and VTKHDF series for ParaView, LIGGGHTS and
-Yade files) and the ``jaxbpm convert`` / ``jaxbpm params`` commands (:mod:`~jaxbpm.interop.cli`).
+Yade files), PFC's parameter names for jaxbpm's params both ways (:mod:`~jaxbpm.interop.pfc`) and the
+``jaxbpm convert`` / ``jaxbpm params`` commands (:mod:`~jaxbpm.interop.cli`).
 """
 
 import importlib
 
-__all__ = ["conventions", "formats"]
+__all__ = ["conventions", "formats", "pfc"]
 
 
 def __getattr__(name: str):

@@ -130,28 +130,35 @@ def resolve_contact_law(contact_law: Any = "hertz", cohesive: CohesiveLaw | Mapp
     """The contact law a scene asks for.
 
     Args:
-        contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`CohesiveLaw`.
+        contact_law: ``"hertz"`` (default), ``"linear"`` (PFC's linear contact model,
+            :mod:`jaxbpm.physics.linear`), ``"cohesive"``, a :class:`~jaxbpm.physics.linear.LinearLaw` or a
+            :class:`CohesiveLaw`.
         cohesive: the law's parameters (a :class:`CohesiveLaw` or a mapping of its fields) for
             ``contact_law="cohesive"``.
 
     Returns:
-        ``None`` for Hertz-Mindlin contacts, else the :class:`CohesiveLaw`.
+        ``None`` for Hertz-Mindlin contacts, else the :class:`~jaxbpm.physics.linear.LinearLaw` or the
+        :class:`CohesiveLaw`.
 
     Raises:
-        SceneError: an unknown law or parameter, or parameters given twice or for the Hertz law.
+        SceneError: an unknown law or parameter, or cohesive parameters given twice or for another law.
     """
+    from jaxbpm.physics.linear import LinearLaw
+
     if isinstance(contact_law, CohesiveLaw):
         if cohesive is not None:
             raise SceneError("give the cohesive parameters either as contact_law=CohesiveLaw(...) or as cohesive=..., "
                              "not both")
         return contact_law
-    if contact_law == "hertz":
+    if isinstance(contact_law, LinearLaw) or contact_law in ("hertz", "linear"):
         if cohesive is not None:
-            raise SceneError("cohesive contact parameters were given with contact_law='hertz'; use "
+            name = contact_law if isinstance(contact_law, str) else "LinearLaw(...)"
+            raise SceneError(f"cohesive contact parameters were given with contact_law={name!r}; use "
                              "contact_law='cohesive'")
-        return None
+        return LinearLaw() if contact_law == "linear" else (None if contact_law == "hertz" else contact_law)
     if contact_law != "cohesive":
-        raise SceneError(f"unknown contact law {contact_law!r}; use 'hertz', 'cohesive' or a CohesiveLaw")
+        raise SceneError(f"unknown contact law {contact_law!r}; use 'hertz', 'linear', 'cohesive', a LinearLaw or a "
+                         "CohesiveLaw")
     if cohesive is None:
         return CohesiveLaw()
     if isinstance(cohesive, CohesiveLaw):

@@ -1,4 +1,6 @@
-"""Hertz-Mindlin particle-particle contacts, written for one pair and lifted with ``vmap``.
+"""Hertz-Mindlin particle-particle contacts, written for one pair and lifted with ``vmap``; the same entry points
+(:func:`law_components`, :func:`hertz_mindlin`, :func:`pair_forces`) run PFC's linear contact model
+(:mod:`jaxbpm.physics.linear`) when given its :class:`~jaxbpm.physics.linear.LinearParams`.
 
 Effective properties of two spheres of one material (E, nu)::
 
@@ -43,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxbpm.physics import linear as linear_mod
 from jaxbpm.physics.vec import cross, dot, once, safe_sqrt, stack
 
 __all__ = ["law_components", "ContactParams", "ContactForces", "contact_params", "hertz_mindlin", "hertz_normal_force",
@@ -141,13 +144,16 @@ def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, 
         spring: ``(x, y, z)``, the tangential spring carried from the last step [m].
         dxi: ``(x, y, z)``, the relative displacement of the contact points since then [m].
         v_rel: ``(x, y, z)``, the relative velocity of the contact points [m/s].
-        p: the contact parameters.
+        p: the contact parameters (a :class:`~jaxbpm.physics.linear.LinearParams`: PFC's linear law,
+            :func:`jaxbpm.physics.linear.law_components`).
         valid: bool, ``False`` on padding.
 
     Returns:
         A :class:`ContactForces` whose vectors are ``(x, y, z)`` component tuples, zero where the pair is not in
         contact.
     """
+    if isinstance(p, linear_mod.LinearParams):
+        return ContactForces(*linear_mod.law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p, valid))
     one = _one(p)
     dist = jnp.sqrt(dot(d, d))
     n = tuple(c / dist for c in d)
@@ -202,7 +208,7 @@ def _one(p: ContactParams):
 
 
 def hertz_mindlin(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams) -> ContactForces:
-    """Forces of one contact.
+    """Forces of one contact (PFC's linear law where ``p`` is a :class:`~jaxbpm.physics.linear.LinearParams`).
 
     Args:
         d: ``[3]`` x_j - x_i [m].

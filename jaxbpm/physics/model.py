@@ -6,8 +6,9 @@ A :class:`Model` holds the sample's arrays in JAX form and a few static switches
   only, as in the 3N direct stiffness method of Jarolin & Dosta 2020). Default: on whenever the sample has bonds (they
   transmit bending and twisting moments) or contacts with friction.
 * ``contacts``: particle contacts (with a neighbour list in the DEM) or none; ``contact_law``: ``"hertz"``
-  (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default) or ``"cohesive"`` (the stress-dependent cohesive law of
-  Irazabal et al. 2023, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
+  (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default), ``"linear"`` (PFC's linear contact model,
+  :mod:`jaxbpm.physics.linear`, whose scalars live in ``contact``) or ``"cohesive"`` (the stress-dependent cohesive
+  law of Irazabal et al. 2023, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
 * ``walls``: the wall law (``"hertz"``/``"linear"``) or ``None``.
 
 Parameters that calibrators change live in a small pytree ``params = {"bond_E": [n_materials],
@@ -29,6 +30,7 @@ import numpy as np
 from jaxbpm.physics import bond as bond_mod
 from jaxbpm.physics import cohesive as cohesive_mod
 from jaxbpm.physics import contact as contact_mod
+from jaxbpm.physics import linear as linear_mod
 from jaxbpm.physics import wall as wall_mod
 from jaxbpm.physics.params import _float_dtype, _put, check_params, default_params  # noqa: F401
 from jaxbpm.sample import Sample
@@ -63,7 +65,8 @@ class Model:
         bond_radius: ``[nb]`` r_b [m].
         bond_tensile: ``[n_materials]`` tensile strength sigma_c [Pa] (inf: unbreakable).
         bond_cohesion: ``[n_materials]`` shear strength (cohesion) c [Pa].
-        contact: the Hertz-Mindlin parameters.
+        contact: the Hertz-Mindlin parameters, or with ``contact_law="linear"`` the linear law's
+            :class:`~jaxbpm.physics.linear.LinearParams`.
         wall_stiffness: E* of a particle on a rigid wall [Pa] (``"hertz"``) or k [N/m] (``"linear"``).
         rotations: 6 DOF per particle (else 3).
         contacts: particle contacts on.
@@ -73,7 +76,7 @@ class Model:
         cohesive: the cohesive law's :class:`~jaxbpm.physics.cohesive.CohesiveParams` with
             ``contact_law="cohesive"``.
         failure_rule: how a bond's stresses break it (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
-        contact_law: ``"hertz"`` or ``"cohesive"``.
+        contact_law: ``"hertz"``, ``"linear"`` or ``"cohesive"``.
         bond_block: the DEM's bond pass in blocks of this many bonds (``None``: one pass).
     """
 
@@ -198,19 +201,30 @@ class Model:
         over = {field: jnp.asarray(params[key]) for key, field in self.COHESIVE_KEYS.items() if key in params}
         return self.cohesive._replace(**over) if over else self.cohesive
 
-    def hertz_params(self, params) -> contact_mod.ContactParams:
-        """The Hertz-Mindlin parameters.
+    #: params keys that override the linear law's scalars (see :meth:`hertz_params`)
+    LINEAR_KEYS = {"contact_emod": "emod", "contact_kratio": "kratio", "friction": "friction"}
+
+    def hertz_params(self, params):
+        """The parameters of the contact law the pair functions of :mod:`jaxbpm.physics.contact` run: Hertz-Mindlin's,
+        or with ``contact_law="linear"`` the linear law's.
 
         Args:
             params: the parameter dict; ``"contact_E"`` and ``"contact_nu"`` (scalars, differentiable) replace the
-                particles' contact modulus and Poisson's ratio where given.
+                particles' contact modulus and Poisson's ratio where given (Hertz-Mindlin); ``"contact_emod"``,
+                ``"contact_kratio"`` and ``"friction"`` replace E*, k_n / k_s and mu (the linear law).
 
         Returns:
-            The :class:`~jaxbpm.physics.contact.ContactParams`.
+            The :class:`~jaxbpm.physics.contact.ContactParams` or :class:`~jaxbpm.physics.linear.LinearParams`.
         """
         c = self.contact
         if isinstance(params, dict) and "_contact" in params:
             return params["_contact"]
+        if self.contact_law == "linear":
+            if not isinstance(params, dict):
+                return c
+            over = {field: jnp.asarray(params[key], c.emod.dtype) for key, field in self.LINEAR_KEYS.items()
+                    if key in params}
+            return c._replace(**over) if over else c
         if not isinstance(params, dict) or not ({"contact_E", "contact_nu"} & set(params)):
             return c
         r = c.G_star / c.E_star  # = (1 - nu) / (2 (2 - nu)) for one material: recover the sample's E and nu
@@ -352,11 +366,13 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
             E / (1 - nu^2)) or ``"linear"`` (give ``wall_stiffness`` in N/m).
         rotations: ``None`` picks 6 DOF per particle when the sample has bonds or frictional contacts, else 3.
             Particles with cohesive contacts and no bonds do not rotate by default (Irazabal et al. 2023).
-        contact_damping: Tsuji damping of the Hertz-Mindlin contacts.
+        contact_damping: Tsuji damping of the Hertz-Mindlin contacts (the dashpots of the linear law).
         wall_stiffness: the walls' stiffness (see :attr:`Model.wall_stiffness`), or ``None``: the default.
         breakage: bonds break when their stresses exceed the strengths of the material table (or of the params);
             off by default (the static solvers model the elastic range).
-        contact_law: ``"hertz"`` (default), ``"cohesive"`` or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw`.
+        contact_law: ``"hertz"`` (default), ``"linear"`` (PFC's linear contact model, its parameters from the
+            particle material: :class:`~jaxbpm.physics.linear.LinearLaw`), a ``LinearLaw``, ``"cohesive"`` or a
+            :class:`~jaxbpm.physics.cohesive.CohesiveLaw`.
         cohesive: the cohesive law's parameters (a ``CohesiveLaw`` or a mapping of its fields) with
             ``contact_law="cohesive"``.
         pad_to: ``(particles, bonds)`` capacities (a :class:`~jaxbpm._compile.SizeClass`) to pad a bonds-only
@@ -381,11 +397,16 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
     """
     pm = sample.particle_material
     law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
+    linear = law if isinstance(law, linear_mod.LinearLaw) else None
+    law = None if linear is not None else law
     if rotations is None:
         if law is not None:
             rotations = sample.n_bonds > 0
         else:
-            rotations = sample.n_bonds > 0 or (contacts and float(pm.friction) > 0)
+            mu = pm.friction if linear is None or linear.friction is None else linear.friction
+            rotations = sample.n_bonds > 0 or (contacts and float(mu) > 0)
+    if linear is not None and contacts:
+        _warn_rest_overlaps(sample, linear.params(pm))
     dtype = _float_dtype()
     if dtype != np.float64:
         warnings.warn("jaxbpm: JAX is running in float32; bonded-particle stiffness solves lose precision. "
@@ -428,8 +449,9 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         bond_key_index=_put(key_index, np.int32),
         bond_tensile=_put(mats.tensile_strength, dtype),
         bond_cohesion=_put(mats.shear_strength, dtype),
-        contact=contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
-                               bool(contact_damping)),
+        contact=(contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
+                                bool(contact_damping)) if linear is None
+                 else linear.params(pm, dtype, bool(contact_damping))),
         wall_stiffness=_put(ws, dtype),
         rotations=bool(rotations),
         contacts=bool(contacts),
@@ -438,9 +460,28 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         breakage=bool(breakage) and sample.n_bonds > 0,
         failure_rule=bond_mod.check_failure_rule(failure_rule),
         cohesive=None if law is None else law.params(pm, dtype),
-        contact_law="hertz" if law is None else "cohesive",
+        contact_law="cohesive" if law is not None else "hertz" if linear is None else "linear",
         bond_block=BOND_BLOCK if bonds.shape[0] >= BLOCKED_FROM and jax.default_backend() == "cpu" else None,
     )
+
+
+def _warn_rest_overlaps(sample: Sample, p) -> None:
+    """Warn when bonded particles overlap at rest: PFC's linear law (absolute overlap) pushes them apart from the
+    start with ``k_n delta``, large beside Hertz's ``delta^1.5`` force, and a generated sample is not balanced there."""
+    if not sample.n_bonds:
+        return
+    b, rad = np.asarray(sample.bonds), np.asarray(sample.radii, np.float64)
+    r_i, r_j = rad[b[:, 0]], rad[b[:, 1]]
+    overlap = r_i + r_j - np.asarray(sample.bond_length, np.float64)
+    rel = overlap / np.minimum(r_i, r_j)
+    over = rel > 1e-9
+    if over.any():
+        kn = float(p.emod) * np.pi * np.minimum(r_i, r_j) ** 2 / (r_i + r_j)
+        warnings.warn(f"linear contacts: {int(over.sum())} of {sample.n_bonds} bonded pairs overlap at rest (up to "
+                      f"{float(rel.max()):.3g} of the smaller radius): the linear law (k_n delta) pushes them apart "
+                      f"from the start, with up to {float(np.max(kn * np.maximum(overlap, 0.0))):.3g} N, which the "
+                      "bonds hold and the particles' motion relaxes; for a sample at rest, shrink the radii below the "
+                      "bond lengths (sample.replace(radii=...))", stacklevel=3)
 
 
 def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:

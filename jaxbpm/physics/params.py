@@ -64,9 +64,11 @@ _PER_MATERIAL = {  # params keys with one entry per bond material: (check, what 
     "bond_friction_angle": (lambda v: np.isfinite(v) & (v >= 0) & (v < np.pi / 2), "finite and in [0, pi/2) [rad]"),
     "bond_moment_factor": (lambda v: np.isfinite(v) & (v >= 0) & (v <= 1), "finite and in [0, 1]"),
 }
-_SCALAR = {  # params keys of the contact laws (Hertz-Mindlin, cohesive): scalars
+_SCALAR = {  # params keys of the contact laws (Hertz-Mindlin, linear, cohesive): scalars
     "contact_E": (lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
     "contact_nu": (lambda v: np.isfinite(v) & (v > -1.0) & (v < 0.5), "finite and in (-1, 0.5)"),
+    "contact_emod": (lambda v: np.isfinite(v) & (v > 0), "finite and > 0 [Pa]"),
+    "contact_kratio": (lambda v: np.isfinite(v) & (v > 0), "finite and > 0"),
     "friction": (lambda v: np.isfinite(v) & (v >= 0), "finite and >= 0"),
     "restitution": (lambda v: np.isfinite(v) & (v > 0) & (v <= 1), "finite and in (0, 1]"),
     "cohesion_initial": (lambda v: np.isfinite(v) & (v >= 0), "finite and >= 0 [Pa]"),
@@ -83,10 +85,12 @@ def check_params(params, sample: Sample) -> dict:
     the shear stiffness is infinite; at 0.5 and above the bond is not an elastic solid). Optional, per material:
     ``bond_tensile_strength`` and ``bond_shear_strength`` >= 0 [Pa] (``inf``: never breaks), ``bond_friction_angle`` in
     [0, pi/2) [rad], ``bond_moment_factor`` in [0, 1]. Optional scalars of the contact laws: ``contact_E`` > 0 [Pa],
-    ``contact_nu`` in (-1, 0.5), ``friction`` >= 0, ``restitution`` in (0, 1], ``cohesion_initial`` and ``cohesion_max``
-    >= 0 [Pa] (``cohesion_max`` >= ``cohesion_initial`` when both are given), ``cohesion_from_stress`` >= 0. Any other
-    key is an error (a misspelt key would otherwise be ignored). Values must be real numbers (not booleans, complex
-    numbers or strings); traced values (inside ``jit``/``grad``/``vmap``) are not checked.
+    ``contact_nu`` in (-1, 0.5) (Hertz-Mindlin, cohesive), ``contact_emod`` > 0 [Pa] and ``contact_kratio`` > 0 (the
+    linear law's E* and k_n / k_s), ``friction`` >= 0, ``restitution`` in (0, 1], ``cohesion_initial`` and
+    ``cohesion_max`` >= 0 [Pa] (``cohesion_max`` >= ``cohesion_initial`` when both are given),
+    ``cohesion_from_stress`` >= 0. Any other key is an error (a misspelt key would otherwise be ignored). Values must
+    be real numbers (not booleans, complex numbers or strings); traced values (inside ``jit``/``grad``/``vmap``) are
+    not checked.
 
     Args:
         params: the parameter dict.

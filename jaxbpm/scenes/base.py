@@ -18,6 +18,7 @@ import numpy as np
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.bond import check_failure_rule
 from jaxbpm.physics.cohesive import CohesiveLaw, resolve_contact_law
+from jaxbpm.physics.linear import LinearLaw
 from jaxbpm.physics.loading import Loading
 from jaxbpm.physics.model import Model, build_model
 from jaxbpm.sample import Sample
@@ -49,7 +50,9 @@ class Scene(Protocol):
       contacts: whether particles also interact by contacts (not only by their bonds).
       breakage: whether bonds break (``None``: when the sample's material table has a finite strength; see
         :func:`sample_breaks`).
-      cohesive_law: the :class:`~jaxbpm.physics.cohesive.CohesiveLaw` of the contacts, or ``None`` (Hertz-Mindlin).
+      cohesive_law: the :class:`~jaxbpm.physics.cohesive.CohesiveLaw` of the contacts, or ``None`` (Hertz-Mindlin
+        or the linear law). A scene may also have ``linear_law``: the :class:`~jaxbpm.physics.linear.LinearLaw` of
+        its contacts (PFC's linear contact model), or ``None``.
       uses_walls: whether plane walls load the sample (else clamped particles, ``layers``).
       wall_law, wall_stiffness: the walls' contact law (``"hertz"`` or ``"linear"``) and the linear law's stiffness
         [N/m] (``None``: the default of :func:`~jaxbpm.physics.model.build_model`).
@@ -322,6 +325,10 @@ def _build_model(scene: Scene, sample: Sample, overrides: dict) -> Model:
     law = scene.cohesive_law
     if law is not None and overrides.get("contacts", True):
         kw["contact_law"] = law
+    # the linear law's scalars go with the model even without contacts: a static solve switches them on later
+    linear = getattr(scene, "linear_law", None)
+    if linear is not None:
+        kw["contact_law"] = linear
     kw.update(overrides)
     return build_model(sample, **kw)
 
@@ -338,6 +345,7 @@ class BaseScene:
 
     methods: ClassVar[tuple[str, ...]] = METHODS
     cohesive_law: ClassVar[CohesiveLaw | None] = None
+    linear_law: ClassVar[LinearLaw | None] = None
 
     def model(self, sample: Sample, **overrides) -> Model:
         """The model of the sample this scene needs.
@@ -466,9 +474,11 @@ class AxialScene(BaseScene):
       fit_range: the part of the loading (fractions of the target displacement) over which K is fitted.
       breakage: bonds break in the DEM when their stresses exceed their strengths (``None``: when the sample's
         material table has a finite strength).
-      contact_law: ``"hertz"`` (Hertz-Mindlin) or ``"cohesive"`` (the stress-dependent cohesive law of
-        :mod:`jaxbpm.physics.cohesive`; DEM only), with its parameters in ``cohesive``; or a
-        :class:`~jaxbpm.physics.cohesive.CohesiveLaw` itself.
+      contact_law: ``"hertz"`` (Hertz-Mindlin), ``"linear"`` (PFC's linear contact model,
+        :mod:`jaxbpm.physics.linear`, its parameters from the particle material and the params ``contact_emod``,
+        ``contact_kratio``, ``friction``; or a :class:`~jaxbpm.physics.linear.LinearLaw` itself) or ``"cohesive"``
+        (the stress-dependent cohesive law of :mod:`jaxbpm.physics.cohesive`; DEM only), with its parameters in
+        ``cohesive``; or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw` itself.
       cohesive: a :class:`~jaxbpm.physics.cohesive.CohesiveLaw` or a mapping of its fields (``c0``, ``kc``,
         ``c_max``, and optionally ``E``, ``nu``, ``friction``, ``restitution``, ``initial_gap``).
       failure_rule: how a bond's stresses combine when it breaks: ``"separate"`` (tension and shear checked apart,
@@ -502,13 +512,22 @@ class AxialScene(BaseScene):
         return f"{type(self).__qualname__}({', '.join(f'{n}={getattr(self, n)!r}' for n in names)})"
 
     def _check_contacts(self):
-        if self.cohesive_law is not None and not self.contacts:
-            raise SceneError("contact_law='cohesive' needs contacts=True")
+        law = resolve_contact_law(self.contact_law, self.cohesive)
+        if law is not None and not self.contacts:
+            name = "cohesive" if isinstance(law, CohesiveLaw) else "linear"
+            raise SceneError(f"contact_law={name!r} needs contacts=True")
 
     @property
     def cohesive_law(self) -> CohesiveLaw | None:
-        """The :class:`~jaxbpm.physics.cohesive.CohesiveLaw` of the scene, or ``None`` (Hertz contacts)."""
-        return resolve_contact_law(self.contact_law, self.cohesive)
+        """The :class:`~jaxbpm.physics.cohesive.CohesiveLaw` of the scene, or ``None`` (Hertz or linear contacts)."""
+        law = resolve_contact_law(self.contact_law, self.cohesive)
+        return law if isinstance(law, CohesiveLaw) else None
+
+    @property
+    def linear_law(self) -> LinearLaw | None:
+        """The :class:`~jaxbpm.physics.linear.LinearLaw` of the scene, or ``None`` (Hertz or cohesive contacts)."""
+        law = resolve_contact_law(self.contact_law, self.cohesive)
+        return law if isinstance(law, LinearLaw) else None
 
     def loading(self, sample: Sample, speed: float) -> Loading:
         """The DEM's boundary conditions: the driven layer or the top wall moves against ``axis``.

@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 
 from jaxbpm.errors import SceneError
+from jaxbpm.physics.cohesive import CohesiveLaw, resolve_contact_law
+from jaxbpm.physics.linear import LinearLaw
 from jaxbpm.physics.loading import Loading
 from jaxbpm.sample import Sample
 from jaxbpm.scenes.base import (BaseScene, _check_failure_rule, _check_fit_range, _check_stop_after_peak,
@@ -43,7 +45,7 @@ class ThreePointBending(BaseScene):
       strain: the punch deflection over the beam height, in (0, 1).
       support_width, punch_width: [m], default one mean diameter.
       layer_thickness: [m], the depth of the support and punch layers (default one mean radius).
-      contacts: Hertz-Mindlin contacts (on by default: broken bonds fall back to them).
+      contacts: particle contacts (on by default: broken bonds fall back to them), by ``contact_law``.
       rotations: rotational DOFs (``None``: the Model decides).
       fit_range: the part of the loading (fractions of the target deflection) over which K is fitted.
       breakage, failure_rule: as in :class:`~jaxbpm.scenes.UniaxialCompression`.
@@ -53,6 +55,8 @@ class ThreePointBending(BaseScene):
       stop_after_peak: with breakage, the DEM run stops once the punch force has fallen to this fraction of its
         peak, in (0, 1) (default 0.7); ``None``: it runs to the full ``strain`` (see
         :class:`~jaxbpm.scenes.UniaxialCompression`).
+      contact_law: ``"hertz"`` (Hertz-Mindlin, default) or ``"linear"`` (PFC's linear contact model,
+        :mod:`jaxbpm.physics.linear`; or a :class:`~jaxbpm.physics.linear.LinearLaw` itself).
 
     Raises:
       SceneError: an argument out of its range.
@@ -73,6 +77,7 @@ class ThreePointBending(BaseScene):
     supports: Any = None
     punch: Any = None
     stop_after_peak: float | None = 0.7
+    contact_law: Any = "hertz"
 
     #: the solvers that model this scene (the STE models uniaxial compression only)
     methods = ("dem", "dsm")
@@ -81,6 +86,12 @@ class ThreePointBending(BaseScene):
     wall_stiffness = None
 
     def __post_init__(self):
+        law = resolve_contact_law(self.contact_law)
+        if isinstance(law, CohesiveLaw):
+            raise SceneError("ThreePointBending takes contact_law='hertz' or 'linear' (or a LinearLaw), not the "
+                             "cohesive law")
+        if law is not None and not self.contacts:
+            raise SceneError("contact_law='linear' needs contacts=True")
         _check_failure_rule(self.failure_rule)
         _check_stop_after_peak(self.stop_after_peak)
         if not _is_axis(self.axis) or not _is_axis(self.span_axis) or self.axis == self.span_axis:
@@ -98,6 +109,11 @@ class ThreePointBending(BaseScene):
         for group in (self.supports, self.punch):
             if group is not None:
                 _spec(group)  # a group of no known form is an error here, not at the solve
+
+    @property
+    def linear_law(self) -> LinearLaw | None:
+        """The :class:`~jaxbpm.physics.linear.LinearLaw` of the contacts, or ``None`` (Hertz-Mindlin)."""
+        return resolve_contact_law(self.contact_law)
 
     @property
     def uses_walls(self) -> bool:

@@ -50,9 +50,10 @@ class UniaxialCompression(AxialScene):
       fit_range: the part of the loading (fractions of the target strain) over which K is fitted.
       breakage: bonds break in the DEM when their stresses exceed their strengths (``None``: when the sample's
         material table has a finite strength).
-      contact_law: ``"hertz"`` (Hertz-Mindlin, default) or ``"cohesive"`` (the stress-dependent cohesive law of
-        :mod:`jaxbpm.physics.cohesive`, for cohesive granular samples; DEM only), with its parameters in
-        ``cohesive``; or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw` itself.
+      contact_law: ``"hertz"`` (Hertz-Mindlin, default), ``"linear"`` (PFC's linear contact model,
+        :mod:`jaxbpm.physics.linear`; or a :class:`~jaxbpm.physics.linear.LinearLaw` itself) or ``"cohesive"``
+        (the stress-dependent cohesive law of :mod:`jaxbpm.physics.cohesive`, for cohesive granular samples; DEM
+        only), with its parameters in ``cohesive``; or a :class:`~jaxbpm.physics.cohesive.CohesiveLaw` itself.
       cohesive: a :class:`~jaxbpm.physics.cohesive.CohesiveLaw` or a mapping of its fields: ``c0``, ``kc``,
         ``c_max``, and optionally ``E``, ``nu``, ``friction``, ``restitution``, ``initial_gap``.
       failure_rule: how a bond's stresses combine when it breaks: ``"separate"`` (default; tension and shear

@@ -180,7 +180,8 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
     if pad:
         model, arrays = _padded(model, arrays, counts)
         layers_cap = capacity(n_layers, minimum=4)
-    est = _assemble(sample, model, arrays, counts, n_layers, layers_cap, dofs, first_neighbour, axis)
+    est = _assemble(sample, model, arrays, counts, n_layers, layers_cap, dofs, first_neighbour, axis,
+                    getattr(scene, "linear_law", None))
     if precision == "float32":
         f32 = jnp.float32
         est = dataclasses.replace(est, d=est.d.astype(f32), volume=est.volume.astype(f32),
@@ -303,12 +304,17 @@ def _padded(model, arrays: dict, counts):
     return model, out
 
 
-def _assemble(sample, model, a: dict, counts, n_layers, layers_cap, dofs, first_neighbour, axis) -> Estimator:
+def _assemble(sample, model, a: dict, counts, n_layers, layers_cap, dofs, first_neighbour, axis,
+              linear=None) -> Estimator:
     """The :class:`Estimator` of the (padded) arrays ``a``; with 3 DOF each bond's ``K^nm`` per unit stiffness and
-    the contacts' ``K^nm``."""
+    the contacts' ``K^nm`` (Hertz-Mindlin's, or with a :class:`~jaxbpm.physics.linear.LinearLaw` the linear law's),
+    without a Coulomb limit."""
     dtype = model.positions0.dtype
     pm = sample.particle_material
-    cparams = contact_params(float(pm.E), float(pm.nu), float("inf"), float(pm.restitution), dtype.name, False)
+    if linear is None:
+        cparams = contact_params(float(pm.E), float(pm.nu), float("inf"), float(pm.restitution), dtype.name, False)
+    else:
+        cparams = linear.params(pm, dtype)._replace(friction=jnp.asarray(np.inf, dtype))
     est = Estimator(model=model, pairs=put(a["pairs"]), d=put(a["d"], dtype), contact_d=put(a["cd"], dtype),
                     contact_radii=put(a["crad"], dtype).reshape(-1, 2), contact_params=cparams,
                     volume=put(a["vol"], dtype), valid=put(a["valid"]), include=put(a["include"]),

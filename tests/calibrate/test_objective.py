@@ -25,6 +25,17 @@ def test_base_params_reads_particle_and_cohesive_entries():
         cal.base_params(s, ["bond_colour"])
 
 
+def test_base_params_reads_the_linear_contact_law():
+    from jaxbpm.physics.linear import LinearLaw
+
+    s = jaxbpm.generate.lattice("sc", (2, 2, 2), 1e-3, particle_material={"E": 3e8, "nu": 0.2})
+    scene = UniaxialCompression(strain=0.01, contacts=True, contact_law=LinearLaw(emod=2e9, kratio=1.21))
+    base = cal.base_params(s, ["contact_emod", "contact_kratio"], {"a": UniaxialCompression(), "b": scene})
+    assert float(base["contact_emod"]) == 2e9 and float(base["contact_kratio"]) == 1.21
+    plain = cal.base_params(s, ["contact_emod", "contact_kratio"])  # the law's defaults for the particle material
+    assert float(plain["contact_emod"]) == 3e8 and float(plain["contact_kratio"]) == (2 - 0.2) / (2 * (1 - 0.2))
+
+
 def test_forward_model_is_cached_and_checks_its_arguments(one):
     fwd = cal.forward_model(one, SCENE, "dsm")
     assert fwd is cal.forward_model(one, SCENE, "dsm") and fwd.name == "dsm" and fwd.scenes == ("main",)

@@ -9,7 +9,7 @@ import pytest
 import jaxbpm
 from jaxbpm import InstabilityError
 from jaxbpm.dem.timestep import critical_time_step
-from jaxbpm.physics import rotation
+from jaxbpm.physics import linear, rotation
 from jaxbpm.physics.model import build_model, default_params
 
 R = 1e-3
@@ -51,3 +51,71 @@ def test_a_model_without_stiffness_has_no_time_step():
                                   bond_radius=np.zeros(0))
     with pytest.raises(InstabilityError, match="no stiffness"):
         critical_time_step(build_model(s), default_params(s))
+
+
+def _linear_cluster(damping=False):
+    """Eight spheres on the corners of a cube, overlapping their neighbours by 1 % of R, held together by soft bonds
+    along the edges (the contacts, 400 times stiffer, set the time step), linear contacts."""
+    pos = 2 * R * 0.99 * np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    edges = [[a, b] for a in range(8) for b in range(a + 1, 8) if np.sum(np.abs(pos[a] - pos[b]) > 0) == 1]
+    s = jaxbpm.Sample.from_arrays(pos, R, edges, bond_radius_ratio=0.5, materials={"E": 1e7, "nu": 0.25},
+                                  particle_material={"E": 1e9, "nu": 0.25, "friction": 1e3, "restitution": 0.5})
+    law = linear.LinearLaw(emod=1e9, kratio=1.21)
+    return s, build_model(s, contacts=True, contact_law=law, contact_damping=damping)
+
+
+def _linear_omega2_max(s, model):
+    """omega_max^2 of the cluster's linear contacts (dense M^-1 K, the contact points' slip from the translations
+    and rotations, no sliding)."""
+    n, x0, params = s.n_particles, model.positions0, default_params(s)
+    pairs = jnp.array([[a, b] for a in range(n) for b in range(a + 1, n)])
+    valid = jnp.ones(pairs.shape[0], bool)
+
+    def generalised_forces(z):
+        u, w = z[:3 * n].reshape(n, 3), z[3 * n:].reshape(n, 3)
+        d = x0[pairs[:, 1]] - x0[pairs[:, 0]]
+        nrm = d / jnp.linalg.norm(d, axis=1, keepdims=True)
+        r = model.radii[pairs]
+        slip = (u[pairs[:, 1]] - u[pairs[:, 0]] + jnp.cross(w[pairs[:, 1]], -r[:, 1:] * nrm)
+                - jnp.cross(w[pairs[:, 0]], r[:, :1] * nrm))
+        zero = jnp.zeros_like(slip)
+        f, m, _ = model.forces(x0 + u, rotation.from_rotation_vector(w), params,
+                               contacts=(pairs, valid, zero, slip, zero))
+        return jnp.concatenate([f.ravel(), m.ravel()])
+
+    k = -np.asarray(jax.jacfwd(generalised_forces)(jnp.zeros(6 * n)))
+    mass = np.concatenate([np.repeat(np.asarray(s.mass), 3), np.repeat(np.asarray(s.inertia), 3)])
+    scaled = k / np.sqrt(mass)[:, None] / np.sqrt(mass)[None, :]
+    return float(np.max(np.linalg.eigvalsh(0.5 * (scaled + scaled.T))))
+
+
+def _free_run(model, s, dt, n_steps):
+    n = s.n_particles
+    empty = jnp.zeros((0, 3))
+    load = jaxbpm.dem.Loading(clamped=jnp.zeros(n, bool), velocity=jnp.zeros((n, 3)), wall_points0=empty,
+                              wall_normals=empty, wall_velocity=empty)
+    final, _, _ = jaxbpm.dem.simulate(model, default_params(s), load, dt=dt, n_steps=n_steps, chunk=n_steps)
+    return final
+
+
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the cluster overlaps at rest on purpose
+def test_linear_contacts_time_step_is_safe_and_the_run_stable():
+    s, model = _linear_cluster()
+    exact = 2.0 / np.sqrt(_linear_omega2_max(s, model))
+    dt = critical_time_step(model, default_params(s))
+    assert 0.2 * exact < dt < exact, (dt, exact)  # on the safe side, not far from it
+    # the run (released from the overlapping start, the contacts pushing, the bonds pulling) stays bounded at the
+    # estimate: by the start's strain energy, 1/2 k_n (0.02 R)^2 per contact; well past the exact limit it diverges
+    # (just past it, the growing motion parts the contacts, which pull no particle back)
+    final = _free_run(model, s, dt, 4000)
+    kn = float(linear.normal_stiffness(R, R, 1e9))
+    v = np.asarray(final.velocities)
+    assert np.all(np.isfinite(v))
+    assert 0.5 * float(np.sum(np.asarray(s.mass)[:, None] * v**2)) < 12 * 0.5 * kn * (0.02 * R) ** 2
+    with pytest.raises(InstabilityError):
+        _free_run(model, s, 3.0 * exact, 4000)
+    # the dashpots lower the contacts' part (an explicit scheme's limit shrinks by sqrt(1 + beta^2) - beta; the soft
+    # bonds' part stays)
+    _, damped = _linear_cluster(damping=True)
+    beta = float(damped.contact.beta)
+    assert dt * (np.sqrt(1 + beta**2) - beta) < critical_time_step(damped, default_params(s)) < 0.9 * dt

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxbpm
 from jaxbpm import dsm
@@ -68,6 +69,22 @@ def test_nonlinear_dsm_is_a_pure_differentiable_function(packing):
     ks = np.asarray(jax.jit(jax.vmap(f))(batch))
     np.testing.assert_allclose(ks[0], f({**p, "bond_E": jnp.asarray([1e9])}), rtol=1e-9)
     assert ks[1] > ks[0]
+
+
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the packing overlaps at rest
+def test_linear_contacts_gradient_matches_finite_differences(packing):
+    """The linear law's E* and k_n / k_s as params: the implicit gradient of the nonlinear DSM's K against central
+    finite differences (stiffer contacts, stiffer sample; a larger kratio, softer shear springs, a softer sample)."""
+    scene = UniaxialCompression(strain=0.002, contacts=True, contact_law="linear")
+    f = dsm.stiffness_function(packing, scene, jaxbpm.DSM(dofs=3, tol=1e-10, load_steps=2))
+    p = dict(default_params(packing), contact_emod=jnp.asarray(1e9), contact_kratio=jnp.asarray(1.21))
+    grad = jax.grad(f)(p)
+    for key in ("contact_emod", "contact_kratio"):
+        x = float(p[key])
+        h = 1e-4 * x
+        fd = (f({**p, key: jnp.asarray(x + h)}) - f({**p, key: jnp.asarray(x - h)})) / (2 * h)
+        np.testing.assert_allclose(float(grad[key]), float(fd), rtol=1e-5)
+    assert float(grad["contact_emod"]) > 0 > float(grad["contact_kratio"])
 
 
 _VMAP_REPEATS = """

@@ -43,3 +43,18 @@ def test_sliding_contacts_match_the_dem_where_no_slip_does_not(packing):
     b = jaxbpm.solve(packing, scene, method="dsm", slip=False, tol=1e-6)
     assert a.stats["converged"] and b.stats["converged"]
     np.testing.assert_allclose(a.stiffness, b.stiffness, rtol=1e-5)
+
+
+@pytest.mark.xdist_group(SHARED)
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the packing overlaps at rest
+def test_linear_contacts_dsm_matches_dem(packing):
+    """PFC's linear contacts: the DSM (the same law, static) against the DEM on a packing whose contacts carry most
+    of the stiffness (half of its bonded pairs overlap slightly at rest: a linear contact is stiff from first touch)."""
+    scene = UniaxialCompression(strain=0.002, contacts=True, contact_law="linear")
+    a = jaxbpm.solve(packing, scene, method="dsm")
+    b = jaxbpm.solve(packing, scene, method="dem")
+    bonds = jaxbpm.solve(packing, UniaxialCompression(strain=0.002), method="dsm")
+    assert a.stats["converged"] and a.stats["nonlinear"]
+    share = 1 - bonds.stiffness / a.stiffness  # the contacts' share
+    assert share > 0.5, share
+    assert abs(a.stiffness / b.stiffness - 1) < 0.01, (a.stiffness, b.stiffness)

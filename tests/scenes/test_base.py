@@ -205,3 +205,29 @@ def test_stop_after_peak_defaults_to_seven_tenths():
         assert cls().stop_after_peak == 0.7 and cls(stop_after_peak=None).stop_after_peak is None
         assert cls(stop_after_peak=0.8) != cls()
     assert UniaxialCompression.to_failure(stop_after_peak=0.75).stop_after_peak == 0.75
+
+
+def test_linear_contact_law_on_every_scene(column):
+    """contact_law="linear" (or a LinearLaw) on each scene: its model runs the linear law (also the contact-free
+    model a static solve starts from, whose contacts it switches on later), contacts required."""
+    from jaxbpm.physics.linear import LinearLaw, LinearParams
+
+    law = LinearLaw(emod=3e9, kratio=1.21)
+    for scene in (UniaxialCompression(contacts=True, contact_law="linear"), BrazilianDisc(contact_law=law),
+                  ThreePointBending(contact_law="linear")):
+        assert scene.cohesive_law is None and isinstance(scene.linear_law, LinearLaw)
+        for model in (scene.model(column), scene.model(column, contacts=False)):
+            assert model.contact_law == "linear" and isinstance(model.contact, LinearParams)
+    assert float(BrazilianDisc(contact_law=law).model(column).contact.emod) == 3e9
+    assert UniaxialCompression(contacts=True).model(column).contact_law == "hertz"
+    assert ThreePointBending().linear_law is None
+    with pytest.raises(SceneError, match="contact_law='linear' needs contacts=True"):
+        UniaxialCompression(contact_law="linear")
+    with pytest.raises(SceneError, match="contact_law='linear' needs contacts=True"):
+        ThreePointBending(contacts=False, contact_law=law)
+    with pytest.raises(SceneError, match="not the cohesive law"):
+        ThreePointBending(contact_law="cohesive")
+    with pytest.raises(SceneError, match="cohesive contact parameters were given with contact_law='linear'"):
+        UniaxialCompression(contacts=True, contact_law="linear", cohesive={"c0": 1.0})
+    with pytest.raises(SceneError, match="unknown contact law"):
+        BrazilianDisc(contact_law="Linear")

@@ -144,3 +144,26 @@ def test_bad_input_is_reported(lattice, packing):
                                        bond_radius=0.1)
     with pytest.raises(SampleError, match="no bonds"):
         ste.estimator(lonely)
+
+
+def test_linear_contacts_enter_with_their_own_stiffness():
+    """contact_law="linear": each active contact's K^nm is the linear law's (k_n along n, k_s across, less the
+    normal force's turn F_n / |d| across), not Hertz-Mindlin's."""
+    from jaxbpm.physics.linear import LinearLaw, normal_stiffness
+
+    s = jaxbpm.generate.lattice("sc", (3, 3, 3), R, bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25})
+    law = LinearLaw(emod=2e9, kratio=1.5)
+    est = ste.estimator(s, UniaxialCompression(strain=0.002, contacts=True, contact_law=law))
+    hertz = ste.estimator(s, UniaxialCompression(strain=0.002, contacts=True))
+    nc = est.contacts
+    assert nc > 0 and nc == hertz.contacts
+    d = np.asarray(est.contact_d)[:nc]
+    dist = np.linalg.norm(d, axis=1)
+    n = d / dist[:, None]
+    kn = float(normal_stiffness(R, R, 2e9))
+    fn = kn * (2 * R - dist)
+    across = np.eye(3)[None] - n[:, :, None] * n[:, None, :]
+    expected = kn * n[:, :, None] * n[:, None, :] + (kn / 1.5 - fn / dist)[:, None, None] * across
+    k = np.asarray(est.contact_k)[:nc].reshape(nc, 3, 3)
+    np.testing.assert_allclose(k, expected, rtol=1e-9, atol=1e-9 * kn)
+    assert not np.allclose(np.abs(np.asarray(hertz.contact_k)[:nc]), np.abs(k.reshape(nc, 9)), rtol=1e-3)
