@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from jaxbpm import dem, dsm, ste
+from jaxbpm._geometry import check_three_d, SOLVERS_2D
 from jaxbpm._options import METHODS, resolve_options, SolverOptions
 from jaxbpm.auto import solve_auto
 from jaxbpm.elastic_field import dsm_field
@@ -63,10 +64,13 @@ def _solve(sample, scene, method, params, options) -> Result:
     if isinstance(scene, str):  # "ucs", "bts", "tpb", "uniaxial", ...: jaxbpm.scenes.names
         scene = scene_from_name(scene)
     if isinstance(method, str) and method == "auto":  # the cheapest solver expected to meet tol: jaxbpm.auto
+        check_three_d(sample, "method='auto'")
         return solve_auto(sample, scene, params, options, solve=_dispatch)
     method = resolve_options(method, options)
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    if method.method not in SOLVERS_2D:
+        check_three_d(sample, f"the {method.method.upper()}")
     _check_supported(scene, method.method)
     if params is not None:  # one validation path for every solver, once per solve
         params = check_params(params, sample)

@@ -99,3 +99,14 @@ def test_a_static_solver_refuses_a_failure_scene_at_once(lattice, method, monkey
         with pytest.raises(SceneError, match=rf"the {method.upper()} gives the elastic range only.*method='dem' "
                                              "gives the strength"):
             jaxbpm.solve(lattice, scene, method)
+
+
+@pytest.mark.parametrize("method", ["dem", "dsm", "ste", "auto"])
+def test_a_two_dimensional_sample_is_refused_where_no_solver_models_it(method):
+    from jaxbpm._geometry import SOLVERS_2D
+
+    flat = jaxbpm.generate.lattice("square", (4, 4))
+    if method in SOLVERS_2D:
+        pytest.skip(f"the {method} solves 2D samples")
+    with pytest.raises(SceneError, match="in 2D is not yet available"):
+        jaxbpm.solve(flat, jaxbpm.scenes.UniaxialCompression(), method)

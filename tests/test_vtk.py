@@ -87,3 +87,13 @@ def test_export_vtk_writes_the_particle_types(tmp_path):
     sample = _chain(types=[5, 1, 1, 2, 2, 2])
     mesh = meshio.read(io.export_vtk(tmp_path / "t.vtu", sample))
     np.testing.assert_array_equal(mesh.point_data["type"], [5, 1, 1, 2, 2, 2])
+
+
+def test_export_vtk_two_dimensional_discs_at_z_zero(tmp_path):
+    from jaxbpm.generate import lattice
+
+    s = lattice("square", (3, 2), 1e-3)
+    mesh = meshio.read(io.export_vtk(tmp_path / "discs.vtu", s))
+    assert mesh.points.shape == (6, 3)
+    assert np.array_equal(mesh.points[:, :2], s.positions) and np.all(mesh.points[:, 2] == 0.0)
+    assert np.allclose(mesh.point_data["radius"], 1e-3)

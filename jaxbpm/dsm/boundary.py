@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm._compile import put
+from jaxbpm._geometry import check_three_d
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.model import Model
 
@@ -25,7 +26,11 @@ def free_mask(model: Model, scene, sample):
 
     Returns:
       ``(free [n, nd], fixed [n], driven [n])``.
+
+    Raises:
+      SceneError: a two-dimensional sample.
     """
+    check_three_d(sample, "the DSM")
     nd = 6 if model.rotations else 3
     n = model.n
     free = np.ones((n, nd), bool)

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm._compile import capacity, put, setup_jit, size_class
+from jaxbpm._geometry import check_three_d
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import tangent
 from jaxbpm.physics.model import Model, contact_params
@@ -162,6 +163,7 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
     """
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    check_three_d(sample, "the STE")
     if dofs not in (3, 6):
         raise SceneError(f"dofs must be 3 or 6 per particle, got {dofs!r}")
     if precision not in ("float64", "float32"):
