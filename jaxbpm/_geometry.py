@@ -118,7 +118,7 @@ def solid_measure(radii: np.ndarray, dim: int) -> float:
 
 
 #: what solves a two-dimensional sample so far (see :func:`check_three_d`)
-SOLVERS_2D: tuple[str, ...] = ()
+SOLVERS_2D: tuple[str, ...] = ("dsm",)
 
 
 def check_three_d(sample, what: str) -> None:
@@ -135,7 +135,8 @@ def check_three_d(sample, what: str) -> None:
     from jaxbpm.errors import SceneError
 
     if getattr(sample, "dim", 3) == 2:
-        done = (f"2D samples are solved by {' and '.join(SOLVERS_2D)} so far; " if SOLVERS_2D else
+        names = " and ".join(f"the {m.upper()}" for m in SOLVERS_2D)
+        done = (f"2D samples are solved by {names} (bonds only, clamped layers) so far; " if SOLVERS_2D else
                 "2D samples (discs) can be built, stored and exported, and their bond law evaluated "
                 "(jaxbpm.physics.model.build_model), but no solver takes them yet: ")
         raise SceneError(f"{done}{what} in 2D is not yet available (the sample's positions are [n, 2])")

@@ -28,10 +28,11 @@ def free_mask(model: Model, scene, sample):
       ``(free [n, nd], fixed [n], driven [n])``.
 
     Raises:
-      SceneError: a two-dimensional sample.
+      SceneError: a two-dimensional sample between walls.
     """
-    check_three_d(sample, "the DSM")
-    nd = 6 if model.rotations else 3
+    if scene.uses_walls:
+        check_three_d(sample, "the DSM between walls")
+    nd = model.dofs
     n = model.n
     free = np.ones((n, nd), bool)
     if scene.uses_walls:
@@ -134,6 +135,6 @@ def affine_field(sample, model: Model, ax, delta):
       ``[n, nd]`` the displacements.
     """
     x = np.asarray(sample.positions)[:, ax]
-    u = np.zeros((model.n, 6 if model.rotations else 3))
+    u = np.zeros((model.n, model.dofs))
     u[:, ax] = -delta * (x - x.min()) / max(x.max() - x.min(), 1e-300)
     return jnp.asarray(u, model.positions0.dtype)
