@@ -64,7 +64,6 @@ def _solve(sample, scene, method, params, options) -> Result:
     if isinstance(scene, str):  # "ucs", "bts", "tpb", "uniaxial", ...: jaxbpm.scenes.names
         scene = scene_from_name(scene)
     if isinstance(method, str) and method == "auto":  # the cheapest solver expected to meet tol: jaxbpm.auto
-        check_three_d(sample, "method='auto'")
         return solve_auto(sample, scene, params, options, solve=_dispatch)
     method = resolve_options(method, options)
     if not isinstance(sample, Sample):
