@@ -101,7 +101,7 @@ def test_a_static_solver_refuses_a_failure_scene_at_once(lattice, method, monkey
             jaxbpm.solve(lattice, scene, method)
 
 
-@pytest.mark.parametrize("method", ["dem", "ste"])
+@pytest.mark.parametrize("method", ["dem"])
 def test_a_two_dimensional_sample_is_refused_where_no_solver_models_it(method):
     from jaxbpm._geometry import SOLVERS_2D
 
