@@ -28,7 +28,8 @@ DISC_SHAPES = ("rectangle", "disc", "beam")
 
 _DEFAULT_ASPECT = {"rectangle": (1.0, 1.0), "beam": (4.0, 1.0), "disc": None}
 _SQUARE_OFFSETS = np.array([[1, 0], [0, 1]])
-# hexagonal lattice on a skewed grid: site (i, j) at (i + j / 2, j sqrt(3) / 2) * 2 R; neighbours (1, 0), (0, 1), (-1, 1)
+# hexagonal lattice on a skewed grid: site (i, j) at (i + j / 2, j sqrt(3) / 2) * 2 R; neighbours (1, 0), (0, 1),
+# (-1, 1)
 _HEX_OFFSETS = np.array([[1, 0], [0, 1], [-1, 1]])
 
 

@@ -409,7 +409,8 @@ def load_sample(path, *, verify: bool = True) -> Sample:
             data["positions"], data["radii"], data["bonds"], data["bond_radius"],
             bond_material=data["bond_material"], materials=data["materials"],
             particle_material=data["particle_material"], bond_contact=data["bond_contact"], domain=data["domain"],
-            types=data["types"], wide_bonds=True, thickness=data["thickness"])  # (a file of a built sample: its bonds were accepted then)
+            types=data["types"], wide_bonds=True,  # (a file of a built sample: its bonds were accepted then)
+            thickness=data["thickness"])
     except SampleError as exc:
         raise SampleError(f"{path}: {exc}") from exc
     if derived is not None:

@@ -322,8 +322,9 @@ class Sample:
         Args:
           **changes: keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
             ``bond_radius_ratio``, ``bond_material``, ``materials``, ``density``, ``particle_material``,
-            ``bond_contact``, ``domain``, ``types``, ``wide_bonds``, ``thickness``). New ``bonds`` need a new ``bond_radius`` or
-            ``bond_radius_ratio``. The bond radii are checked against the radii again only where one of them changes.
+            ``bond_contact``, ``domain``, ``types``, ``wide_bonds``, ``thickness``). New ``bonds`` need a new
+            ``bond_radius`` or ``bond_radius_ratio``. The bond radii are checked against the radii again only where
+            one of them changes.
 
         Returns:
           The sample, its derived quantities recomputed.
@@ -405,7 +406,8 @@ class Sample:
                                   pick(self.bond_radius, bond_rows), bond_material=pick(self.bond_material, bond_rows),
                                   materials=self.materials, particle_material=self.particle_material,
                                   bond_contact=self.bond_contact, domain=self.domain, types=pick(self.types, rows),
-                                  wide_bonds=True, thickness=self.thickness)  # (bonds of this sample, accepted when it was built)
+                                  wide_bonds=True,  # (bonds of this sample, accepted when it was built)
+                                  thickness=self.thickness)
 
     def largest_cluster(self) -> "Sample":
         """The sample without the particles outside its largest bonded cluster (loose particles and fragments).

@@ -3,9 +3,9 @@
 A :class:`Model` holds the sample's arrays in JAX form and a few static switches:
 
 * ``rotations``: particles carry orientations (6 DOF each) or not (3 DOF: bonds then act on relative translation
-  only, as in the 3N direct stiffness method of Jarolin & Dosta 2020). A two-dimensional sample's discs have 3 DOF
-  (u_x, u_y, theta) with rotations and 2 without; their bonds follow :mod:`jaxbpm.physics.bond2d`. Default: on whenever the sample has bonds (they
-  transmit bending and twisting moments) or contacts with friction.
+  only, as in the 3N direct stiffness method of Jarolin & Dosta 2020). Default: on whenever the sample has bonds (they
+  transmit bending and twisting moments) or contacts with friction. A two-dimensional sample's discs have 3 DOF
+  (u_x, u_y, theta) with rotations and 2 without; their bonds follow :mod:`jaxbpm.physics.bond2d`.
 * ``contacts``: particle contacts (with a neighbour list in the DEM) or none; ``contact_law``: ``"hertz"``
   (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default) or ``"cohesive"`` (the stress-dependent cohesive law of
   Irazabal et al. 2023, :mod:`jaxbpm.physics.cohesive`, whose scalars live in ``cohesive``).
