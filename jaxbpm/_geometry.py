@@ -118,7 +118,7 @@ def solid_measure(radii: np.ndarray, dim: int) -> float:
 
 
 #: what solves a two-dimensional sample so far (see :func:`check_three_d`)
-SOLVERS_2D: tuple[str, ...] = ("dsm", "ste")
+SOLVERS_2D: tuple[str, ...] = ("dsm", "ste", "dem")
 
 
 def check_three_d(sample, what: str) -> None:

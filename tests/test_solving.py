@@ -101,12 +101,11 @@ def test_a_static_solver_refuses_a_failure_scene_at_once(lattice, method, monkey
             jaxbpm.solve(lattice, scene, method)
 
 
-@pytest.mark.parametrize("method", ["dem"])
-def test_a_two_dimensional_sample_is_refused_where_no_solver_models_it(method):
-    from jaxbpm._geometry import SOLVERS_2D
-
+@pytest.mark.parametrize("scene,method", [(jaxbpm.scenes.UniaxialCompression.to_failure(axis=1), "dem"),
+                                          (jaxbpm.scenes.UniaxialCompression(axis=1, boundary="walls"), "dsm")])
+def test_a_two_dimensional_sample_is_refused_where_no_solver_models_it(scene, method):
     flat = jaxbpm.generate.lattice("square", (4, 4))
-    if method in SOLVERS_2D:
-        pytest.skip(f"the {method} solves 2D samples")
-    with pytest.raises(SceneError, match="in 2D is not yet available"):
-        jaxbpm.solve(flat, jaxbpm.scenes.UniaxialCompression(axis=1), method)
+    with pytest.raises(SceneError, match="not yet available"):
+        jaxbpm.solve(flat, scene, method)
+    with pytest.raises(SceneError, match="start='elastic'"):
+        jaxbpm.solve(flat, jaxbpm.scenes.UniaxialCompression(axis=1), "dem", start="elastic")

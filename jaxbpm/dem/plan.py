@@ -14,7 +14,6 @@ from typing import Any
 import numpy as np
 
 from jaxbpm._compile import SetupCache, size_class
-from jaxbpm._geometry import check_three_d
 from jaxbpm.dem.integrator import progress_printer
 from jaxbpm.dem.state import DEMState, pad_loading
 from jaxbpm.dem.timestep import critical_time_step
@@ -132,9 +131,8 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
         The :class:`Plan`.
 
     Raises:
-        SceneError: ``safety`` or ``dt`` out of range, or a two-dimensional sample.
+        SceneError: ``safety`` or ``dt`` out of range, or contacts or walls asked of a two-dimensional sample.
     """
-    check_three_d(sample, "the DEM")
     members = list(params) if not isinstance(params, Mapping) else [params]
     breaks = sample_breaks(sample, scene.breakage)
     # bonds only (no contacts, no walls): the model is padded to the sample's size class, so that the next sample of
