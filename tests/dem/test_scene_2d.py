@@ -41,3 +41,15 @@ def test_two_disc_bond_breaks_at_the_analytic_load():
     slope = kn * np.sin(a) ** 2 + kt * np.cos(a) ** 2
     assert abs(r.force[last] / (slope * r.displacement[last]) - 1) < 0.01
     assert r.stats["broken_shear"] == 1 and r.stats["broken_tensile"] == 0
+
+
+def test_a_2d_run_writes_its_vtu_series_at_z_zero(tmp_path):
+    import meshio
+
+    s = lattice("square", (4, 6))
+    r = jaxbpm.solve(s, UniaxialCompression(axis=1, strain=1e-4), "dem", snapshots=2, vtu=tmp_path / "run.pvd")
+    last = meshio.read(sorted(tmp_path.glob("*.vtu"))[-1])
+    assert last.points.shape == (s.n_particles, 3) and np.all(last.points[:, 2] == 0.0)
+    # the last frame is the final state: its displacement is the run's
+    moved = np.asarray(r.state.positions) - np.asarray(s.positions)
+    assert np.allclose(last.point_data["displacement"][:, :2], moved, rtol=0, atol=1e-15)
