@@ -26,21 +26,23 @@ def morton_order(positions, bits: int = 10) -> np.ndarray:
     Particles close in space get close indices, so per-bond gathers and per-particle sums touch memory in runs.
 
     Args:
-      positions: ``[n, 3]`` points (any real dtype; read as float64).
+      positions: ``[n, 3]`` (or ``[n, 2]``) points (any real dtype; read as float64).
       bits: cells per axis are ``2**bits``.
 
     Returns:
       ``[n]`` int64 permutation (ties keep their order).
     """
-    x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    x = np.asarray(positions, dtype=np.float64)
+    dim = x.shape[-1] if x.ndim == 2 and x.shape[-1] in (2, 3) else 3
+    x = x.reshape(-1, dim)
     if len(x) == 0:
         return np.zeros(0, np.int64)
     lo, span = x.min(axis=0), np.ptp(x, axis=0)
     q = np.floor((x - lo) / np.where(span > 0, span, 1.0) * (2**bits - 1)).astype(np.uint64)
     code = np.zeros(len(x), np.uint64)
     for bit in range(bits):
-        for axis in range(3):
-            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+        for axis in range(dim):
+            code |= ((q[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(dim * bit + axis)
     return np.argsort(code, kind="stable")
 
 

@@ -103,17 +103,18 @@ def checked_positions(positions) -> np.ndarray:
     """The particle centres, checked.
 
     Args:
-      positions: ``[n, 3]`` particle centres [m], ``n >= 1``.
+      positions: ``[n, 3]`` sphere centres or ``[n, 2]`` disc centres (a two-dimensional sample) [m], ``n >= 1``.
 
     Returns:
-      ``[n, 3]`` float64.
+      ``[n, 3]`` or ``[n, 2]`` float64.
 
     Raises:
       SampleError: wrong shape, no particles, or values that are not finite.
     """
     pos = float_array("positions", positions)
-    if pos.ndim != 2 or pos.shape[1] != 3:
-        raise SampleError(f"positions must have shape [n, 3], got {pos.shape}")
+    if pos.ndim != 2 or pos.shape[1] not in (2, 3):
+        raise SampleError(f"positions must have shape [n, 3] (spheres) or [n, 2] (discs of a two-dimensional "
+                          f"sample), got {pos.shape}")
     if pos.shape[0] == 0:
         raise SampleError("positions: the sample has no particles")
     finite("positions", pos)
@@ -203,7 +204,7 @@ def bond_lengths(pos: np.ndarray, rad: np.ndarray, b: np.ndarray) -> np.ndarray:
     float64 round-off of the positions they are differences of.
 
     Args:
-      pos: ``[n, 3]`` checked positions [m].
+      pos: ``[n, 3]`` (or ``[n, 2]``) checked positions [m].
       rad: ``[n]`` checked radii [m].
       b: ``[nb, 2]`` checked bonds.
 

@@ -13,7 +13,7 @@ from jaxbpm._atomic import atomic_write
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Sample
 
-__all__ = ["export_vtk", "user_data"]
+__all__ = ["export_vtk", "user_data", "points_3d"]
 
 _VTK_FORMATS = {".vtu": "vtu", ".vtk": "vtk"}
 
@@ -53,6 +53,21 @@ def user_data(kind: str, data: Mapping[str, Any] | None, count: int, what: str,
     return out
 
 
+def points_3d(positions) -> np.ndarray:
+    """Points as VTK stores them: ``[n, 3]`` float64, a two-dimensional sample's ``[n, 2]`` discs at z = 0.
+
+    Args:
+      positions: ``[n, 3]`` or ``[n, 2]`` centres [m].
+
+    Returns:
+      ``[n, 3]`` float64.
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+    if pos.shape[1] == 2:
+        pos = np.column_stack([pos, np.zeros(len(pos))])
+    return pos
+
+
 def _types(sample: Sample) -> np.ndarray:
     """The particle types as int32 (1 where the sample has none)."""
     return np.ones(sample.n_particles, np.int32) if sample.types is None else np.asarray(sample.types, np.int32)
@@ -73,7 +88,10 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
     2 shear), then ``bond_data``. VTK stores cell data for every cell, so the vertex cells carry fillers: NaN for
     the float fields (user ``bond_data`` is written as float64 so it can hold NaN) and -1 for the integer ones.
     In ParaView, glyph the points with spheres scaled by ``radius`` and show the lines as tubes; colour them by
-    ``break_mode`` (or threshold ``broken`` at 1) to see the cracks of a failure run.
+    ``break_mode`` (or threshold ``broken`` at 1) to see the cracks of a failure run. A two-dimensional
+    sample's discs are points at z = 0 (VTK's points have three coordinates) with their ``radius``: glyph them with
+    ParaView's 2D Glyph (a filled circle) scaled by ``radius``, or with spheres, which cut the plane z = 0 in the
+    discs.
 
     Args:
       path: ``*.vtu`` (VTK XML unstructured grid, preferred) or ``*.vtk`` (legacy); the suffix picks the format.
@@ -131,6 +149,5 @@ def export_vtk(path, sample: Sample, *, point_data: Mapping[str, Any] | None = N
     for name, arr in bdata.items():
         filler = np.full((n,) + arr.shape[1:], -1 if np.issubdtype(arr.dtype, np.integer) else np.nan, dtype=arr.dtype)
         cell_data[name] = [filler, arr] if nb else [filler]
-    mesh = meshio.Mesh(np.asarray(sample.positions, dtype=np.float64), cells, point_data=pdata,
-                       cell_data=cell_data)
+    mesh = meshio.Mesh(points_3d(sample.positions), cells, point_data=pdata, cell_data=cell_data)
     return atomic_write(target, lambda tmp: meshio.write(tmp, mesh, file_format=file_format))

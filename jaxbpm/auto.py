@@ -46,6 +46,7 @@ from typing import Callable
 import numpy as np
 
 from jaxbpm import dsm
+from jaxbpm._geometry import check_three_d
 from jaxbpm._options import resolve_options, SolverOptions
 from jaxbpm.dsm.options import DSM
 from jaxbpm.errors import SceneError, SolveError
@@ -400,10 +401,26 @@ def solve_auto(sample, scene, params, options: dict, solve: Callable[..., Result
         raise SceneError(f"throw must be True or False, got {throw!r}")
     if params is not None:  # once per solve: the solvers below take them as they are
         params = check_params(params, sample)
+    if sample.dim == 2:
+        return _plane(sample, scene, params, throw, solve, tol)
     t0 = time.perf_counter()
     choice = choose(sample, scene, tol, params=params)
     result, fallback, total, compile_time = _answer(sample, choice, params, options, throw, solve, t0)
     _account(result, choice, fallback, total, compile_time)
+    return result
+
+
+def _plane(sample, scene, params, throw, solve, tol) -> Result:
+    """``method="auto"`` on a two-dimensional sample: the linear DSM (exact for the linear model of bonds between
+    clamped layers, and the one solver of 2D samples so far); other scenes are refused."""
+    if scene.breakage is True or scene.contacts or scene.uses_walls:
+        check_three_d(sample, "method='auto' on a scene with breakage, contacts or walls")
+    result = solve(sample, scene, params, resolve_options("dsm", {"throw": throw}))
+    result.stats["method_choice"] = {
+        "method": "dsm", "route": "dsm_bonds", "options": {}, "tol": tol, "contact_share": None,
+        "expected_error": None, "probe_time": 0.0, "reused_probe": False, "geometric_error": None,
+        "why": "a two-dimensional sample with bonds only between clamped layers: the linear DSM on the bonds alone "
+               "(the solver of 2D samples so far)"}
     return result
 
 

@@ -1,7 +1,10 @@
 """Sample generators: regular lattices, random dense packings, and bond-material assignment.
 
 * :func:`lattice` builds simple-cubic (``"sc"``) or face-centred-cubic (``"fcc"``) packings of equal touching
-  spheres, bonded between nearest neighbours (exact, integer arithmetic).
+  spheres, bonded between nearest neighbours (exact, integer arithmetic), and in two dimensions square
+  (``"square"``) or hexagonal (``"hex"``) lattices of discs (:func:`jaxbpm.discs.lattice2d`).
+* :func:`disc_packing` (and the shortcut :func:`rectangle`) fills a rectangle, a disc or a beam with polydisperse
+  discs: a two-dimensional sample (:mod:`jaxbpm.discs`).
 * :func:`random_packing` (and the shortcuts :func:`box`, :func:`cylinder`, :func:`beam`) fills a box, a cylinder
   or a beam with polydisperse spheres: random insertion, then force-biased overlap removal with FIRE on a jax-md
   neighbour list, then a bond between every pair closer than a small surface gap.
@@ -23,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from jaxbpm._spatial import morton_order
+from jaxbpm.discs import contact_pairs, disc_packing, lattice2d, LATTICES_2D
 from jaxbpm.errors import SampleError
 from jaxbpm.packing import jamming_fraction, Walls, pack, pack_auto
 from jaxbpm.sample import BondMaterials, Domain, Sample
@@ -30,6 +34,8 @@ from jaxbpm.sample import BondMaterials, Domain, Sample
 __all__ = [
     "lattice",
     "random_packing",
+    "disc_packing",
+    "rectangle",
     "box",
     "morton_order",
     "cylinder",
@@ -54,15 +60,16 @@ _SC_OFFSETS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]])
 _FCC_OFFSETS = np.array([[1, 1, 0], [1, -1, 0], [1, 0, 1], [1, 0, -1], [0, 1, 1], [0, 1, -1]])
 
 
-def lattice(kind: str, cells: tuple[int, int, int], radius: float = 1e-3, *, bond_radius_ratio: float = 0.5,
+def lattice(kind: str, cells: tuple[int, ...], radius: float = 1e-3, *, bond_radius_ratio: float = 0.5,
             **sample_kw) -> Sample:
-    """A regular packing of equal touching spheres, bonded between nearest neighbours.
+    """A regular packing of equal touching spheres (or discs), bonded between nearest neighbours.
 
     Args:
       kind: ``"sc"``: particles at ``(i, j, k) * 2 radius`` for ``i < nx``, ``j < ny``, ``k < nz``
         (``nx * ny * nz`` particles, up to 6 bonds each). ``"fcc"``: sites ``(i, j, k) * a / 2`` with lattice
         constant ``a = 2 sqrt(2) radius``, ``0 <= i <= 2 nx`` (likewise j, k) and ``i + j + k`` even
-        (``((2nx+1)(2ny+1)(2nz+1) + 1) / 2`` particles, up to 12 bonds each).
+        (``((2nx+1)(2ny+1)(2nz+1) + 1) / 2`` particles, up to 12 bonds each). ``"square"``, ``"hex"``: a
+        two-dimensional lattice of discs, see :func:`jaxbpm.discs.lattice2d` (``cells = (nx, ny)``).
       cells: ``(nx, ny, nz)``, each >= 1 (SC: particles per direction; FCC: unit cells per direction).
       radius: particle radius [m].
       bond_radius_ratio: bond radius / particle radius.
@@ -74,8 +81,10 @@ def lattice(kind: str, cells: tuple[int, int, int], radius: float = 1e-3, *, bon
     """
     _check_sample_kw(sample_kw)
     kind = str(kind).lower()
+    if kind in LATTICES_2D:
+        return lattice2d(kind, cells, radius, bond_radius_ratio=bond_radius_ratio, **sample_kw)
     if kind not in ("sc", "fcc"):
-        raise SampleError(f"lattice: kind must be 'sc' or 'fcc', got {kind!r}")
+        raise SampleError(f"lattice: kind must be 'sc' or 'fcc' (spheres), 'square' or 'hex' (discs), got {kind!r}")
     cells = _check_cells(cells)
     radius = _positive("radius", radius)
     if kind == "sc":
@@ -285,6 +294,19 @@ def box(n: int, **kw) -> Sample:
     return random_packing(n, shape="box", **kw)
 
 
+def rectangle(n: int, **kw) -> Sample:
+    """A random packing of discs filling a rectangle: a two-dimensional sample.
+
+    Args:
+      n: number of discs.
+      **kw: the keywords of :func:`jaxbpm.discs.disc_packing` (``aspect`` default ``(1, 1)``, ``thickness``, ...).
+
+    Returns:
+      The sample, see :func:`jaxbpm.discs.disc_packing`.
+    """
+    return disc_packing(n, shape="rectangle", **kw)
+
+
 def cylinder(n: int, **kw) -> Sample:
     """A random packing filling a z-axis cylinder.
 
@@ -418,35 +440,17 @@ def from_shape(shape: str, n: int, *, seed: int = 0, progress=False, **kw) -> Sa
 
 # ----------------------------------------------------------------------------------------------------------- bonds
 def bond_pairs(positions, radii, gap: float) -> np.ndarray:
-    """Pairs of spheres whose surface gap ``|x_j - x_i| - r_i - r_j`` is below ``gap``.
+    """Pairs of spheres (or discs) whose surface gap ``|x_j - x_i| - r_i - r_j`` is below ``gap``.
 
     Args:
-      positions: ``[n, 3]`` centres [m].
+      positions: ``[n, 3]`` centres [m] (``[n, 2]``: discs).
       radii: ``[n]`` radii [m].
       gap: largest surface gap of a bonded pair [m] (overlapping pairs, negative gaps, are included).
 
     Returns:
       ``[nb, 2]`` int32 particle indices, ``i < j``, sorted lexicographically.
     """
-    from scipy.spatial import cKDTree
-
-    pos = np.asarray(positions, dtype=np.float64)
-    rad = np.asarray(radii, dtype=np.float64)
-    if pos.ndim != 2 or pos.shape[1] != 3 or rad.shape != (pos.shape[0],):
-        raise SampleError(f"bond_pairs: need positions [n, 3] and radii [n], got {pos.shape} and {rad.shape}")
-    gap = float(gap)
-    if not np.isfinite(gap):
-        raise SampleError(f"bond_pairs: gap must be finite, got {gap}")
-    none = np.zeros((0, 2), dtype=np.int32)
-    reach = 2.0 * float(rad.max(initial=0.0)) + gap
-    if pos.shape[0] < 2 or reach <= 0:
-        return none
-    pairs = cKDTree(pos).query_pairs(r=reach, output_type="ndarray")
-    if pairs.size == 0:
-        return none
-    i, j = pairs[:, 0], pairs[:, 1]
-    dist = np.linalg.norm(pos[j] - pos[i], axis=1)
-    return _sorted_pairs(pairs[dist - rad[i] - rad[j] < gap])
+    return contact_pairs(positions, radii, gap)
 
 
 # ------------------------------------------------------------------------------------------------------- materials

@@ -15,7 +15,7 @@ File layout (all quantities SI; every dataset carries a ``units`` attribute):
 ==============================  ===========  ==========  =============================================
 name                            shape        units       meaning
 ==============================  ===========  ==========  =============================================
-``/positions``                  ``[n, 3]``   m           particle centres
+``/positions``                  ``[n, 3]``   m           particle centres (``[n, 2]``: a 2D sample)
 ``/radii``                      ``[n]``      m           particle radii
 ``/bonds``                      ``[nb, 2]``  1           particle indices of each bond (i < j), int32
 ``/bond_radius``                ``[nb]``     m           bond radius
@@ -35,8 +35,9 @@ name                            shape        units       meaning
 
 A file written before ``/types`` existed loads with every particle type 1 and verifies as before.
 
-Root attributes: ``format``, ``format_version``, ``jaxbpm_version``, ``units`` (a note), ``bond_contact``, and
-``domain_kind`` / ``domain_lo`` / ``domain_hi`` [m] when the sample has a domain (absent otherwise).
+Root attributes: ``format``, ``format_version``, ``jaxbpm_version``, ``units`` (a note), ``bond_contact``,
+``domain_kind`` / ``domain_lo`` / ``domain_hi`` [m] when the sample has a domain (absent otherwise), and
+``thickness`` [m], the discs' thickness, for a two-dimensional sample (absent for spheres).
 
 Checks on load. The file starts with a 512-byte HDF5 user block (HDF5 readers skip it) whose first line,
 ``jaxbpm-sample crc32=XXXXXXXX bytes=N``, holds the CRC-32 (zlib) and length of the rest of the file: ``load_sample``
@@ -102,6 +103,8 @@ def _write_inputs(f, sample: Sample) -> None:
     f.attrs["jaxbpm_version"] = __version__
     f.attrs["units"] = _UNITS_NOTE
     f.attrs["bond_contact"] = sample.bond_contact
+    if sample.thickness is not None:
+        f.attrs["thickness"] = np.float64(sample.thickness)
     if sample.domain is not None:
         f.attrs["domain_kind"] = str(sample.domain.kind)
         f.attrs["domain_lo"] = np.asarray(sample.domain.lo, dtype=np.float64)
@@ -130,7 +133,8 @@ def _inputs_crc32(sample: Sample) -> int:
     ``bonds``, ``bond_material`` (int32), ``bond_radius``, the material table ``E``, ``nu``, ``tensile_strength``,
     ``shear_strength`` and the particle material's scalars (float64), each array preceded by its shape (int64),
     little-endian; then ``bond_contact`` and the domain (``kind``, ``lo``, ``hi``; ``none`` without one); then the
-    particle ``types`` (int32) where any is not 1 (so files written before types existed keep their CRC)."""
+    particle ``types`` (int32) where any is not 1 (so files written before types existed keep their CRC); then the
+    thickness (float64) of a two-dimensional sample."""
     crc = 0
 
     def add(arr, dtype):
@@ -155,6 +159,8 @@ def _inputs_crc32(sample: Sample) -> int:
     types = _types(sample)
     if np.any(types != 1):
         add(types, np.int32)
+    if sample.thickness is not None:
+        add([sample.thickness], np.float64)
     return crc
 
 
@@ -294,6 +300,16 @@ def _read(group, name: str, path: pathlib.Path, limit: int) -> np.ndarray:
                               f"read: {exc})") from exc
 
 
+def _thickness(f, path: pathlib.Path) -> float | None:
+    """The root attribute ``thickness`` (a two-dimensional sample's discs), or ``None`` where the file has none."""
+    if "thickness" not in f.attrs:
+        return None
+    t = np.asarray(f.attrs["thickness"])
+    if t.shape != () or not np.issubdtype(t.dtype, np.floating):
+        raise SampleFileError(f"{path}: the root attribute 'thickness' must be one number [m], got {t.tolist()!r}")
+    return float(t)
+
+
 def _read_inputs(f, path: pathlib.Path, limit: int) -> dict:
     """What :meth:`Sample.from_arrays` needs, read from the open file as plain NumPy values and strings."""
     _check_header(f, path)
@@ -312,6 +328,7 @@ def _read_inputs(f, path: pathlib.Path, limit: int) -> dict:
     if "bond_contact" not in f.attrs:
         raise SampleFileError(f"{path}: missing field 'bond_contact' (root attribute)")
     data["bond_contact"] = _attr_str(f.attrs["bond_contact"])
+    data["thickness"] = _thickness(f, path)
     data["domain"] = None
     domain_keys = [k for k in ("domain_kind", "domain_lo", "domain_hi") if k in f.attrs]
     if domain_keys:
@@ -322,8 +339,10 @@ def _read_inputs(f, path: pathlib.Path, limit: int) -> dict:
             lo, hi = (np.asarray(f.attrs[k], dtype=np.float64) for k in ("domain_lo", "domain_hi"))
         except (TypeError, ValueError) as exc:
             raise SampleFileError(f"{path}: domain_lo and domain_hi must be numbers ({exc})") from None
-        if lo.shape != (3,) or hi.shape != (3,):
-            raise SampleError(f"{path}: domain_lo and domain_hi must hold 3 values, got shapes {lo.shape}, {hi.shape}")
+        dim = data["positions"].shape[1] if data["positions"].ndim == 2 else 3
+        if lo.shape != (dim,) or hi.shape != (dim,):
+            raise SampleError(f"{path}: domain_lo and domain_hi must hold {dim} values (the positions' columns), got "
+                              f"shapes {lo.shape}, {hi.shape}")
         data["domain"] = Domain(_attr_str(f.attrs["domain_kind"]), tuple(lo.tolist()), tuple(hi.tolist()))
     return data
 
@@ -390,7 +409,8 @@ def load_sample(path, *, verify: bool = True) -> Sample:
             data["positions"], data["radii"], data["bonds"], data["bond_radius"],
             bond_material=data["bond_material"], materials=data["materials"],
             particle_material=data["particle_material"], bond_contact=data["bond_contact"], domain=data["domain"],
-            types=data["types"], wide_bonds=True)  # (a file of a built sample: its bonds were accepted then)
+            types=data["types"], wide_bonds=True,  # (a file of a built sample: its bonds were accepted then)
+            thickness=data["thickness"])
     except SampleError as exc:
         raise SampleError(f"{path}: {exc}") from exc
     if derived is not None:

@@ -16,6 +16,7 @@ from typing import Any, Mapping, NamedTuple
 import jax
 import numpy as np
 
+from jaxbpm._geometry import bond_section, checked_thickness, particle_mass, solid_measure
 from jaxbpm._spatial import morton_order
 from jaxbpm._summary import SampleSummary
 from jaxbpm._text import shown
@@ -30,20 +31,21 @@ __all__ = ["Sample", "BondMaterials", "ParticleMaterial", "Domain", "SampleSumma
 class Domain(NamedTuple):
     """The region a generated sample fills, used for its packing fraction.
 
-    kind: ``"box"`` (also used for beams) or ``"cylinder"`` (axis along z).
-    lo, hi: corners of the bounding box of the region [m].
+    kind: ``"box"`` (also used for beams; a rectangle in 2D) or ``"cylinder"`` (axis along z; a disc in 2D).
+    lo, hi: corners of the bounding box of the region [m], three coordinates each (two in 2D).
     """
 
     kind: str
-    lo: tuple[float, float, float]
-    hi: tuple[float, float, float]
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
 
     @property
     def volume(self) -> float:
-        """The region's volume [m^3] (a cylinder: the one inscribed in the box, pi a b h / 4)."""
+        """The region's volume [m^3] (a cylinder: the one inscribed in the box, pi a b h / 4), in 2D its area [m^2]
+        (a disc: the ellipse inscribed in the rectangle, pi a b / 4)."""
         size = np.subtract(self.hi, self.lo)
         if self.kind == "cylinder":
-            return float(np.pi * size[0] * size[1] / 4.0 * size[2])
+            return float(np.pi * size[0] * size[1] / 4.0 * np.prod(size[2:]))
         return float(np.prod(size))
 
 
@@ -192,13 +194,16 @@ _BOND_CONTACT = ("superimpose", "replace")
 
 @dataclasses.dataclass(frozen=True)
 class Sample:
-    """A bonded-particle sample (a JAX pytree).
+    """A bonded-particle sample (a JAX pytree), of spheres (3D) or of discs (2D).
 
     Particles (``n``): ``positions [n, 3]`` m, ``radii [n]`` m, ``mass [n]`` kg, ``inertia [n]`` kg m^2
     (solid sphere, 2/5 m r^2).
     Bonds (``nb``): ``bonds [nb, 2]`` particle indices (i < j), ``bond_radius [nb]`` m, ``bond_material [nb]``
     component index, ``bond_length [nb]`` initial length L m, ``bond_area [nb]`` A = pi r_b^2,
     ``bond_I [nb]`` I = pi r_b^4 / 4, ``bond_J [nb]`` J = pi r_b^4 / 2.
+    A two-dimensional sample (:attr:`dim` 2) has ``positions [n, 2]``: discs of ``thickness`` t (mass
+    rho pi r^2 t, inertia m r^2 / 2) and bonds of rectangular cross-section 2 r_b x t (A = 2 r_b t,
+    I = (2 r_b)^3 t / 12; see :mod:`jaxbpm._geometry`).
     ``materials``: :class:`BondMaterials` (per component). ``particle_material``: :class:`ParticleMaterial`.
     ``types [n]`` int32: each particle's type (LAMMPS atom types, another code's material or group column; default
     1), which boundary groups can select (:class:`jaxbpm.scenes.groups.Type`); no solver reads it.
@@ -224,6 +229,7 @@ class Sample:
     bond_contact: str = "superimpose"
     domain: Domain | None = None
     types: Any = None
+    thickness: float | None = None
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -243,11 +249,12 @@ class Sample:
         domain: Domain | None = None,
         types=None,
         wide_bonds: bool = False,
+        thickness: float | None = None,
     ) -> "Sample":
         """Build and validate a sample from plain arrays.
 
         Args:
-          positions: ``[n, 3]`` particle centres [m].
+          positions: ``[n, 3]`` sphere centres, or ``[n, 2]`` disc centres: a two-dimensional sample [m].
           radii: ``[n]`` (or a scalar) particle radii [m].
           bonds: ``[nb, 2]`` integer particle indices; the order within a pair does not matter.
           bond_radius: ``[nb]`` or scalar bond radius [m]. Give this or ``bond_radius_ratio``.
@@ -263,6 +270,8 @@ class Sample:
             type); carried through subsets, renumbering and files, read by no solver.
           wide_bonds: allow bond radii above the smaller particle's radius (``bond_radius_ratio`` > 1), refused
             otherwise.
+          thickness: the discs' thickness of a two-dimensional sample [m] (default 1 m, PFC2D's unit thickness);
+            not for spheres.
 
         Returns:
           The sample, with its derived per-particle and per-bond quantities.
@@ -271,7 +280,8 @@ class Sample:
           SampleError: naming the problem and the offending indices.
         """
         pos = checked_positions(positions)
-        n = pos.shape[0]
+        n, dim = pos.shape
+        t = checked_thickness(thickness, dim)
         rad = checked_radii(radii, n)
         b = checked_bonds(bonds, n)
         length = bond_lengths(pos, rad, b)
@@ -281,27 +291,29 @@ class Sample:
         pm = _particle_material(particle_material, density)
         if not isinstance(bond_contact, str) or bond_contact not in _BOND_CONTACT:
             raise SampleError(f"bond_contact must be one of {_BOND_CONTACT}, got {shown(bond_contact)}")
-        domain = _checked_domain(domain)
+        domain = _checked_domain(domain, dim)
         ty = checked_types(types, n)
 
-        mass = pm.density * 4.0 / 3.0 * np.pi * rad**3
+        mass, inertia = particle_mass(rad, float(pm.density), t)
+        section = bond_section(rb, t)
         return cls(
             positions=pos,
             radii=rad,
             mass=mass,
-            inertia=0.4 * mass * rad**2,
+            inertia=inertia,
             bonds=b,
             bond_radius=rb,
             bond_material=bm,
             bond_length=length,
-            bond_area=np.pi * rb**2,
-            bond_I=np.pi * rb**4 / 4.0,
-            bond_J=np.pi * rb**4 / 2.0,
+            bond_area=section.area,
+            bond_I=section.inertia,
+            bond_J=section.polar,
             materials=mats,
             particle_material=pm,
             bond_contact=bond_contact,
             domain=domain,
             types=ty,
+            thickness=t,
         )
 
     def replace(self, **changes) -> "Sample":
@@ -310,8 +322,9 @@ class Sample:
         Args:
           **changes: keywords of :meth:`from_arrays` (``positions``, ``radii``, ``bonds``, ``bond_radius``,
             ``bond_radius_ratio``, ``bond_material``, ``materials``, ``density``, ``particle_material``,
-            ``bond_contact``, ``domain``, ``types``, ``wide_bonds``). New ``bonds`` need a new ``bond_radius`` or
-            ``bond_radius_ratio``. The bond radii are checked against the radii again only where one of them changes.
+            ``bond_contact``, ``domain``, ``types``, ``wide_bonds``, ``thickness``). New ``bonds`` need a new
+            ``bond_radius`` or ``bond_radius_ratio``. The bond radii are checked against the radii again only where
+            one of them changes.
 
         Returns:
           The sample, its derived quantities recomputed.
@@ -322,7 +335,7 @@ class Sample:
         kw = dict(positions=self.positions, radii=self.radii, bonds=self.bonds, bond_radius=self.bond_radius,
                   bond_material=self.bond_material, materials=self.materials,
                   particle_material=self.particle_material, bond_contact=self.bond_contact, domain=self.domain,
-                  types=self.types)
+                  types=self.types, thickness=self.thickness)
         if "bond_radius_ratio" in changes:
             kw.pop("bond_radius")
         if "bonds" in changes and "bond_radius" not in changes and "bond_radius_ratio" not in changes:
@@ -393,7 +406,8 @@ class Sample:
                                   pick(self.bond_radius, bond_rows), bond_material=pick(self.bond_material, bond_rows),
                                   materials=self.materials, particle_material=self.particle_material,
                                   bond_contact=self.bond_contact, domain=self.domain, types=pick(self.types, rows),
-                                  wide_bonds=True)  # (bonds of this sample, accepted when it was built)
+                                  wide_bonds=True,  # (bonds of this sample, accepted when it was built)
+                                  thickness=self.thickness)
 
     def largest_cluster(self) -> "Sample":
         """The sample without the particles outside its largest bonded cluster (loose particles and fragments).
@@ -412,7 +426,8 @@ class Sample:
 
     @property
     def dim(self) -> int:
-        """The spatial dimension: positions are ``[n, dim]`` (3: spheres, three rotations each)."""
+        """The spatial dimension: positions are ``[n, dim]`` (3: spheres, three rotations each; 2: discs in the
+        x-y plane, one rotation each)."""
         return int(np.shape(self.positions)[1])
 
     @property
@@ -448,18 +463,19 @@ class Sample:
         return connected_components(graph, directed=False)[1]
 
     def packing_fraction(self) -> tuple[float, str]:
-        """Solid volume over the sample's volume, and what that volume is.
+        """Solid volume over the sample's volume (2D: disc area over the sample's area), and what that volume is.
 
         Returns:
           ``(fraction, basis)``: the fraction, over the generated ``domain`` when known (basis ``"box domain"`` or
-          ``"cylinder domain"``), else over the bounding box of the spheres (``"bounding box of the spheres"``).
+          ``"cylinder domain"``), else over the bounding box of the particles (``"bounding box of the spheres"``,
+          or ``"... of the discs"``).
         """
         rad, pos = np.asarray(self.radii), np.asarray(self.positions)
-        solid = float(np.sum(4.0 / 3.0 * np.pi * rad**3))
+        solid = solid_measure(rad, self.dim)
         if self.domain is not None:
             return solid / self.domain.volume, f"{self.domain.kind} domain"
         size = (pos + rad[:, None]).max(axis=0) - (pos - rad[:, None]).min(axis=0)
-        return solid / float(np.prod(size)), "bounding box of the spheres"
+        return solid / float(np.prod(size)), f"bounding box of the {'discs' if self.dim == 2 else 'spheres'}"
 
     def summary(self) -> SampleSummary:
         """Counts, coordination, clusters, packing fraction and extent of the sample.
@@ -497,15 +513,16 @@ class Sample:
         )
 
     def __repr__(self) -> str:
+        flat = "" if self.dim == 3 else f", dim=2, thickness={self.thickness!r}"
         return (f"Sample(n_particles={self.n_particles}, n_bonds={self.n_bonds}, "
-                f"n_materials={self.n_materials}, bond_contact={self.bond_contact!r})")
+                f"n_materials={self.n_materials}, bond_contact={self.bond_contact!r}{flat})")
 
 
 _register(
     Sample,
     ["positions", "radii", "mass", "inertia", "bonds", "bond_radius", "bond_material", "bond_length",
      "bond_area", "bond_I", "bond_J", "materials", "particle_material", "types"],
-    ["bond_contact", "domain"],
+    ["bond_contact", "domain", "thickness"],
 )
 
 
@@ -539,8 +556,9 @@ def _particle_material(particle_material, density) -> ParticleMaterial:
 _DOMAIN_KINDS = ("box", "cylinder")
 
 
-def _checked_domain(domain) -> Domain | None:
-    """``domain`` as a :class:`Domain` of plain floats, or a :class:`SampleError` saying what is wrong."""
+def _checked_domain(domain, dim: int = 3) -> Domain | None:
+    """``domain`` as a :class:`Domain` of plain floats (``dim`` coordinates per corner), or a :class:`SampleError`
+    saying what is wrong."""
     if domain is None:
         return None
     if not isinstance(domain, tuple) or len(domain) != 3:
@@ -551,9 +569,11 @@ def _checked_domain(domain) -> Domain | None:
     try:
         lo_a, hi_a = (np.asarray(v, dtype=np.float64) for v in (lo, hi))
     except (TypeError, ValueError, OverflowError):
-        raise SampleError(f"domain lo and hi must be 3 numbers each [m], got {shown(lo)}, {shown(hi)}") from None
-    if lo_a.shape != (3,) or hi_a.shape != (3,) or not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
-        raise SampleError(f"domain lo and hi must be 3 finite numbers each [m], got {shown(lo)}, {shown(hi)}")
+        raise SampleError(f"domain lo and hi must be {dim} numbers each [m], got {shown(lo)}, {shown(hi)}") from None
+    if lo_a.shape != (dim,) or hi_a.shape != (dim,) or not (np.all(np.isfinite(lo_a)) and np.all(np.isfinite(hi_a))):
+        raise SampleError(f"domain lo and hi must be {dim} finite numbers each [m] (the sample's dimension), got "
+                          f"{shown(lo)}, {shown(hi)}")
     if not np.all(hi_a > lo_a):
-        raise SampleError(f"domain hi must exceed lo in x, y and z, got lo {lo_a.tolist()}, hi {hi_a.tolist()}")
+        raise SampleError(f"domain hi must exceed lo in {'x and y' if dim == 2 else 'x, y and z'}, got lo "
+                          f"{lo_a.tolist()}, hi {hi_a.tolist()}")
     return Domain(kind, tuple(lo_a.tolist()), tuple(hi_a.tolist()))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from jaxbpm import dem, dsm, ste
+from jaxbpm._geometry import check_three_d, SOLVERS_2D
 from jaxbpm._options import METHODS, resolve_options, SolverOptions
 from jaxbpm.auto import solve_auto
 from jaxbpm.elastic_field import dsm_field
@@ -67,6 +68,8 @@ def _solve(sample, scene, method, params, options) -> Result:
     method = resolve_options(method, options)
     if not isinstance(sample, Sample):
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
+    if method.method not in SOLVERS_2D:
+        check_three_d(sample, f"the {method.method.upper()}")
     _check_supported(scene, method.method)
     if params is not None:  # one validation path for every solver, once per solve
         params = check_params(params, sample)

@@ -209,3 +209,16 @@ def test_measured_geometric_error_in_the_choice(box):
     assert r.wall_time == pytest.approx(r.setup_time + r.compile_time + r.run_time, rel=1e-9)
     dem = jaxbpm.solve(box, scene, "dem", params=bond_E(1e10))
     assert abs(r.stiffness / dem.stiffness - 1) <= 0.01
+
+
+def test_auto_on_a_two_dimensional_sample_is_the_linear_dsm():
+    from jaxbpm.generate import lattice
+    from jaxbpm.physics.model import build_model, default_params
+
+    flat = lattice("square", (4, 6))
+    r = jaxbpm.solve(flat, UniaxialCompression(axis=1), "auto")
+    kn = float(build_model(flat).stiffness(default_params(flat)).kn[0])
+    assert r.stats["method_choice"]["method"] == "dsm"
+    assert abs(r.stiffness / (4 * kn / 5) - 1) < 1e-9  # 4 columns of 5 bonds in series
+    with pytest.raises(SceneError, match="not yet available"):
+        jaxbpm.solve(flat, UniaxialCompression(axis=1, breakage=True, contacts=True), "auto")

@@ -10,6 +10,7 @@ MODULES = [
     "jaxbpm",
     "jaxbpm.physics.blocks",
     "jaxbpm.physics.bond",
+    "jaxbpm.physics.bond2d",
     "jaxbpm.physics.contact",
     "jaxbpm.physics.params",
     "jaxbpm.physics.tangent",

@@ -134,7 +134,7 @@ def test_bond_pairs_matches_brute_force():
     assert g.bond_pairs(pos[:1], rad[:1], R).shape == (0, 2)
     assert g.bond_pairs(pos, rad, -10 * R).shape == (0, 2)
     with pytest.raises(SampleError, match="positions"):
-        g.bond_pairs(pos[:, :2], rad, R)
+        g.bond_pairs(pos[:, :1], rad, R)
 
 
 # ---------------------------------------------------------------------------------------------- random packings

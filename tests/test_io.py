@@ -360,3 +360,17 @@ def test_types_changed_after_writing_are_an_error(tmp_path):
     with pytest.raises(SampleFileError, match=r"inputs_crc32"):
         io.load_sample(path)
     assert io.load_sample(path, verify=False).types[0] == 3
+
+
+def test_two_dimensional_round_trip(tmp_path):
+    from jaxbpm.generate import lattice
+
+    s = lattice("square", (4, 3), 1e-3, thickness=0.25, materials={"E": [1e9, 2e9]}, bond_material=np.arange(17) % 2)
+    s = s.replace(domain=Domain("box", (-1e-3, -1e-3), (8e-3, 6e-3)))
+    back = io.load_sample(io.save_sample(tmp_path / "flat.h5", s))
+    _assert_same(s, back)
+    assert back.dim == 2 and back.thickness == 0.25
+    with h5py.File(tmp_path / "flat.h5", "r") as f:
+        assert f["positions"].shape == (12, 2) and float(f.attrs["thickness"]) == 0.25
+    plain = io.load_sample(_without_header(tmp_path / "flat.h5"))  # the inputs' CRC covers the thickness
+    _assert_same(s, plain)

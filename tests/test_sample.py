@@ -76,7 +76,7 @@ GOOD = dict(positions=np.array([[0, 0, 0], [2e-3, 0, 0], [4e-3, 0, 0]], float), 
 
 
 @pytest.mark.parametrize("change, message", [
-    (dict(positions=np.zeros((3, 2))), r"positions must have shape \[n, 3\]"),
+    (dict(positions=np.zeros((3, 4))), r"positions must have shape \[n, 3\]"),
     (dict(positions=np.array([[0, 0, 0], [np.nan, 0, 0], [4e-3, 0, 0]])), r"positions contains NaN .*\[1\]"),
     (dict(positions=np.array([[0, 0, 0], [np.inf, 0, 0], [4e-3, 0, 0]])), r"positions contains inf"),
     (dict(positions=np.array([["a", "b", "c"]] * 3)), r"positions must be a real numeric array"),
@@ -220,3 +220,42 @@ def test_a_saved_sample_with_wide_bonds_loads(tmp_path):
     wide = Sample.from_arrays(pos, 1.0, [[0, 1]], bond_radius_ratio=3.0, wide_bonds=True)
     back = io.load_sample(io.save_sample(tmp_path / "w.h5", wide))
     assert np.array_equal(back.bond_radius, wide.bond_radius)
+
+
+# ---------------------------------------------------------------------------------------------- two dimensions
+def test_two_dimensional_sample_from_arrays():
+    pos = np.array([[0.0, 0.0], [2e-3, 0.0], [2e-3, 2e-3]])
+    s = Sample.from_arrays(pos, 1e-3, [[0, 1], [1, 2]], bond_radius=0.5e-3, density=2000.0, thickness=0.01)
+    assert s.dim == 2 and s.thickness == 0.01
+    assert np.allclose(s.mass, 2000.0 * np.pi * 1e-6 * 0.01) and np.allclose(s.inertia, 0.5 * s.mass * 1e-6)
+    assert np.allclose(s.bond_area, 1e-3 * 0.01) and np.allclose(s.bond_I, (1e-3) ** 3 * 0.01 / 12)
+    assert np.allclose(s.bond_length, 2e-3)
+    assert Sample.from_arrays(pos, 1e-3, [[0, 1]], bond_radius=0.5e-3).thickness == 1.0  # PFC2D's unit thickness
+    # the thickness survives every rebuild
+    assert s.replace(radii=0.9e-3).thickness == 0.01
+    assert s.subset(np.array([True, True, False])).thickness == 0.01
+    assert s.renumbered().thickness == 0.01 and s.renumbered().dim == 2
+    assert "dim=2" in repr(s)
+
+
+def test_two_dimensional_validation():
+    pos = np.array([[0.0, 0.0], [2e-3, 0.0]])
+    with pytest.raises(SampleError, match=r"\[n, 2\]"):
+        Sample.from_arrays(np.zeros((2, 4)), 1e-3, [[0, 1]], bond_radius=1e-4)
+    with pytest.raises(SampleError, match="takes none"):
+        Sample.from_arrays(np.zeros((2, 3)) + [[0, 0, 0], [1, 0, 0]], 1.0, [[0, 1]], bond_radius=0.1, thickness=1.0)
+    with pytest.raises(SampleError, match="thickness"):
+        Sample.from_arrays(pos, 1e-3, [[0, 1]], bond_radius=1e-4, thickness=-1.0)
+    with pytest.raises(SampleError, match="2 finite numbers"):
+        Sample.from_arrays(pos, 1e-3, [[0, 1]], bond_radius=1e-4, domain=Domain("box", (0, 0, 0), (1, 1, 1)))
+    with pytest.raises(SampleError, match="zero-length"):
+        Sample.from_arrays(np.zeros((2, 2)), 1e-3, [[0, 1]], bond_radius=1e-4)
+
+
+def test_two_dimensional_packing_fraction_is_an_area_fraction():
+    pos = np.array([[0.0, 0.0], [2.0, 0.0]])
+    s = Sample.from_arrays(pos, 1.0, [[0, 1]], bond_radius=0.5)
+    assert np.isclose(s.packing_fraction()[0], 2 * np.pi / 8.0)  # two unit discs in a 4 x 2 box
+    assert "discs" in s.packing_fraction()[1]
+    disc = s.replace(domain=Domain("cylinder", (-1.0, -2.0), (3.0, 2.0)))
+    assert np.isclose(disc.packing_fraction()[0], 2 * np.pi / (np.pi * 4.0))

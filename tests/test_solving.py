@@ -99,3 +99,13 @@ def test_a_static_solver_refuses_a_failure_scene_at_once(lattice, method, monkey
         with pytest.raises(SceneError, match=rf"the {method.upper()} gives the elastic range only.*method='dem' "
                                              "gives the strength"):
             jaxbpm.solve(lattice, scene, method)
+
+
+@pytest.mark.parametrize("scene,method", [(jaxbpm.scenes.UniaxialCompression.to_failure(axis=1), "dem"),
+                                          (jaxbpm.scenes.UniaxialCompression(axis=1, boundary="walls"), "dsm")])
+def test_a_two_dimensional_sample_is_refused_where_no_solver_models_it(scene, method):
+    flat = jaxbpm.generate.lattice("square", (4, 4))
+    with pytest.raises(SceneError, match="not yet available"):
+        jaxbpm.solve(flat, scene, method)
+    with pytest.raises(SceneError, match="start='elastic'"):
+        jaxbpm.solve(flat, jaxbpm.scenes.UniaxialCompression(axis=1), "dem", start="elastic")

@@ -27,7 +27,8 @@ def test_arrays_and_finite():
 def test_positions_and_radii():
     pos = v.checked_positions([[0, 0, 0], [1, 0, 0]])
     assert pos.dtype == np.float64 and pos.shape == (2, 3)
-    for bad, match in (([[0, 0]], r"shape \[n, 3\], got \(1, 2\)"), (np.zeros((0, 3)), "has no particles")):
+    for bad, match in (([[0, 0, 0, 0]], r"shape \[n, 3\] \(spheres\) or \[n, 2\].*got \(1, 4\)"),
+                       (np.zeros((0, 3)), "has no particles")):
         with pytest.raises(SampleError, match=match):
             v.checked_positions(bad)
     assert np.array_equal(v.checked_radii(0.5, 3), [0.5, 0.5, 0.5])

@@ -104,3 +104,13 @@ def test_export_vtk_writes_the_broken_bonds_by_mode(tmp_path, suffix):
         with pytest.raises(SampleError, match="break_mode"):
             io.export_vtk(tmp_path / "bad.vtu", sample, break_mode=bad)
     assert nb == len(mode)
+
+
+def test_export_vtk_two_dimensional_discs_at_z_zero(tmp_path):
+    from jaxbpm.generate import lattice
+
+    s = lattice("square", (3, 2), 1e-3)
+    mesh = meshio.read(io.export_vtk(tmp_path / "discs.vtu", s))
+    assert mesh.points.shape == (6, 3)
+    assert np.array_equal(mesh.points[:, :2], s.positions) and np.all(mesh.points[:, 2] == 0.0)
+    assert np.allclose(mesh.point_data["radius"], 1e-3)

@@ -70,9 +70,9 @@ def peak_stop(scene, model, load, the_plan) -> PeakStop:
     dtype = model.positions0.dtype
     fraction = getattr(scene, "stop_after_peak", None)
     if fraction is None or not model.breakage:
-        weights, fraction = np.zeros((n_walls + 2, 3)), -np.inf
+        weights, fraction = np.zeros((n_walls + 2, model.dim)), -np.inf
     else:
-        weights = force_weights(scene, n_walls + 2)
+        weights = force_weights(scene, n_walls + 2, model.dim)
     fit_end = float(getattr(scene, "fit_range", (0.0, 0.0))[1]) * the_plan.target
     arm_time = fit_end / the_plan.speed
     put = lambda a: jax.device_put(np.asarray(a, dtype))  # noqa: E731

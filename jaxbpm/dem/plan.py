@@ -131,7 +131,7 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
         The :class:`Plan`.
 
     Raises:
-        SceneError: ``safety`` or ``dt`` out of range.
+        SceneError: ``safety`` or ``dt`` out of range, or contacts or walls asked of a two-dimensional sample.
     """
     members = list(params) if not isinstance(params, Mapping) else [params]
     breaks = sample_breaks(sample, scene.breakage)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from jaxbpm._compile import compile_clock
+from jaxbpm._geometry import check_three_d
 from jaxbpm.dem import quasistatic as quasi_static
 from jaxbpm.dem.curve import curve, fit_line, peak_stats, plan_stats
 from jaxbpm.dem.elastic_start import elastic_start, with_segment
@@ -52,11 +53,14 @@ def solve_scene(sample, scene, params=None, options: DEM | None = None, *, stati
 
     Raises:
       OptionsError: ``start="elastic"`` without ``static``.
-      SceneError: options that do not fit the scene or the run.
+      SceneError: options that do not fit the scene or the run (on a two-dimensional sample: ``start="elastic"``,
+        contacts or walls, not yet available in 2D).
       InstabilityError: with ``options.throw``, a run that blew up (carrying the result of what ran before).
       SimulationInterrupted: a ``KeyboardInterrupt`` during the run, carrying the result of the part that was run.
     """
     options = DEM() if options is None else options
+    if options.start == "elastic" and sample.dim == 2:
+        check_three_d(sample, "the DEM's start='elastic'")
     if options.start == "elastic" and static is None:
         raise OptionsError("start='elastic' needs the static solve that gives the start: run it with jaxbpm.solve, "
                            "or pass static=jaxbpm.elastic_field.dsm_field")

@@ -84,7 +84,7 @@ def pad_loading(load: Loading, n: int) -> Loading:
         raise ValueError(f"cannot pad a loading of {clamped.shape[0]} particles to {n}")
     return dataclasses.replace(
         load, clamped=jax.device_put(np.concatenate([clamped, np.ones(extra, bool)])),
-        velocity=jax.device_put(np.concatenate([velocity, np.zeros((extra, 3), velocity.dtype)])))
+        velocity=jax.device_put(np.concatenate([velocity, np.zeros((extra, velocity.shape[1]), velocity.dtype)])))
 
 
 def unpad_state(state: DEMState, n: int, n_bonds: int) -> DEMState:

@@ -4,7 +4,8 @@
 Per step, time step dt::
 
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
-    x   += dt v ,                 q  = exp(dt w) q                (drift; clamped particles follow their motion)
+    x   += dt v ,                 q  = exp(dt w) q                (drift; clamped particles follow their motion;
+                                                               a disc's angle: theta += dt w)
     F, M = forces(x, q)                                           (one force evaluation per step)
     v   += dt/2 (F + F_d) / m ,   w += dt/2 (M + M_d) / I        (half kick)
 
@@ -56,13 +57,14 @@ def _start(model: Model, params, load: Loading, nbrs):
 def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
     n, dtype = model.n, model.positions0.dtype
     capacity = nbrs.idx.shape[1] if nbrs is not None else 0
+    flat = model.dim == 2  # discs: an angle and a spin about z each
     state = DEMState(
         positions=model.positions0,
         velocities=jnp.where(load.clamped[:, None], load.velocity, 0.0),
-        orientations=rotation.identity(n, dtype),
-        omegas=jnp.zeros((n, 3), dtype),
-        force=jnp.zeros((n, 3), dtype),
-        moment=jnp.zeros((n, 3), dtype),
+        orientations=jnp.zeros((n, 1), dtype) if flat else rotation.identity(n, dtype),
+        omegas=jnp.zeros((n, 1 if flat else 3), dtype),
+        force=jnp.zeros((n, model.dim), dtype),
+        moment=jnp.zeros((n, 1 if flat else 3), dtype),
         intact=jnp.ones(model.bonds.shape[0], bool),
         spring=jnp.zeros((capacity, 3), dtype),
         nbrs=nbrs,
@@ -136,7 +138,7 @@ def step(model: Model, params, load: Loading, state: DEMState, dt, damping, orig
     if model.rotations:
         w = state.omegas + 0.5 * dt * inv_i * _damped(state.moment, state.omegas, damping, 0.5 * dt * inv_i)
         w = jnp.where(clamped, 0.0, w)
-        q = rotation.integrate(state.orientations, dt * w)
+        q = state.orientations + dt * w if model.dim == 2 else rotation.integrate(state.orientations, dt * w)
     else:
         w, q = state.omegas, state.orientations
 

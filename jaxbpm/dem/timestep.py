@@ -45,7 +45,8 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
     omega2 = 0.0
     if model.bonds.shape[0]:
         v0 = jax.device_put(_start_vector(model))
-        v, kv = _bond_omega2(model, params, v0, iterations=iterations)
+        power = _disc_omega2 if model.dim == 2 else _bond_omega2
+        v, kv = power(model, params, v0, iterations=iterations)
         v, kv = np.asarray(v, np.float64).ravel(), np.asarray(kv, np.float64).ravel()
         # the Rayleigh quotient, exactly rounded sums: the same whatever zeros (padding) the vectors hold; it
         # approaches omega_max^2 from below: a 2 % margin
@@ -114,6 +115,9 @@ def _start_vector(model: Model) -> np.ndarray:
     if not bonded.any():
         bonded[:] = True
     p = (pos - pos[bonded].min(axis=0)) / float(np.max(np.asarray(model.radii)[bonded]))
+    if model.dim == 2:  # discs: (u_x, u_y[, theta])
+        nd = model.dofs
+        return np.sin(p @ _WAVES[:nd, :2].T + _PHASES[:nd]).astype(model.positions0.dtype)
     return np.sin(p @ _WAVES.T + _PHASES).astype(model.positions0.dtype)
 
 
@@ -166,6 +170,36 @@ def _bond_omega2(model: Model, params, v0, iterations):
     v0 = jnp.where(stiff[:, None], v0, 0.0)
     if not model.rotations:
         v0 = v0.at[:, 3:].set(0.0)
+
+    def body(v, _):
+        w = apply(v)
+        return w / jnp.max(jnp.abs(w)), None
+
+    v, _ = jax.lax.scan(body, v0 / jnp.max(jnp.abs(v0)), None, length=iterations)
+    return v, apply(v)
+
+
+@setup_jit(static_argnames=("iterations",))
+def _disc_omega2(model: Model, params, v0, iterations):
+    """:func:`_bond_omega2` of a two-dimensional model: ``[n, dofs]`` iterates, ``K`` from the pair stiffness of the
+    2D bond law (:func:`jaxbpm.physics.tangent.bond_full`)."""
+    from jaxbpm.physics import tangent
+
+    n, nd = model.n, model.dofs
+    k = model.stiffness(params)
+    pair = tangent.bond_full(model.r0, k, model.rotations)  # [nb, 2 nd, 2 nd], stiffness
+    i, j = model.bonds[:, 0], model.bonds[:, 1]
+    scale = jnp.concatenate([jnp.broadcast_to(model.mass[:, None], (n, 2)), model.inertia[:, None]],
+                            axis=1)[:, :nd] ** -0.5
+
+    def apply(v):
+        u = scale * v
+        y = jnp.einsum("bkl,bl->bk", pair, jnp.concatenate([u[i], u[j]], axis=1))
+        return scale * jax.ops.segment_sum(jnp.concatenate([y[:, :nd], y[:, nd:]]), jnp.concatenate([i, j]), n)
+
+    per_bond = k.kn + k.kt + k.kb
+    stiff = jax.ops.segment_sum(jnp.concatenate([per_bond, per_bond]), jnp.concatenate([i, j]), n) > 0
+    v0 = jnp.where(stiff[:, None], v0, 0.0)
 
     def body(v, _):
         w = apply(v)

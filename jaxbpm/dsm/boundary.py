@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm._compile import put
+from jaxbpm._geometry import check_three_d
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.model import Model
 
@@ -25,8 +26,13 @@ def free_mask(model: Model, scene, sample):
 
     Returns:
       ``(free [n, nd], fixed [n], driven [n])``.
+
+    Raises:
+      SceneError: a two-dimensional sample between walls.
     """
-    nd = 6 if model.rotations else 3
+    if scene.uses_walls:
+        check_three_d(sample, "the DSM between walls")
+    nd = model.dofs
     n = model.n
     free = np.ones((n, nd), bool)
     if scene.uses_walls:
@@ -129,6 +135,6 @@ def affine_field(sample, model: Model, ax, delta):
       ``[n, nd]`` the displacements.
     """
     x = np.asarray(sample.positions)[:, ax]
-    u = np.zeros((model.n, 6 if model.rotations else 3))
+    u = np.zeros((model.n, model.dofs))
     u[:, ax] = -delta * (x - x.min()) / max(x.max() - x.min(), 1e-300)
     return jnp.asarray(u, model.positions0.dtype)

@@ -8,7 +8,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxbpm.dsm.operator import (
-    _geometric_operator, _packed_operator, _uses_geometry, BondGeometry, internal_forces, reduced_jacobians)
+    _geometric_operator, _packed_operator, _uses_geometry, BondGeometry, internal_forces, reduced_jacobians,
+    stiffness_product)
 from jaxbpm.dsm.preconditioner import build_preconditioner, CoarseSpace
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.model import Model
@@ -46,11 +47,12 @@ def tangent_operator(model: Model, params, *, operator="auto", walls=None, geome
         if _uses_geometry(geometry, params):
             return _geometric_operator(model, params, geometry)
         jac = reduced_jacobians(model, params)
+        if model.dim == 2:  # discs: the reduced 4 x 4 (or 2 x 2) form, applied as it is
+            return (lambda v: stiffness_product(model, jac, v)), jac
         return _packed_operator(model, jac), jac
     if operator != "jvp":
         raise ValueError(f"operator must be 'auto', 'jacobians' or 'jvp', got {operator!r}")
-    nd = 6 if model.rotations else 3
-    u0 = jnp.zeros((model.n, nd), model.positions0.dtype)
+    u0 = jnp.zeros((model.n, model.dofs), model.positions0.dtype)
 
     def f(u):
         return internal_forces(model, params, u, walls=walls)[0]

@@ -52,14 +52,15 @@ def _linear_setup(sample, scene, rotations, operator, preconditioner, aggregate_
     guess = np.asarray(affine_field(sample, model, scene.axis, delta))
     n, nb = model.n, int(model.bonds.shape[0])
     free_dofs = int(free_np.sum())
-    coarse = _coarse_for(model, free_np, preconditioner, aggregate_size)
+    flat = model.dim == 2  # discs: block-Jacobi on the reduced Jacobians (the coarse space and geometry are 3D)
+    coarse = None if flat else _coarse_for(model, free_np, preconditioner, aggregate_size)
     if pad:
         n_cap, nb_cap, _ = size_class(n, nb)
         model = pad_model(model, n_cap, nb_cap)
         free_np, u_p, guess = pad_rows(free_np, n_cap, False), pad_rows(u_p, n_cap), pad_rows(guess, n_cap)
         coarse = None if coarse is None else _pad_coarse(coarse, n_cap, nb, nb_cap, aggregate_size)
     geometry = None
-    if operator in ("auto", "jacobians"):
+    if operator in ("auto", "jacobians") and not flat:
         geometry = bond_geometry(model, coarse, n_materials=n_materials)
     dtype = model.positions0.dtype
     return _LinearSetup(model=model, free=put(free_np), u_p=put(u_p, dtype), coarse=coarse,

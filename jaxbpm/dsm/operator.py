@@ -17,10 +17,12 @@ from jaxbpm.physics.model import Model
 
 
 def _configuration(model: Model, u):
-    """Positions and orientations for a DOF array ``u [n, 3 or 6]``."""
-    x = model.positions0 + u[:, :3]
-    q = rotation.from_rotation_vector(u[:, 3:]) if model.rotations else None
-    return x, q
+    """Positions and orientations for a DOF array ``u [n, 3 or 6]`` (2D: ``[n, 2 or 3]``, the rotation an angle)."""
+    dim = model.dim
+    x = model.positions0 + u[:, :dim]
+    if not model.rotations:
+        return x, None
+    return x, (u[:, 2:3] if dim == 2 else rotation.from_rotation_vector(u[:, 3:]))
 
 
 def _contact_slip(model: Model, pairs, d, w):
@@ -55,13 +57,15 @@ def _contact_slip(model: Model, pairs, d, w):
 
 
 def _pair_dofs(model: Model, pairs, u):
-    """The reduced DOFs of pairs ``[3 or 9, C]`` from a DOF array ``u [n, nd]``: ``u_j - u_i`` (and ``theta_i``,
-    ``theta_j``), the only way the bond and contact laws see the displacements."""
+    """The reduced DOFs of pairs ``[3 or 9, C]`` (2D: ``[2 or 4, C]``) from a DOF array ``u [n, nd]``: ``u_j - u_i``
+    (and ``theta_i``, ``theta_j``), the only way the bond and contact laws see the displacements."""
     i, j = pairs[:, 0], pairs[:, 1]
     ut = u.T
-    z = [ut[c, j] - ut[c, i] for c in range(3)]
+    dim = model.dim
+    z = [ut[c, j] - ut[c, i] for c in range(dim)]
     if model.rotations:
-        z += [ut[3 + c, i] for c in range(3)] + [ut[3 + c, j] for c in range(3)]
+        rot = model.dofs - dim
+        z += [ut[dim + c, i] for c in range(rot)] + [ut[dim + c, j] for c in range(rot)]
     return jnp.stack(z)  # one gather per row: a concatenation of [3, P] gathers runs 4x slower on CPU
 
 
@@ -465,8 +469,16 @@ def _packed_product_jvp(primals, tangents):
 
 def _scatter_pairs(model: Model, i, j, y):
     """Stiffness product from pair force rates ``y`` = (f_i [, m_i, m_j]) ``[no, P]``: particle i gets minus
-    (f_i [, m_i]), j gets (f_i [, -m_j]) (``f_j = -f_i``); one scatter of rows of 4 or 8 numbers."""
+    (f_i [, m_i]), j gets (f_i [, -m_j]) (``f_j = -f_i``); one scatter of rows of 4 or 8 numbers (2D: 4 or 2)."""
     zero = jnp.zeros_like(y[0])
+    if model.dim == 2:
+        if model.rotations:
+            rows_i = jnp.stack([-y[0], -y[1], -y[2], zero], axis=1)
+            rows_j = jnp.stack([y[0], y[1], -y[3], zero], axis=1)
+        else:
+            rows_i, rows_j = jnp.stack([-y[0], -y[1]], axis=1), jnp.stack([y[0], y[1]], axis=1)
+        total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), model.n)
+        return total[:, :model.dofs]
     if model.rotations:
         rows_i = jnp.stack([-y[0], -y[1], -y[2], zero, -y[3], -y[4], -y[5], zero], axis=1)
         rows_j = jnp.stack([y[0], y[1], y[2], zero, -y[6], -y[7], -y[8], zero], axis=1)
@@ -564,14 +576,16 @@ def block_diagonal(model: Model, params, jac=None) -> jnp.ndarray:
     """
     jr = reduced_jacobians(model, params) if jac is None else jac
     J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
-    if J.shape[1] == 3:
+    if not model.rotations:
         return (jax.ops.segment_sum(J, model.bonds[:, 0], model.n)
                 + jax.ops.segment_sum(J, model.bonds[:, 1], model.n))
     # K_ii = [[J(f_i, d), -J(f_i, th_i)], [J(m_i, d), -J(m_i, th_i)]]
     # K_jj = [[J(f_i, d), J(f_i, th_j)], [-J(m_j, d), -J(m_j, th_j)]]
-    k_ii = jnp.concatenate([jnp.concatenate([J[:, 0:3, 0:3], -J[:, 0:3, 3:6]], axis=2),
-                            jnp.concatenate([J[:, 3:6, 0:3], -J[:, 3:6, 3:6]], axis=2)], axis=1)
-    k_jj = jnp.concatenate([jnp.concatenate([J[:, 0:3, 0:3], J[:, 0:3, 6:9]], axis=2),
-                            jnp.concatenate([-J[:, 6:9, 0:3], -J[:, 6:9, 6:9]], axis=2)], axis=1)
+    d, r = model.dim, model.dofs - model.dim  # translations, rotations (3, 3; 2D: 2, 1)
+    f, mi, mj = slice(0, d), slice(d, d + r), slice(d + r, d + 2 * r)
+    k_ii = jnp.concatenate([jnp.concatenate([J[:, f, f], -J[:, f, mi]], axis=2),
+                            jnp.concatenate([J[:, mi, f], -J[:, mi, mi]], axis=2)], axis=1)
+    k_jj = jnp.concatenate([jnp.concatenate([J[:, f, f], J[:, f, mj]], axis=2),
+                            jnp.concatenate([-J[:, mj, f], -J[:, mj, mj]], axis=2)], axis=1)
     return jax.ops.segment_sum(k_ii, model.bonds[:, 0], model.n) + jax.ops.segment_sum(k_jj, model.bonds[:, 1],
                                                                                        model.n)

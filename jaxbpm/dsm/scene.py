@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm._compile import put, strong
+from jaxbpm._geometry import check_three_d
 from jaxbpm.dsm.boundary import (
     _check_contact_skin, _check_held, affine_field, contact_candidates, free_mask, LINEAR_REACH)
 from jaxbpm.dsm.linear import (
@@ -99,6 +100,8 @@ def solve_scene(sample, scene, params=None, options: DSM | None = None):
     t0 = time.perf_counter()
     if params is not None:  # (one compiled program whatever the parameters' array form)
         params = strong(params)
+    if sample.dim == 2:
+        return _plane(sample, scene, params, options, t0)
     rotations, nonlinear = _modes(scene, options)
     if not nonlinear and not scene.contacts and not scene.uses_walls:
         return _bonds_linear(sample, scene, params, options, rotations, t0)
@@ -111,6 +114,17 @@ def solve_scene(sample, scene, params=None, options: DSM | None = None):
     if nonlinear:
         return _solve_try(sample, scene, params, options, rotations, stiffness_tol, None, t0)[0]
     return _linearised_contacts(sample, scene, params, options, rotations, stiffness_tol, t0)
+
+
+def _plane(sample, scene, params, options: DSM, t0):
+    """The DSM of a two-dimensional sample: the linear bonds-only solve between clamped layers, 3 DOF per disc
+    (u_x, u_y, theta), block-Jacobi preconditioned (the coarse space of aggregates' rigid modes is 3D)."""
+    if scene.contacts or scene.uses_walls or options.nonlinear or options.geometric_correction:
+        check_three_d(sample, "the DSM with contacts, walls, nonlinear=True or geometric_correction")
+    if options.dofs is not None:
+        raise SceneError("dofs counts the DOF of a sphere (3 or 6); a disc of a 2D sample has 3 (u_x, u_y, theta): "
+                         "leave dofs=None")
+    return _bonds_linear(sample, scene, params, options, None, t0)
 
 
 def _modes(scene, options: DSM):

@@ -8,7 +8,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from jaxbpm._atomic import atomic_write
-from jaxbpm._vtk import user_data
+from jaxbpm._vtk import points_3d, user_data
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.interop._meta import exact_text
 from jaxbpm.sample import Sample
@@ -89,8 +89,10 @@ def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data
     Args:
       s: the series' sample.
       who: the caller, for messages.
-      positions: ``[n, 3]`` particle centres [m], or ``None``.
-      displacement: ``[n, 3]`` from the sample's positions [m], or ``None`` (not both with ``positions``).
+      positions: ``[n, 3]`` particle centres [m] (``[n, 2]``: a two-dimensional sample, written at z = 0), or
+        ``None``.
+      displacement: ``[n, 3]`` (2D: ``[n, 2]``) from the sample's positions [m], or ``None`` (not both with
+        ``positions``).
       intact: ``[nb]`` booleans, or ``None`` (all intact).
       point_data: ``{name: [n] or [n, k]}`` extra per-particle fields, or ``None``.
       bond_data: ``{name: [nb] or [nb, k]}`` extra per-bond fields, or ``None``.
@@ -103,18 +105,20 @@ def step_arrays(s: Sample, who: str, positions, displacement, intact, point_data
     """
     n, nb = s.n_particles, s.n_bonds
     ref = np.asarray(s.positions, np.float64)
+    dim = ref.shape[1]  # 2: discs, written at z = 0
     if positions is not None and displacement is not None:
         raise SampleError(f"{who}: give positions or displacement, not both")
     if positions is not None:
         pos = np.asarray(positions, np.float64)
-        if pos.shape != (n, 3):
-            raise SampleError(f"{who}: positions must have shape [{n}, 3], got {pos.shape}")
+        if pos.shape != (n, dim):
+            raise SampleError(f"{who}: positions must have shape [{n}, {dim}], got {pos.shape}")
         disp = pos - ref
     else:
-        disp = np.zeros((n, 3)) if displacement is None else np.asarray(displacement, np.float64)
-        if disp.shape != (n, 3):
-            raise SampleError(f"{who}: displacement must have shape [{n}, 3], got {disp.shape}")
+        disp = np.zeros((n, dim)) if displacement is None else np.asarray(displacement, np.float64)
+        if disp.shape != (n, dim):
+            raise SampleError(f"{who}: displacement must have shape [{n}, {dim}], got {disp.shape}")
         pos = ref + disp
+    pos, disp = points_3d(pos), points_3d(disp)
     ok = np.ones(nb, bool) if intact is None else np.asarray(intact, bool).reshape(-1)
     if ok.shape != (nb,):
         raise SampleError(f"{who}: intact must have shape [{nb}], got {ok.shape}")

@@ -60,7 +60,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from jaxbpm.physics import rotation
+from jaxbpm.physics import bond2d, rotation
 from jaxbpm.physics.vec import cross, dot, stack
 
 __all__ = ["law_components",
@@ -143,9 +143,12 @@ def bond_stresses(normal, shear, twist, bend, s: BondStrength):
 
     Args:
         normal: ``[nb]`` normal forces [N], tension > 0.
-        shear: tangential forces [N], an ``(x, y, z)`` tuple of ``[nb]`` arrays or ``[nb, 3]`` rows.
-        twist: ``[nb]`` twisting moments [N m].
-        bend: bending moments [N m], an ``(x, y, z)`` tuple of ``[nb]`` arrays or ``[nb, 3]`` rows.
+        shear: tangential forces [N], an ``(x, y, z)`` tuple of ``[nb]`` arrays or ``[nb, 3]`` rows (2D: ``(x, y)``
+            or ``[nb, 2]``).
+        twist: ``[nb]`` twisting moments [N m] (2D: zeros).
+        bend: bending moments [N m], an ``(x, y, z)`` tuple of ``[nb]`` arrays or ``[nb, 3]`` rows (2D: the moment
+            about z, ``(m,)`` or ``[nb, 1]``: sigma = F_n / A + beta |M| r_b / I, PFC2D's rule with the rectangular
+            section of :mod:`jaxbpm.physics.bond2d`).
         s: the bonds' strengths and cross-sections.
 
     Returns:
@@ -234,8 +237,13 @@ def bond_failure(normal, shear, twist, bend, s: BondStrength, rule: str = "separ
 
 
 def _norm(v):
+    """The length of vectors given as component tuples (one component in 2D: a moment about z) or ``[..., k]``."""
     if isinstance(v, tuple):
-        return jnp.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if len(v) == 1:
+            return jnp.abs(v[0])
+        return jnp.sqrt(sum(c * c for c in v))
+    if v.shape[-1] == 1:
+        return jnp.abs(v[..., 0])
     return jnp.linalg.norm(v, axis=-1)
 
 
@@ -320,9 +328,9 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
     """Per-particle sums of the forces and moments of all intact bonds, and the per-bond forces.
 
     Args:
-        positions: ``[n, 3]`` particle positions [m].
-        orientations: ``[n, 4]`` orientations (unit quaternions), or ``None``: no rotational degrees of freedom,
-            particles keep their reference orientation.
+        positions: ``[n, 3]`` particle positions [m] (``[n, 2]``: discs, the 2D law of :mod:`jaxbpm.physics.bond2d`).
+        orientations: ``[n, 4]`` orientations (unit quaternions; 2D: ``[n, 1]`` rotation angles [rad]), or ``None``:
+            no rotational degrees of freedom, particles keep their reference orientation.
         bonds: ``[nb, 2]`` particle indices of the bonds.
         r0: ``[nb, 3]`` reference bond vectors [m].
         k: the bonds' stiffnesses.
@@ -332,8 +340,8 @@ def bond_forces(positions, orientations, bonds, r0, k: BondStiffness, intact=Non
             the break modes); ``None``: bonds never break.
 
     Returns:
-        ``(forces, moments, per_bond)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] and the bonds' :class:`BondForces`
-        (``[nb, ...]``).
+        ``(forces, moments, per_bond)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] (2D: ``[n, 2]`` and ``[n, 1]``) and the
+        bonds' :class:`BondForces` (``[nb, ...]``).
     """
     return bond_forces_breaking(positions, orientations, bonds, r0, k, intact, strength)[:3]
 
@@ -366,7 +374,7 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
     rows, out, intact, mode, aux = _bond_pass(x_t, q_t, bonds[:, 0], bonds[:, 1], r0, k, intact, strength, rule,
                                               extra, lambda a: a)
     total = jax.ops.segment_sum(rows, jnp.concatenate([bonds[:, 0], bonds[:, 1]]), positions.shape[0])
-    result = (total[:, :3], total[:, 4:7], stack(out), intact, mode)
+    result = _split(total) + (stack(out), intact, mode)
     return result if extra is None else result + (aux,)
 
 
@@ -375,11 +383,13 @@ def _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take):
     the ``[2 nb, 8]`` rows of (force, 0, moment, 0) for the scatter to ``i`` then ``j``, the per-bond forces, the new
     intact mask, the break modes and ``extra``'s aux."""
     d = x_t[:, j] - x_t[:, i]
-    if q_t is None:
-        q_i = q_j = (1.0, 0.0, 0.0, 0.0)
+    if x_t.shape[0] == 2:  # discs: one rotation angle each
+        th_i, th_j = (0.0, 0.0) if q_t is None else (q_t[0, i], q_t[0, j])
+        kn, kt, _, kb = (take(a) for a in k)
+        out = BondForces(*bond2d.law_components(tuple(d), tuple(take(r0).T), th_i, th_j, kn, kt, kb))
     else:
-        q_i, q_j = tuple(q_t[:, i]), tuple(q_t[:, j])
-    out = law_components(tuple(d), tuple(take(r0).T), q_i, q_j, *(take(a) for a in k))
+        q_i, q_j = ((1.0, 0.0, 0.0, 0.0),) * 2 if q_t is None else (tuple(q_t[:, i]), tuple(q_t[:, j]))
+        out = law_components(tuple(d), tuple(take(r0).T), q_i, q_j, *(take(a) for a in k))
     mode = None
     if intact is not None:
         intact = take(intact)
@@ -396,10 +406,11 @@ def _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take):
         e_f, e_mi, e_mj, aux = extra(i, j, tuple(d), take)
         f_i, m_i, m_j = (tuple(a + b for a, b in zip(u, w)) for u, w in ((f_i, e_f), (m_i, e_mi), (m_j, e_mj)))
     # one scatter of (force, 0, moment, 0) rows for both ends: XLA's CPU scatter is several times faster for rows of
-    # 4 or 8 doubles than for rows of 3 or 6
-    zero = jnp.zeros_like(out.normal)
-    rows_i = jnp.stack(f_i + (zero,) + m_i + (zero,), axis=1)
-    rows_j = jnp.stack(tuple(-f for f in f_i) + (zero,) + m_j + (zero,), axis=1)
+    # 4 or 8 doubles than for rows of 3 or 6 (2D: rows (f_x, f_y, m, 0))
+    zero = (jnp.zeros_like(out.normal),)
+    pad, tail = (zero, zero) if len(f_i) == 3 else ((), zero)
+    rows_i = jnp.stack(f_i + pad + m_i + tail, axis=1)
+    rows_j = jnp.stack(tuple(-f for f in f_i) + pad + m_j + tail, axis=1)
     return jnp.concatenate([rows_i, rows_j]), out, intact, mode, aux
 
 
@@ -433,10 +444,18 @@ def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extr
     shapes = jax.eval_shape(lambda: _bond_pass(x_t, q_t, bonds[:block, 0], bonds[:block, 1], r0, k, intact, strength,
                                                rule, extra, first)[2:])
     per_bond = jax.tree_util.tree_map(lambda a: jnp.zeros((nb,) + a.shape[1:], a.dtype), shapes)
-    total = jnp.zeros((positions.shape[0], 8), positions.dtype)
+    total = jnp.zeros((positions.shape[0], 8 if positions.shape[1] == 3 else 4), positions.dtype)
     total, (intact, mode, aux) = jax.lax.fori_loop(0, count, run, (total, per_bond))
-    result = (total[:, :3], total[:, 4:7], None, intact, mode)
+    result = _split(total) + (None, intact, mode)
     return result if extra is None else result + (aux,)
+
+
+def _split(total):
+    """``(forces, moments)`` from the scattered rows: ``[n, 8]`` (3D: f, 0, m, 0) or ``[n, 4]`` (2D: f_x, f_y, m,
+    0)."""
+    if total.shape[1] == 4:
+        return total[:, :2], total[:, 2:3]
+    return total[:, :3], total[:, 4:7]
 
 
 def _taker(nb, pick):

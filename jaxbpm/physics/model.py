@@ -4,7 +4,8 @@ A :class:`Model` holds the sample's arrays in JAX form and a few static switches
 
 * ``rotations``: particles carry orientations (6 DOF each) or not (3 DOF: bonds then act on relative translation
   only, as in the 3N direct stiffness method of Jarolin & Dosta 2020). Default: on whenever the sample has bonds (they
-  transmit bending and twisting moments) or contacts with friction.
+  transmit bending and twisting moments) or contacts with friction. A two-dimensional sample's discs have 3 DOF
+  (u_x, u_y, theta) with rotations and 2 without; their bonds follow :mod:`jaxbpm.physics.bond2d`.
 * ``contacts``: particle contacts (with a neighbour list in the DEM) or none; ``contact_law``: ``"hertz"``
   (Hertz-Mindlin, :mod:`jaxbpm.physics.contact`, the default), ``"linear"`` (PFC's linear contact model,
   :mod:`jaxbpm.physics.linear`, whose scalars live in ``contact``) or ``"cohesive"`` (the stress-dependent cohesive
@@ -49,12 +50,12 @@ class Model:
     """Arrays of the sample in JAX form plus static switches (a pytree). Build it with :func:`build_model`.
 
     Attributes:
-        positions0: ``[n, 3]`` reference positions [m].
+        positions0: ``[n, 3]`` reference positions [m] (``[n, 2]``: discs).
         radii: ``[n]`` [m].
         mass: ``[n]`` [kg].
         inertia: ``[n]`` moments of inertia [kg m^2].
         bonds: ``[nb, 2]`` particle indices.
-        r0: ``[nb, 3]`` reference bond vectors [m].
+        r0: ``[nb, 3]`` reference bond vectors [m] (``[nb, 2]``: discs).
         bond_material: ``[nb]`` material index of each bond.
         bond_area: ``[nb]`` cross-sections [m^2].
         bond_I: ``[nb]`` second moments of area [m^4].
@@ -275,8 +276,9 @@ class Model:
         """Forces and moments on every particle, and the parts they came from.
 
         Args:
-            positions: ``[n, 3]`` particle positions [m].
-            orientations: ``[n, 4]`` unit quaternions (ignored without rotations).
+            positions: ``[n, 3]`` particle positions [m] (``[n, 2]``: discs).
+            orientations: ``[n, 4]`` unit quaternions (discs: ``[n, 1]`` rotation angles [rad]; ignored without
+                rotations).
             params: the parameter dict (or :meth:`precompute`'s).
             intact: ``[nb]`` bool, or ``None``: all bonds intact.
             contacts: ``None`` or a tuple ``(pairs [C, 2], valid [C], spring [C, 3], dxi [C, 3], v_rel [C, 3])``;
@@ -391,11 +393,17 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         The :class:`Model`.
 
     Raises:
-        SceneError: an unknown contact law, or cohesive parameters out of range.
+        SceneError: an unknown contact law, cohesive parameters out of range, or contacts or walls asked of a
+            two-dimensional sample.
         ValueError: an unknown wall law or failure rule, ``walls="linear"`` without ``wall_stiffness``, padding with
             contacts or walls, or to capacities too small.
     """
     pm = sample.particle_material
+    if sample.dim == 2 and (contacts or walls is not None):
+        from jaxbpm.errors import SceneError
+
+        raise SceneError("a two-dimensional sample's model has bonds only so far: contacts and walls between discs "
+                         "are not yet available in 2D")
     law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
     linear = law if isinstance(law, linear_mod.LinearLaw) else None
     law = None if linear is not None else law
@@ -492,7 +500,7 @@ def _padded(arrays: dict, n_cap: int, nb_cap: int) -> dict:
         raise ValueError(f"cannot pad {n} particles and {nb} bonds to ({n_cap}, {nb_cap}): padding bonds need two "
                          "extra particles")
     r_max = float(arrays["radii"].max())
-    row = np.arange(1, n_cap - n + 1, dtype=np.float64)[:, None] * np.array([4.0 * r_max, 0.0, 0.0])
+    row = np.arange(1, n_cap - n + 1, dtype=np.float64)[:, None] * (4.0 * r_max * np.eye(pos.shape[1])[0])
     extra_n, extra_b = n_cap - n, nb_cap - nb
 
     def grow(name, fill, count, shape=()):

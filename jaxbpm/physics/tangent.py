@@ -2,11 +2,12 @@
 forward-mode differentiation, in the forms the solvers store. The DSM's operator and preconditioner and the STE's
 tensors all start here, so the three solvers integrate, linearise and estimate one and the same bond law.
 
-Forms (``nd`` DOF per particle, 3 or 6; DOF order of a pair ``(u_i, theta_i, u_j, theta_j)``):
+Forms (``nd`` DOF per particle, 3 or 6; in 2D 2 or 3; DOF order of a pair ``(u_i, theta_i, u_j, theta_j)``):
 
 * reduced ``[ni, no, nb]`` (:func:`bond_reduced`): ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` with rotations
   (9 x 9), ``d f_i / d d`` without (3 x 3), ``d = r0 + u_j - u_i`` the bond vector. The bond law sees the
-  displacements only through ``d`` and ``f_j = -f_i``, so these numbers give the whole pair tangent.
+  displacements only through ``d`` and ``f_j = -f_i``, so these numbers give the whole pair tangent. In 2D
+  (:mod:`jaxbpm.physics.bond2d`): ``d (f_i, m_i, m_j) / d (d, theta_i, theta_j)`` 4 x 4, or 2 x 2 without rotations.
 * full ``[nb, 2 nd, 2 nd]`` (:func:`full`): the pair's stiffness (minus the force Jacobian).
 * unit ``[4, nb, 9]`` (:func:`bond_unit`): ``d f_i / d d`` row-major with one of (k_n, k_t, k_tw, k_b) set to one and
   the others to zero. The law is linear in its stiffnesses, so ``d f_i / d d = sum_s k_s unit[s]`` for any bond
@@ -36,7 +37,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxbpm.physics import bond as bond_mod, contact as contact_mod, rotation
+from jaxbpm.physics import bond as bond_mod, bond2d, contact as contact_mod, rotation
 
 __all__ = ["bond_reduced", "full", "bond_full", "bond_unit", "contact_full"]
 
@@ -50,9 +51,9 @@ def bond_reduced(r0, k: bond_mod.BondStiffness, rotations: bool, z0=None) -> jnp
     Jacobians at that state instead (rotations through the exact map).
 
     Args:
-        r0: ``[nb, 3]`` rest vectors of the bonds [m].
+        r0: ``[nb, 3]`` rest vectors of the bonds [m] (``[nb, 2]``: discs, the 2D law).
         k: the bonds' stiffnesses (``[nb]`` arrays).
-        rotations: with the rotational DOF (``ni = no = 9``) or without (3).
+        rotations: with the rotational DOF (``ni = no = 9``; 2D: 4) or without (3; 2D: 2).
         z0: ``[ni, nb]`` the state to take the Jacobians at, or ``None``: at rest.
 
     Returns:
@@ -61,7 +62,30 @@ def bond_reduced(r0, k: bond_mod.BondStiffness, rotations: bool, z0=None) -> jnp
     r0c = tuple(jnp.asarray(r0).T)
     nb = r0.shape[0]
     dtype = r0.dtype
-    ni = 9 if rotations else 3
+    if len(r0c) == 2:
+        law, ni = _law_2d(r0c, k, rotations), (4 if rotations else 2)
+    else:
+        law, ni = _law_3d(r0c, k, rotations, z0), (9 if rotations else 3)
+    z = jnp.zeros((ni, nb), dtype) if z0 is None else z0
+    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
+    return jax.vmap(lambda t: jax.jvp(law, (z,), (t,))[1])(basis)
+
+
+def _law_2d(r0c, k, rotations: bool):
+    """The 2D bond law as a function of the reduced DOFs ``z [2 or 4, nb]`` (``u_j - u_i``, then ``theta_i``,
+    ``theta_j``) giving ``(f_i, m_i, m_j)`` (``f_i`` without rotations), stacked."""
+    def law(z):
+        d = (r0c[0] + z[0], r0c[1] + z[1])
+        th_i, th_j = (z[2], z[3]) if rotations else (0.0, 0.0)
+        f_i, m_i, m_j, *_ = bond2d.law_components(d, r0c, th_i, th_j, k.kn, k.kt, k.kb)
+        return jnp.stack(f_i + m_i + m_j if rotations else f_i)
+
+    return law
+
+
+def _law_3d(r0c, k, rotations: bool, z0):
+    """The 3D bond law as a function of the reduced DOFs ``z [3 or 9, nb]`` (see :func:`bond_reduced`)."""
+    nb, dtype = r0c[0].shape[0], r0c[0].dtype
     one, zero = jnp.ones(nb, dtype), jnp.zeros(nb, dtype)
 
     def law(z):
@@ -78,9 +102,7 @@ def bond_reduced(r0, k: bond_mod.BondStiffness, rotations: bool, z0=None) -> jnp
         parts = (out.f_i + out.m_i + out.m_j) if rotations else out.f_i
         return jnp.stack(parts)
 
-    z = jnp.zeros((ni, nb), dtype) if z0 is None else z0
-    basis = jnp.broadcast_to(jnp.eye(ni, dtype=dtype)[:, :, None], (ni, ni, nb))
-    return jax.vmap(lambda t: jax.jvp(law, (z,), (t,))[1])(basis)
+    return law
 
 
 def full(jr) -> jnp.ndarray:
@@ -93,12 +115,14 @@ def full(jr) -> jnp.ndarray:
         ``[nb, 2 nd, 2 nd]``, DOF order ``(u_i, theta_i, u_j, theta_j)`` (``(u_i, u_j)`` without rotations).
     """
     J = jnp.moveaxis(jr, 2, 0).transpose(0, 2, 1)  # [nb, out, in]
-    jd = J[:, :, :3]
-    if J.shape[1] == 3:  # f_i from d; f_j = -f_i
-        row = jnp.concatenate([-jd, jd], axis=2)
+    size = J.shape[1]
+    if size in (2, 3):  # f_i from d; f_j = -f_i
+        row = jnp.concatenate([-J, J], axis=2)
         return -jnp.concatenate([row, -row], axis=1)
-    rows = jnp.concatenate([-jd, J[:, :, 3:6], jd, J[:, :, 6:9]], axis=2)  # rows f_i, m_i, m_j
-    f_i, m_i, m_j = rows[:, 0:3], rows[:, 3:6], rows[:, 6:9]
+    dim, rot = (3, 3) if size == 9 else (2, 1)  # 9: 3D (d, theta_i, theta_j); 4: 2D (d_x, d_y, theta_i, theta_j)
+    jd = J[:, :, :dim]
+    rows = jnp.concatenate([-jd, J[:, :, dim:dim + rot], jd, J[:, :, dim + rot:]], axis=2)  # rows f_i, m_i, m_j
+    f_i, m_i, m_j = rows[:, :dim], rows[:, dim:dim + rot], rows[:, dim + rot:]
     return -jnp.concatenate([f_i, m_i, -f_i, m_j], axis=1)
 
 
@@ -120,16 +144,17 @@ def bond_unit(r0) -> jnp.ndarray:
     """Unit Jacobians: ``d f_i / d d`` of every bond at rest, without rotations, per stiffness.
 
     Args:
-        r0: ``[nb, 3]`` rest vectors of the bonds [m].
+        r0: ``[nb, 3]`` rest vectors of the bonds [m] (``[nb, 2]``: discs).
 
     Returns:
-        ``[4, nb, 9]``: ``d f_i / d d`` (row-major) with (k_n, k_t, k_tw, k_b) set to each unit vector in turn.
+        ``[4, nb, 9]`` (2D: ``[4, nb, 4]``): ``d f_i / d d`` (row-major) with (k_n, k_t, k_tw, k_b) set to each unit
+        vector in turn.
     """
-    nb = r0.shape[0]
+    nb, dim = r0.shape
     out = []
     for s in range(4):
         k = bond_mod.BondStiffness(*(jnp.full(nb, 1.0 if t == s else 0.0, r0.dtype) for t in range(4)))
-        out.append(jnp.moveaxis(bond_reduced(r0, k, rotations=False), 2, 0).transpose(0, 2, 1).reshape(nb, 9))
+        out.append(jnp.moveaxis(bond_reduced(r0, k, rotations=False), 2, 0).transpose(0, 2, 1).reshape(nb, dim * dim))
     return jnp.stack(out)
 
 

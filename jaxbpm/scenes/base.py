@@ -250,7 +250,7 @@ def lateral_stats(scene: Scene, sample: Sample, displacement) -> dict:
     return out if np.isfinite(out["poisson_ratio"]) else {}
 
 
-def force_weights(scene: Scene, n_reactions: int) -> np.ndarray:
+def force_weights(scene: Scene, n_reactions: int, dim: int = 3) -> np.ndarray:
     """The weights that make a scene's load out of one step's reactions, so that a compiled run can measure it.
 
     The load of every jaxbpm scene is a fixed linear combination of the reactions (``compressive_force``); the
@@ -259,18 +259,19 @@ def force_weights(scene: Scene, n_reactions: int) -> np.ndarray:
     Args:
       scene: the scene.
       n_reactions: ``W + 2``, the reactions of one step (walls, then the fixed and the driven set).
+      dim: the reactions' components (2 for a two-dimensional sample).
 
     Returns:
-      ``[n_reactions, 3]`` weights ``w`` with ``compressive_force(r) = sum(w * r[k])`` for every record ``k``.
+      ``[n_reactions, dim]`` weights ``w`` with ``compressive_force(r) = sum(w * r[k])`` for every record ``k``.
 
     Raises:
       SceneError: a scene whose load is not linear in the reactions (set its ``stop_after_peak`` to ``None``).
     """
-    size = 3 * n_reactions
-    basis = np.eye(size).reshape(size, n_reactions, 3)
+    size = dim * n_reactions
+    basis = np.eye(size).reshape(size, n_reactions, dim)
     unit = np.asarray(scene.compressive_force(basis), np.float64)
-    weights = unit.reshape(n_reactions, 3) if unit.shape == (size,) else np.zeros((n_reactions, 3))
-    probe = np.random.default_rng(0).standard_normal((2, n_reactions, 3))
+    weights = unit.reshape(n_reactions, dim) if unit.shape == (size,) else np.zeros((n_reactions, dim))
+    probe = np.random.default_rng(0).standard_normal((2, n_reactions, dim))
     got = np.asarray(scene.compressive_force(probe), np.float64)
     linear = got.shape == (2,) and np.allclose(got, np.einsum("krc,rc->k", probe, weights), rtol=1e-12, atol=1e-12)
     if unit.shape != (size,) or not linear:
@@ -541,13 +542,13 @@ class AxialScene(BaseScene):
           touching the outermost spheres, the top one moving; else the fixed and the driven layer clamped.
         """
         n, ax = sample.n_particles, self.axis
-        e = np.zeros(3)
+        e = np.zeros(sample.dim)
         e[ax] = 1.0
         if self.uses_walls:
             lo, hi = _extent(sample)
             return _loading(np.zeros(n, bool), np.zeros((n, 3)), np.stack([lo[ax] * e, hi[ax] * e]),
                             np.stack([e, -e]), np.stack([0 * e, -speed * e]))
         fixed, driven = self.layers(sample)
-        vel = np.zeros((n, 3))
+        vel = np.zeros((n, sample.dim))
         vel[driven] = -speed * e
         return _loading(fixed | driven, vel)

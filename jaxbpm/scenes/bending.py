@@ -130,15 +130,22 @@ class ThreePointBending(BaseScene):
           ``(S, b, h)``: span, width and height [m].
 
         Raises:
-          SceneError: a span not shorter than the beam.
+          SceneError: a span not shorter than the beam, or a two-dimensional beam loaded out of its plane.
+
+        A two-dimensional beam (discs in the x-y plane) has the width of its discs' thickness (``Sample.thickness``)
+        and is loaded and spanned along x and y (``axis=1, span_axis=0``, or the other way).
         """
         lo, hi = _extent(sample)
         size = hi - lo
         width_axis = 3 - self.axis - self.span_axis
+        if sample.dim == 2 and width_axis != 2:
+            raise SceneError("a two-dimensional beam lies in the x-y plane: load it along y and span it along x "
+                             "(ThreePointBending(axis=1, span_axis=0)) or the other way")
         span = self.span if self.span is not None else 0.8 * float(size[self.span_axis])
         if span >= size[self.span_axis]:
             raise SceneError(f"span {span:.4g} m must be shorter than the beam ({size[self.span_axis]:.4g} m)")
-        return float(span), float(size[width_axis]), float(size[self.axis])
+        width = float(sample.thickness) if sample.dim == 2 else float(size[width_axis])
+        return float(span), width, float(size[self.axis])
 
     def layers(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
         """The clamped particles.
@@ -215,7 +222,7 @@ class ThreePointBending(BaseScene):
           The :class:`~jaxbpm.physics.loading.Loading`.
         """
         supports, punch = self.layers(sample)
-        vel = np.zeros((sample.n_particles, 3))
+        vel = np.zeros((sample.n_particles, sample.dim))
         vel[punch, self.axis] = -speed
         return _loading(supports | punch, vel)
 

@@ -188,10 +188,18 @@ class BrazilianDisc(AxialScene):
 
         Raises:
           SceneError: a z-axis cylinder domain with another ``disc_axis`` (and no explicit dimensions), or a
-            dimension that is not positive.
+            dimension that is not positive. A two-dimensional sample (discs in the x-y plane) has ``disc_axis`` 2 and
+            the thickness of its discs (``Sample.thickness``) unless ``thickness`` is given.
         """
         domain = sample.domain
         cylinder = domain is not None and domain.kind == "cylinder"
+        if sample.dim == 2:  # discs in the x-y plane: the disc's axis is z, its thickness the discs'
+            if self.disc_axis != 2 or self.axis == 2:
+                raise SceneError("a two-dimensional sample lies in the x-y plane: its disc's axis is z (disc_axis=2) "
+                                 "and the load along x or y (axis=0 or 1)")
+            t = float(sample.thickness) if self.thickness is None else float(self.thickness)
+            size = np.subtract(domain.hi, domain.lo) if cylinder else np.subtract(*_extent(sample)[::-1])
+            return float(size[self.axis]) if self.diameter is None else float(self.diameter), t
         if cylinder and self.disc_axis != 2 and (self.diameter is None or self.thickness is None):
             raise SceneError(f"the sample's domain is a cylinder along z, but disc_axis is {self.disc_axis}: give "
                              "disc_axis=2 (or diameter and thickness)")

@@ -30,7 +30,7 @@ class UniaxialCompression(AxialScene):
     ``jaxbpm.solve`` refuses them a scene with ``breakage=True``.
 
     Args:
-      axis: the load axis (default z).
+      axis: the load axis (default z). A two-dimensional sample lies in the x-y plane: load it along 1 (y) or 0 (x).
       strain: the target strain, in (0, 0.5).
       boundary: ``"layers"`` (clamp the particles within ``layer_thickness`` of the bottom, move those within it of
         the top; every DOF of both prescribed, the top translated rigidly, no rotation) or ``"walls"`` (two
@@ -43,7 +43,7 @@ class UniaxialCompression(AxialScene):
         lowest (highest) centre is clamped (driven).
       gauge_length, area: explicit l [m] and A [m^2]; defaults: l = distance between the mean centres of the
         clamped layers (walls: the initial wall gap), A = cross-section of the sample's domain (or the bounding box
-        of its spheres) normal to the axis.
+        of its spheres) normal to the axis (2D: the width across the axis times the discs' thickness).
       contacts: particle contacts on (True) or off.
       rotations: rotational DOFs (``None``: the Model decides).
       wall_law, wall_stiffness: see :func:`jaxbpm.physics.model.build_model`.
@@ -134,7 +134,7 @@ class UniaxialCompression(AxialScene):
         """
         if self.fixed is not None:
             return clamped_groups(sample, self.fixed, self.driven, axis=self.axis, layer_thickness=self.layer_thickness)
-        z = np.asarray(sample.positions)[:, self.axis]
+        z = np.asarray(sample.positions)[:, _plane_axis(self.axis, sample)]
         t = self.layer_thickness if self.layer_thickness is not None else float(np.mean(sample.radii))
         fixed, driven = z <= z.min() + t, z >= z.max() - t
         if not fixed.any() or not driven.any():
@@ -157,8 +157,8 @@ class UniaxialCompression(AxialScene):
           SceneError: a length or an area that is not positive.
         """
         pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
-        ax = self.axis
-        others = [k for k in range(3) if k != ax]
+        ax = _plane_axis(self.axis, sample)
+        others = [k for k in range(sample.dim) if k != ax]
         if self.gauge_length is not None:
             length = float(self.gauge_length)
         elif self.boundary == "walls" and self.fixed is None:
@@ -168,6 +168,10 @@ class UniaxialCompression(AxialScene):
             length = float(pos[driven, ax].mean() - pos[fixed, ax].mean())
         if self.area is not None:
             area = float(self.area)
+        elif sample.dim == 2:  # the width across the axis times the discs' thickness
+            box = (np.subtract(sample.domain.hi, sample.domain.lo) if sample.domain is not None else
+                   (pos + rad[:, None]).max(axis=0) - (pos - rad[:, None]).min(axis=0))
+            area = float(box[others[0]] * sample.thickness)
         elif sample.domain is not None:
             size = np.subtract(sample.domain.hi, sample.domain.lo)
             area = float(size[others[0]] * size[others[1]])
@@ -203,10 +207,10 @@ class UniaxialCompression(AxialScene):
           SceneError: too few particles in the middle third, or all at one lateral coordinate.
         """
         pos = np.asarray(sample.positions, np.float64)
-        n = len(pos)
-        u = np.asarray(displacement, np.float64)[:n, :3]
-        ax = self.axis
-        lateral = [k for k in range(3) if k != ax]
+        n, dim = pos.shape
+        u = np.asarray(displacement, np.float64)[:n, :dim]
+        ax = _plane_axis(self.axis, sample)
+        lateral = [k for k in range(dim) if k != ax]
         z = pos[:, ax]
         lo, hi = z.min(), z.max()
         mid = (z >= lo + (hi - lo) / 3.0) & (z <= hi - (hi - lo) / 3.0)
@@ -226,3 +230,11 @@ class UniaxialCompression(AxialScene):
         mean = float(np.mean(lat))
         return {"axial_strain": axial, "lateral_strain": mean, "lateral_strains": lat,
                 "poisson_ratio": -mean / axial if axial != 0 else float("nan")}
+
+
+def _plane_axis(axis: int, sample: Sample) -> int:
+    """``axis``, checked against a two-dimensional sample (whose discs lie in the x-y plane)."""
+    if sample.dim == 2 and axis == 2:
+        raise SceneError("a two-dimensional sample lies in the x-y plane: load it along axis=1 (y) or axis=0 (x), "
+                         "e.g. UniaxialCompression(axis=1)")
+    return axis

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxbpm._compile import capacity, put, setup_jit, size_class
+from jaxbpm._geometry import check_three_d
 from jaxbpm.errors import SampleError, SceneError
 from jaxbpm.physics import tangent
 from jaxbpm.physics.model import Model, contact_params
@@ -139,7 +140,8 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         or with walls (which clamp no particle), the free form is built.
       clamp_layers: the deprecated spelling of ``boundary`` (``True``: ``"clamped"``, ``False``: ``"free"``;
         :class:`DeprecationWarning`).
-      dofs: 3 (translations, the paper's form) or 6 (translations and rotations) per particle.
+      dofs: 3 (translations, the paper's form) or 6 (translations and rotations) per particle. A two-dimensional
+        sample takes the translations-only form (2 DOF per disc; the estimator's ``dofs`` is then 2).
       first_neighbour: the first-neighbour-only form (Eq. 33-35) instead of Eq. 32.
       contacts: override ``scene.contacts``.
       contact_fraction: fraction of the target strain at which contacts are linearised (default: middle of the
@@ -164,6 +166,10 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         raise TypeError(f"sample must be a jaxbpm.Sample, got {type(sample).__name__}")
     if dofs not in (3, 6):
         raise SceneError(f"dofs must be 3 or 6 per particle, got {dofs!r}")
+    if sample.dim == 2:  # discs: the translations-only form, 2 DOF each
+        if dofs == 6:
+            check_three_d(sample, "the STE with rotations (dofs=6)")
+        dofs = 2
     if precision not in ("float64", "float32"):
         raise SceneError(f"precision must be 'float64' or 'float32', got {precision!r}")
     axis = 2 if scene is None else int(scene.axis)
@@ -195,7 +201,7 @@ def _interactions(sample, model, scene, axis, use_contacts, contact_fraction):
     active at the linearisation point (their vectors shortened to the linearisation overlap)."""
     pos = np.asarray(sample.positions, np.float64)
     cpairs = np.zeros((0, 2), np.int64)
-    cd = np.zeros((0, 3))
+    cd = np.zeros((0, pos.shape[1]))
     if use_contacts:
         if scene is None:
             raise SceneError("contacts need a scene (its axis and target strain set the linearisation overlap)")
@@ -213,14 +219,15 @@ def _interactions(sample, model, scene, axis, use_contacts, contact_fraction):
 
 def _non_singular(pairs, d, n) -> np.ndarray:
     """``[n]``: the particles with at least three interactions, not all coplanar (smallest fabric eigenvalue above
-    :data:`_FABRIC_TOL` of the largest)."""
+    :data:`_FABRIC_TOL` of the largest); in 2D at least two, not all collinear."""
+    dim = d.shape[1]
     unit = d / np.linalg.norm(d, axis=1, keepdims=True)
     ends = pairs.T.ravel()  # both ends of every pair: per-component bincounts (np.add.at is several times slower)
     fabric = np.stack([np.bincount(ends, np.tile(unit[:, a] * unit[:, b], 2), minlength=n)
-                       for a in range(3) for b in range(3)], axis=1).reshape(n, 3, 3)
+                       for a in range(dim) for b in range(dim)], axis=1).reshape(n, dim, dim)
     count = np.bincount(ends, minlength=n)
     eig = np.linalg.eigvalsh(fabric)
-    return (count >= 3) & (eig[:, 0] > _FABRIC_TOL * np.maximum(eig[:, -1], 1e-300))
+    return (count >= dim) & (eig[:, 0] > _FABRIC_TOL * np.maximum(eig[:, -1], 1e-300))
 
 
 def clamped_form(scene, boundary: str) -> bool:
@@ -252,7 +259,8 @@ def _particles(sample, scene, valid, boundary, volumes, surface_depth) -> dict:
         clamped, along = fixed | driven, int(scene.axis)
     if volumes is None:
         phi, _ = sample.packing_fraction()
-        vol = 4.0 / 3.0 * np.pi * rad**3 / phi
+        solid = 4.0 / 3.0 * np.pi * rad**3 if sample.dim == 3 else np.pi * rad**2 * sample.thickness
+        vol = solid / phi
     else:
         vol = np.asarray(volumes, np.float64)
         if vol.shape != (n,) or not np.all(np.isfinite(vol) & (vol > 0)):
@@ -321,10 +329,11 @@ def _assemble(sample, model, a: dict, counts, n_layers, layers_cap, dofs, first_
                     free=put(a["free"]), layer=put(a["layer"], np.int32), layer_count=put(n_layers, np.int32),
                     counts=counts, dofs=int(dofs), first_neighbour=bool(first_neighbour), n_layers=int(layers_cap),
                     axis=axis)
-    if dofs == 3:
+    if dofs == model.dim:  # translations only
         nc, nc_cap = int(counts[2]), int(a["cd"].shape[0])
         geometry, terms = _bond_geometry(model)
-        ck = (-np.asarray(_contact_jacobians_jit(est))[:, :3, 3:].reshape(-1, 9) if nc_cap else np.zeros((0, 9)))
+        ck = (-np.asarray(_contact_jacobians_jit(est))[:, :3, 3:].reshape(-1, 9) if nc_cap else
+              np.zeros((0, dofs * dofs)))
         ck[nc:] = 0.0  # padding contacts do not touch; their stiffness is zero to the last bit
         est = dataclasses.replace(est, geometry=geometry, terms=terms, contact_k=jnp.asarray(ck, dtype))
     return est
@@ -333,7 +342,7 @@ def _assemble(sample, model, a: dict, counts, n_layers, layers_cap, dofs, first_
 def _bond_model(sample: Sample, dofs: int) -> Model:
     from jaxbpm.physics.model import build_model
 
-    return build_model(sample, contacts=False, walls=None, rotations=dofs == 6)
+    return build_model(sample, contacts=False, walls=None, rotations=dofs == 6)  # (2D: dofs 2, no rotations)
 
 
 def _domain_extent(sample: Sample, axis: int) -> tuple[float, float]:
@@ -358,7 +367,7 @@ def _boundary_distance(sample: Sample, along: int | None = None) -> np.ndarray:
     if sample.domain is not None and sample.domain.kind == "cylinder":
         centre, radius = 0.5 * (lo[:2] + hi[:2]), 0.25 * float(np.sum(hi[:2] - lo[:2]))
         radial = radius - np.linalg.norm(pos[:, :2] - centre, axis=1)
-        return np.minimum(radial, dist[:, 2])
+        return radial if sample.dim == 2 else np.minimum(radial, dist[:, 2])
     return dist.min(axis=1)
 
 

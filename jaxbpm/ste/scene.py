@@ -306,13 +306,14 @@ def solve_scene(sample: Sample, scene, params=None, options: STE | None = None):
 
 def _stats(est: Estimator, scene, parts, e, nu, e_iso, nu_iso, layered, setup_time) -> dict:
     """The result's ``stats`` from the program's outputs (host arrays)."""
-    stats = {"tensor": parts["tensor"].tolist(), "E_x": float(e[0]), "E_y": float(e[1]), "E_z": float(e[2]),
+    stats = {"tensor": parts["tensor"].tolist(), "E_x": float(e[0]), "E_y": float(e[1]),
+             "E_z": float(e[2]) if len(e) > 2 else None,
              "nu": nu.tolist(), "E_iso": float(e_iso), "nu_iso": float(nu_iso), "K_body": float(parts["K_body"]),
              "E_axis": float(parts["E_axis"]), "skipped": est.skipped, "surface": est.surface, "clamped": est.clamped,
              "particles": est.particles, "bonds": est.bonds, "contacts": est.contacts, "dofs": est.dofs,
              "first_neighbour": est.first_neighbour, "layered": bool(layered), "precision": str(est.d.dtype),
              "size_class": [est.n, est.n_bonds, est.n_contacts], "setup_time": setup_time}
-    lateral = [k for k in range(3) if k != scene.axis]
+    lateral = [k for k in range(len(e)) if k != scene.axis]
     # the uniaxial test's Poisson ratio: lateral strain per axial strain under stress along the load axis
     stats["poisson_ratio"] = float(np.mean([nu[scene.axis, k] for k in lateral]))
     for name in ("k_bottom", "k_top", "n_bottom", "n_top"):

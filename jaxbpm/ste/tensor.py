@@ -15,19 +15,27 @@ from jaxbpm.physics.blocks import fold_blocks
 from jaxbpm.ste.estimator import _contact_jacobians, Estimator
 
 __all__ = ["pair_stiffness", "local_tensors", "body_tensor", "raw_body_tensor", "voigt", "tensor_from_voigt",
-           "moduli", "directional_modulus", "isotropic_fit", "VOIGT", "coupling", "local_tensors_edges",
+           "moduli", "directional_modulus", "isotropic_fit", "VOIGT", "VOIGT_2D", "coupling", "local_tensors_edges",
            "raw_body_tensor_edges"]
 
 
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
 """Index pairs of the Voigt components, in order."""
 
+VOIGT_2D = ((0, 0), (1, 1), (0, 1))
+"""Index pairs of the Voigt components of a two-dimensional sample (11, 22, 12), in order."""
+
+
+def _voigt_pairs(k: int):
+    """The Voigt index pairs of ``k``-dimensional tensors."""
+    return VOIGT_2D if k == 2 else VOIGT
+
 
 def _bond_jacobians(est: Estimator, params) -> jnp.ndarray:
     """Per-bond stiffness ``[nb, 2nd, 2nd]`` at rest, DOF order (u_i, theta_i, u_j, theta_j): minus the Jacobian of
     the bond law (:func:`jaxbpm.physics.tangent.bond_full`, the tangent the DSM uses too)."""
     model = est.model
-    return tangent.bond_full(model.r0, model.stiffness(params), rotations=est.dofs == 6)
+    return tangent.bond_full(model.r0, model.stiffness(params), rotations=est.dofs == 6)  # (2D: translations)
 
 
 def pair_stiffness(est: Estimator, params) -> jnp.ndarray:
@@ -113,7 +121,11 @@ def _gram(a, b):
 
 
 def _inverse3(D):
-    """Inverse of ``[n, 3, 3]`` matrices by cofactors (elementwise)."""
+    """Inverse of ``[n, 3, 3]`` (or ``[n, 2, 2]``) matrices by cofactors (elementwise)."""
+    if D.shape[-1] == 2:
+        a, b, c, d = D[:, 0, 0], D[:, 0, 1], D[:, 1, 0], D[:, 1, 1]
+        inv_det = 1.0 / (a * d - b * c)
+        return jnp.stack([jnp.stack([d, -b], axis=-1), jnp.stack([-c, a], axis=-1)], axis=1) * inv_det[:, None, None]
     a = [[D[:, r, c] for c in range(3)] for r in range(3)]
     cof = [[a[(r + 1) % 3][(c + 1) % 3] * a[(r + 2) % 3][(c + 2) % 3]
             - a[(r + 1) % 3][(c + 2) % 3] * a[(r + 2) % 3][(c + 1) % 3] for c in range(3)] for r in range(3)]
@@ -122,24 +134,25 @@ def _inverse3(D):
 
 
 def coupling(est: Estimator, params) -> jnp.ndarray:
-    """The coupling ``K^nm`` of every pair (3 DOF): ``sum_s k_s G_s`` for the bonds, then the contacts.
+    """The coupling ``K^nm`` of every pair (3 DOF; 2 in 2D): ``sum_s k_s G_s`` for the bonds, then the contacts.
 
     Args:
       est: the estimator (:func:`~jaxbpm.ste.estimator`).
       params: the bond parameters.
 
     Returns:
-      ``[P, 3, 3]`` one matrix [N/m] per pair, the ``n_bonds`` bonds first, then the ``n_contacts`` contacts.
+      ``[P, 3, 3]`` (2D: ``[P, 2, 2]``) one matrix [N/m] per pair, the ``n_bonds`` bonds first, then the
+      ``n_contacts`` contacts.
     """
     k = est.model.stiffness(params)
     ks = tuple(jnp.asarray(x).astype(est.d.dtype) for x in (k.kn, k.kt, k.ktw, k.kb))
-    nb = est.n_bonds
-    K = jnp.zeros((nb, 9), est.d.dtype)
+    nb, dim = est.n_bonds, est.d.shape[1]
+    K = jnp.zeros((nb, dim * dim), est.d.dtype)
     for t, s in enumerate(est.terms):
         K = K + jnp.broadcast_to(ks[s], (nb,))[:, None] * est.geometry[t]
     if est.n_contacts:
         K = jnp.concatenate([K, est.contact_k.astype(K.dtype)])
-    return K.reshape(-1, 3, 3)
+    return K.reshape(-1, dim, dim)
 
 
 class _Fluct3(NamedTuple):
@@ -155,28 +168,29 @@ class _Fluct3(NamedTuple):
 def _fluctuations3(est: Estimator, params, weighted: bool = False) -> _Fluct3:
     K = coupling(est, params)
     n, d = est.n, est.d
+    k = d.shape[1]  # 3 (2 in 2D)
     i, j = est.pairs[:, 0], est.pairs[:, 1]
     valid = est.valid[:, None, None]
     free = est.relaxing[:, None, None]  # clamped and singular particles follow the affine field
-    kd = (K[:, :, :, None] * d[:, None, None, :]).reshape(-1, 27)  # K[a, l] d_k
-    rows = jnp.concatenate([K.reshape(-1, 9), kd], axis=1)
+    kd = (K[:, :, :, None] * d[:, None, None, :]).reshape(-1, k ** 3)  # K[a, l] d_k
+    rows = jnp.concatenate([K.reshape(-1, k * k), kd], axis=1)
     s_i = jax.ops.segment_sum(rows, i, n)
     s_j = jax.ops.segment_sum(rows, j, n)  # d^nm = -d on the j end
-    D = jnp.where(valid, (s_i[:, :9] + s_j[:, :9]).reshape(n, 3, 3), jnp.eye(3, dtype=d.dtype))
-    B = (s_i[:, 9:] - s_j[:, 9:]).reshape(n, 3, 9)
+    D = jnp.where(valid, (s_i[:, :k * k] + s_j[:, :k * k]).reshape(n, k, k), jnp.eye(k, dtype=d.dtype))
+    B = (s_i[:, k * k:] - s_j[:, k * k:]).reshape(n, k, k * k)
     N = None
     if weighted and not est.first_neighbour:  # N^m: on m = j from the edge (i -> j), weight w^i; on i, -w^j
         w = est.include.astype(d.dtype)
         N = (jax.ops.segment_sum(w[i][:, None] * kd, j, n) - jax.ops.segment_sum(w[j][:, None] * kd, i, n))
-        N = N.reshape(n, 3, 3, 3).transpose(0, 3, 1, 2)
+        N = N.reshape(n, k, k, k).transpose(0, 3, 1, 2)
     A = _inverse3(D)
     gamma = jnp.where(free, _mul(A, B), 0.0)  # Eq. 23
-    B = B.reshape(n, 3, 3, 3)
+    B = B.reshape(n, k, k, k)
     if est.first_neighbour:
         return _Fluct3(K, B, N, gamma, gamma, None, None)
     q_i, q_j = _mul(K, gamma[j]), _mul(K, gamma[i])
-    hat = (jax.ops.segment_sum(q_i.reshape(-1, 27), i, n) + jax.ops.segment_sum(q_j.reshape(-1, 27), j, n))
-    hat = jnp.where(free, _mul(A, hat.reshape(n, 3, 9)), 0.0)  # Eq. 24 + 29
+    hat = (jax.ops.segment_sum(q_i.reshape(-1, k ** 3), i, n) + jax.ops.segment_sum(q_j.reshape(-1, k ** 3), j, n))
+    hat = jnp.where(free, _mul(A, hat.reshape(n, k, k * k)), 0.0)  # Eq. 24 + 29
     return _Fluct3(K, B, N, gamma, gamma + hat, q_i, q_j)
 
 
@@ -189,8 +203,10 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     gathered by one scatter per pair end into one ``[n, 63]`` array (fewer scatters than one per sum). The two passes
     over the pairs fold over blocks of pairs on large samples (:func:`~jaxbpm.physics.blocks.fold_blocks`), which
     bounds the per-pair scratch memory."""
-    K = coupling(est, params).reshape(-1, 9)
     n, d, dtype = est.n, est.d, est.d.dtype
+    k = d.shape[1]  # 3 (2 in 2D)
+    k2, k3 = k * k, k ** 3
+    K = coupling(est, params).reshape(-1, k2)
     pairs = est.pairs
     w = est.include.astype(dtype)
     valid = est.valid[:, None, None]
@@ -207,55 +223,57 @@ def _raw_body_tensor3(est: Estimator, params) -> jnp.ndarray:
     def sums(carry, idx, keep):
         acc, gram = carry
         i, j, dc, kc = block_of(idx, keep)
-        kd = (kc[:, :, None] * dc[:, None, :]).reshape(-1, 27)  # K[a, l] d_k
+        kd = (kc[:, :, None] * dc[:, None, :]).reshape(-1, k3)  # K[a, l] d_k
         wi, wj = w[i][:, None], w[j][:, None]
         # on i: (K, K d, N^i -= w^j K d); on j, where d^nm = -d: (K, -K d, N^j += w^i K d)
         acc = acc.at[i].add(jnp.concatenate([kc, kd] + ([-wj * kd] if neighbours else []), axis=1))
         acc = acc.at[j].add(jnp.concatenate([kc, -kd] + ([wi * kd] if neighbours else []), axis=1))
-        dd = ((wi + wj)[:, :, None] * dc[:, :, None] * dc[:, None, :]).reshape(-1, 9)  # (i, k)
+        dd = ((wi + wj)[:, :, None] * dc[:, :, None] * dc[:, None, :]).reshape(-1, k2)  # (i, k)
         return acc, gram + _gram(dd, kc)
 
-    init = (jnp.zeros((n, 63 if neighbours else 36), dtype), jnp.zeros((9, 9), dtype))
+    init = (jnp.zeros((n, k2 + (2 if neighbours else 1) * k3), dtype), jnp.zeros((k2, k2), dtype))
     acc, gram = fold_blocks(sums, init, K.shape[0])
-    D = jnp.where(valid, acc[:, :9].reshape(n, 3, 3), jnp.eye(3, dtype=dtype))
-    B = acc[:, 9:36].reshape(n, 3, 9)
+    D = jnp.where(valid, acc[:, :k2].reshape(n, k, k), jnp.eye(k, dtype=dtype))
+    B = acc[:, k2:k2 + k3].reshape(n, k, k2)
     A = _inverse3(D)
     gamma = jnp.where(free, _mul(A, B), 0.0)  # Eq. 23
     phi = gamma
     if neighbours:
         def neighbour_sums(hat, idx, keep):
             i, j, _, kc = block_of(idx, keep)
-            k3 = kc.reshape(-1, 3, 3)
-            return hat.at[i].add(_mul(k3, gamma[j])).at[j].add(_mul(k3, gamma[i]))
+            km = kc.reshape(-1, k, k)
+            return hat.at[i].add(_mul(km, gamma[j])).at[j].add(_mul(km, gamma[i]))
 
-        hat = fold_blocks(neighbour_sums, jnp.zeros((n, 3, 9), dtype), K.shape[0])
+        hat = fold_blocks(neighbour_sums, jnp.zeros((n, k, k2), dtype), K.shape[0])
         phi = gamma + jnp.where(free, _mul(A, hat), 0.0)  # Eq. 24 + 29
-    t = gram.reshape(3, 3, 3, 3).transpose(0, 2, 1, 3)
+    t = gram.reshape(k, k, k, k).transpose(0, 2, 1, 3)
     # sum_n w B[j, a, i] phi[a, (l, k)] and sum_n N[i, j, b] Gamma[b, (l, k)]: one matrix product each that
     # contracts (particle, a) -- rows [n * 3, 9] on both sides (faster on CPU than per-particle products summed)
-    bw = (w[:, None, None, None] * B.reshape(n, 3, 3, 3)).transpose(0, 2, 3, 1).reshape(3 * n, 9)
-    t = t - _gram(bw, phi.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
+    bw = (w[:, None, None, None] * B.reshape(n, k, k, k)).transpose(0, 2, 3, 1).reshape(k * n, k2)
+    t = t - _gram(bw, phi.reshape(k * n, k2)).reshape(k, k, k, k).transpose(0, 1, 3, 2)
     if neighbours:
-        nb_ = acc[:, 36:].reshape(n, 3, 3, 3).transpose(0, 2, 3, 1).reshape(3 * n, 9)  # [(n, b), (i, j)]
-        t = t + _gram(nb_, gamma.reshape(3 * n, 9)).reshape(3, 3, 3, 3).transpose(0, 1, 3, 2)
+        nb_ = acc[:, k2 + k3:].reshape(n, k, k, k).transpose(0, 2, 3, 1).reshape(k * n, k2)  # [(n, b), (i, j)]
+        t = t + _gram(nb_, gamma.reshape(k * n, k2)).reshape(k, k, k, k).transpose(0, 1, 3, 2)
     return t / (2.0 * jnp.sum(jnp.where(est.include, est.volume, 0.0)))
 
 
 def _local_tensors3(est: Estimator, params) -> jnp.ndarray:
     fl = _fluctuations3(est, params)
     n, d = est.n, est.d
+    k = d.shape[1]  # 3 (2 in 2D)
+    m = len(_voigt_pairs(k))
     i, j = est.pairs[:, 0], est.pairs[:, 1]
     kd = fl.K[:, :, :, None] * d[:, None, None, :]  # [P, j, l, k]
     g_i, g_j = kd, kd  # d_i f on the i end; on the j end (-d_i) (-K d + K Gamma^i) = d_i (K d - K Gamma^i)
     if fl.q_i is not None:
-        g_i, g_j = kd + fl.q_i.reshape(-1, 3, 3, 3), kd - fl.q_j.reshape(-1, 3, 3, 3)
+        g_i, g_j = kd + fl.q_i.reshape(-1, k, k, k), kd - fl.q_j.reshape(-1, k, k, k)
 
     def edge(g):
-        return voigt(_symmetrise(d[:, :, None, None, None] * jnp.swapaxes(g, -2, -1)[:, None])).reshape(-1, 36)
+        return voigt(_symmetrise(d[:, :, None, None, None] * jnp.swapaxes(g, -2, -1)[:, None])).reshape(-1, m * m)
 
     c = jax.ops.segment_sum(edge(g_i), i, n) + jax.ops.segment_sum(edge(g_j), j, n)
-    s = jnp.einsum("njai,nalk->nijkl", fl.B, fl.phi.reshape(n, 3, 3, 3))
-    c = c.reshape(n, 6, 6) - voigt(_symmetrise(s))
+    s = jnp.einsum("njai,nalk->nijkl", fl.B, fl.phi.reshape(n, k, k, k))
+    c = c.reshape(n, m, m) - voigt(_symmetrise(s))
     return c / (2.0 * est.volume[:, None, None])
 
 
@@ -276,7 +294,7 @@ def raw_body_tensor(est: Estimator, params) -> jnp.ndarray:
     Returns:
       ``[3, 3, 3, 3]`` the tensor [Pa].
     """
-    if est.dofs == 3:
+    if est.dofs == est.model.dim:
         return _raw_body_tensor3(est, params)
     return raw_body_tensor_edges(est, params)
 
@@ -330,7 +348,7 @@ def local_tensors(est: Estimator, params) -> jnp.ndarray:
     Returns:
       ``[n, 6, 6]`` [Pa]; NaN for singular (skipped) particles.
     """
-    if est.dofs == 3:
+    if est.dofs == est.model.dim:
         return jnp.where(est.valid[:, None, None], _local_tensors3(est, params), jnp.nan)
     return local_tensors_edges(est, params)
 
@@ -360,16 +378,17 @@ def local_tensors_edges(est: Estimator, params) -> jnp.ndarray:
 
 
 def voigt(c) -> jnp.ndarray:
-    """A fourth-order tensor in Voigt form (order 11, 22, 33, 23, 13, 12).
+    """A fourth-order tensor in Voigt form (order 11, 22, 33, 23, 13, 12; in 2D 11, 22, 12).
 
     Args:
-      c: ``[..., 3, 3, 3, 3]`` the tensor.
+      c: ``[..., 3, 3, 3, 3]`` (2D: ``[..., 2, 2, 2, 2]``) the tensor.
 
     Returns:
-      ``[..., 6, 6]``.
+      ``[..., 6, 6]`` (2D: ``[..., 3, 3]``).
     """
-    i = np.array([p[0] for p in VOIGT])
-    j = np.array([p[1] for p in VOIGT])
+    pairs = _voigt_pairs(c.shape[-1])
+    i = np.array([p[0] for p in pairs])
+    j = np.array([p[1] for p in pairs])
     return c[..., i[:, None], j[:, None], i[None, :], j[None, :]]
 
 
@@ -377,13 +396,14 @@ def tensor_from_voigt(c6) -> jnp.ndarray:
     """A Voigt stiffness as a fourth-order tensor with the minor symmetries.
 
     Args:
-      c6: ``[..., 6, 6]`` the Voigt form.
+      c6: ``[..., 6, 6]`` the Voigt form (2D: ``[..., 3, 3]``).
 
     Returns:
-      ``[..., 3, 3, 3, 3]``.
+      ``[..., 3, 3, 3, 3]`` (2D: ``[..., 2, 2, 2, 2]``).
     """
-    idx = np.zeros((3, 3), int)
-    for k, (a, b) in enumerate(VOIGT):
+    dim = 2 if c6.shape[-1] == 3 else 3
+    idx = np.zeros((dim, dim), int)
+    for k, (a, b) in enumerate(_voigt_pairs(dim)):
         idx[a, b] = idx[b, a] = k
     return c6[..., idx[:, :, None, None], idx[None, None, :, :]]
 
@@ -397,11 +417,13 @@ def moduli(c6) -> dict:
     Returns:
       ``{"E": [..., 3]`` Young's moduli along x, y, z; ``"nu": [..., 3, 3]`` Poisson ratios nu_ij = -S_ij / S_ii
       (lateral strain j per axial strain i); ``"G": [..., 3]`` shear moduli G_23, G_13, G_12;
-      ``"compliance": [..., 6, 6]}``.
+      ``"compliance": [..., 6, 6]}``. In 2D (``c6 [..., 3, 3]``): the in-plane (plane-stress) ``E [..., 2]``,
+      ``nu [..., 2, 2]`` and ``G [..., 1]`` (G_12).
     """
     s = jnp.linalg.inv(c6)
     diag = jnp.diagonal(s, axis1=-2, axis2=-1)
-    return {"E": 1.0 / diag[..., :3], "nu": -s[..., :3, :3] / diag[..., :3, None], "G": 1.0 / diag[..., 3:],
+    k = 2 if c6.shape[-1] == 3 else 3
+    return {"E": 1.0 / diag[..., :k], "nu": -s[..., :k, :k] / diag[..., :k, None], "G": 1.0 / diag[..., k:],
             "compliance": s}
 
 
@@ -429,11 +451,16 @@ def isotropic_fit(c6) -> tuple[jnp.ndarray, jnp.ndarray]:
       c6: ``[6, 6]`` the Voigt stiffness [Pa].
 
     Returns:
-      ``(E, nu)``: its Young's modulus [Pa] and Poisson's ratio.
+      ``(E, nu)``: its Young's modulus [Pa] and Poisson's ratio (2D, ``c6 [3, 3]``: the isotropic plane-stress
+      tensor's in-plane E and nu).
     """
     c = tensor_from_voigt(c6)
     a = jnp.einsum("...iijj->...", c)   # 9 lambda + 6 mu
     b = jnp.einsum("...ijij->...", c)   # 3 lambda + 12 mu
+    if c6.shape[-1] == 3:  # 2D: a = 4 lambda + 4 mu, b = 2 lambda + 6 mu; plane stress E, nu of (lambda, mu)
+        mu = (2.0 * b - a) / 8.0
+        lam = a / 4.0 - mu
+        return 4.0 * mu * (lam + mu) / (lam + 2.0 * mu), lam / (lam + 2.0 * mu)
     mu = (3.0 * b - a) / 30.0
     lam = (a - 6.0 * mu) / 9.0
     return mu * (3.0 * lam + 2.0 * mu) / (lam + mu), lam / (2.0 * (lam + mu))

@@ -61,3 +61,21 @@ def test_float32_model_warns():
     with jax.enable_x64(False):
         with pytest.warns(UserWarning, match="float32"):
             build_model(s)
+
+
+def test_two_dimensional_model_bonds_only_and_padded():
+    from jaxbpm.errors import SceneError
+    from jaxbpm.generate import lattice
+
+    s = lattice("square", (4, 3))
+    with pytest.raises(SceneError, match="not yet available in 2D"):
+        build_model(s, contacts=True)
+    m = build_model(s)
+    assert (m.dim, m.dofs) == (2, 3) and build_model(s, rotations=False).dofs == 2
+    padded = build_model(s, pad_to=(20, 30))
+    u = 1e-6 * jnp.sin(jnp.arange(2 * s.n_particles, dtype=float)).reshape(-1, 2)
+    params = default_params(s)
+    f, mo, _ = m.forces(m.positions0 + u, jnp.zeros((m.n, 1)), params)
+    fp, mp, _ = padded.forces(padded.positions0.at[:m.n].add(u), jnp.zeros((20, 1)), params)
+    assert jnp.allclose(f, fp[:m.n], rtol=1e-12, atol=1e-9) and jnp.allclose(mo, mp[:m.n], rtol=1e-12, atol=1e-12)
+    assert float(jnp.abs(fp[m.n:]).max()) == 0.0
