@@ -20,8 +20,16 @@ __all__ = ["bar", "say", "Lines", "LINE_INTERVAL"]
 LINE_INTERVAL = 10.0
 
 
+def _in_kernel() -> bool:
+    """Whether this code runs in a Jupyter kernel (not merely in a process that imported ipykernel, as a notebook
+    runner does)."""
+    ipython = sys.modules.get("IPython")
+    shell = getattr(ipython, "get_ipython", lambda: None)() if ipython is not None else None
+    return shell is not None and type(shell).__name__ == "ZMQInteractiveShell"
+
+
 def _tqdm():
-    if importlib.util.find_spec("ipywidgets") is not None and "ipykernel" in sys.modules:
+    if importlib.util.find_spec("ipywidgets") is not None and _in_kernel():
         from tqdm.auto import tqdm
     else:
         from tqdm.std import tqdm
@@ -49,7 +57,7 @@ def bar(desc: str, total: int | None = None, unit: str = "step", leave: bool = T
     """
     if lines is None:
         isatty = getattr(sys.stderr, "isatty", lambda: False)
-        lines = not isatty() and "ipykernel" not in sys.modules
+        lines = not isatty() and not _in_kernel()
     if lines:
         return Lines(desc, total=total, unit=unit, leave=leave, disable=disable)
     return _tqdm()(total=total, desc=desc, unit=unit, file=sys.stderr, leave=leave, dynamic_ncols=True,

@@ -70,3 +70,15 @@ def test_where_stderr_is_no_terminal_progress_is_written_as_lines(capsys, monkey
     d.update(5)
     d.close()
     assert capsys.readouterr().err == ""
+
+
+def test_a_process_that_imported_ipykernel_is_no_kernel(monkeypatch):
+    """A notebook runner imports ipykernel without being a kernel: its progress is still written as lines."""
+    import sys
+    import types
+
+    monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
+    assert isinstance(progress.bar("DEM steps", total=10), progress.Lines)
+    shell = type("ZMQInteractiveShell", (), {})()
+    monkeypatch.setitem(sys.modules, "IPython", types.SimpleNamespace(get_ipython=lambda: shell))
+    assert not isinstance(progress.bar("DEM steps", total=10, disable=True), progress.Lines)
