@@ -158,6 +158,12 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
                       coefficients: bool = True, title: str | None = None) -> pathlib.Path:
     """Write ``sample`` as a LAMMPS data file (``atom_style bpm/sphere``, units si), atomically.
 
+    A two-dimensional sample (discs, ``sample.dim == 2``) is written for ``dimension 2``: positions at z = 0, the box
+    ``zlo zhi`` a slab of the discs' thickness around z = 0, the bond coefficients of the ``2 r_b x t`` rectangular
+    sections (:func:`lammps_coefficients`), and the thickness in jaxbpm's header comment. The density column is the
+    material's density; LAMMPS computes sphere masses from it, so give discs their masses ``rho pi R^2 t`` in the
+    input with ``set group all density/disc`` (rho t) and integrate with ``fix nve/bpm/sphere disc``.
+
     Args:
       path: the data file. Atom IDs are particle index + 1, bond IDs bond index + 1.
       sample: the sample.
@@ -212,6 +218,9 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     density = float(sample.particle_material.density)
     pad = 10.0 * rad.max()
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
+    if sample.dim == 2:  # dimension 2: z = 0, a slab of the discs' thickness around it (LAMMPS needs zlo < 0 < zhi)
+        pos = np.concatenate([pos, np.zeros((n, 1))], axis=1)
+        lo, hi = np.append(lo, -0.5 * sample.thickness), np.append(hi, 0.5 * sample.thickness)
     from jaxbpm._version import __version__
 
     lines = [meta_line(meta_of(sample, normalize=bool(normalize))), "",
@@ -232,8 +241,8 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
             list(range(1, nb + 1)), btype.tolist(), (b[:, 0].astype(np.int64) + 1).tolist(),
             (b[:, 1].astype(np.int64) + 1).tolist(), rb, bm.astype(np.int64).tolist()]))
     body = "".join(parts)
-    head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
-                     f"jaxbpm {__version__}")
+    head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si"
+                     f"{', dimension 2' if sample.dim == 2 else ''}) written by jaxbpm {__version__}")
     text = f"{head} crc32={crc32(body)}\n{body}"
 
     def write(tmp):
@@ -245,7 +254,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
 @names_file
 def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
                      breaking: bool = True, bond_radius_ratio: float | None = None,
-                     materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
+                     materials: Mapping[str, Any] | None = None, dim: int | None = None, **sample_kw) -> Sample:
     """Read a LAMMPS data file with spheres and bonds into a :class:`Sample`.
 
     Particles are ordered by atom ID; their atom types become ``Sample.types`` (groups by type:
@@ -263,8 +272,10 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
       breaking: ``False`` ignores the failure thresholds (LAMMPS ``break no``).
       bond_radius_ratio, materials: ignore the coefficients; bond radius ratio and material table as in
         :meth:`Sample.from_arrays`.
+      dim: 2 reads a ``dimension 2`` file as discs (positions ``[n, 2]``; every z must be equal), 3 as spheres;
+        default: jaxbpm's header comment, else 2 where all z are equal (a LAMMPS ``dimension 2`` file), else 3.
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ``types`` in
-        place of the atom types, ...).
+        place of the atom types, ``thickness`` of 2D discs (default: jaxbpm's header comment, else 1 m), ...).
 
     Returns:
       The sample, particles in the order of their atom IDs.
@@ -296,6 +307,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     if normalize is None:
         normalize = bool(meta.get("normalize", False)) if meta else False
     kw = dict(sample_kw)
+    pos = _planar(path, pos, meta, dim, kw)
     kw.setdefault("types", atom_types)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
@@ -345,10 +357,45 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     limits = np.where(coef[:, 4:8] >= 0.999 * BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
     p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
                                         normalize=normalize)
-    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
+    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()),
+                                   thickness=kw.get("thickness") if pos.shape[1] == 2 else None)
     mats, bm = materials_from_bonds(bond)
     return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
                               particle_material=pm, **kw)
+
+
+def _planar(path, pos: np.ndarray, meta: dict | None, dim: int | None, kw: dict) -> np.ndarray:
+    """The positions of a data file as a sample has them: ``[n, 2]`` for discs (``dimension 2``), else ``[n, 3]``.
+    A 2D file's thickness goes into ``kw`` (given there, else jaxbpm's header's, else 1 m).
+
+    Args:
+      path: the file, for messages.
+      pos: ``[n, 3]`` positions read.
+      meta: jaxbpm's header comment, or ``None``.
+      dim: 2, 3, or ``None`` (the header's, else 2 where every z is equal).
+      kw: the :meth:`Sample.from_arrays` keywords, updated.
+
+    Returns:
+      The positions.
+
+    Raises:
+      SampleFileError: ``dim`` not 2, 3 or ``None``, or ``dim=2`` with unequal z (the first named).
+    """
+    from jaxbpm._geometry import DEFAULT_THICKNESS
+
+    if dim not in (None, 2, 3) or isinstance(dim, bool):
+        raise SampleFileError(f"{path}: dim must be 2 (discs, LAMMPS dimension 2), 3 (spheres) or None, got {dim!r}")
+    flat = bool(np.all(pos[:, 2] == pos[0, 2]))
+    if dim is None:
+        dim = int(meta.get("dim", 3)) if meta is not None else (2 if flat else 3)
+    if dim == 3:
+        return pos
+    if not flat:
+        k = int(np.flatnonzero(pos[:, 2] != pos[0, 2])[0])
+        raise SampleFileError(f"{path}: dim=2 needs every atom at one z (LAMMPS dimension 2: z = 0), but atom "
+                              f"{k + 1} (by ID order) has z = {pos[k, 2]!r}, the first {pos[0, 2]!r}")
+    kw.setdefault("thickness", meta.get("thickness", DEFAULT_THICKNESS) if meta is not None else DEFAULT_THICKNESS)
+    return np.ascontiguousarray(pos[:, :2])
 
 
 def _line_sections(path, raw: list[str], counts: dict[str, int], body_start: int) -> dict[str, tuple[Line, list[Line]]]:

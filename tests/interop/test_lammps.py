@@ -7,12 +7,15 @@ import re
 import subprocess
 import sys
 import textwrap
+import warnings
 import zlib
 
 import numpy as np
 import pytest
 
+import jaxbpm
 from jaxbpm.interop import formats
+from jaxbpm.interop.lammps import lammps_coefficients
 from jaxbpm.interop.conventions import InexactTranslationWarning
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Sample
@@ -297,3 +300,72 @@ def test_atom_types_are_the_sample_types(tmp_path):
     assert formats.read_lammps_data(tmp_path / "t.data").types.tolist() == [3, 1, 1, 2, 7, 2]
     with pytest.raises(SampleError, match=r"type 0 at particles \[1\].*atom_types=sample.types \+ 1"):
         formats.write_lammps_data(tmp_path / "z.data", sample.replace(types=[3, 0, 1, 2, 7, 2]))
+
+
+# ============================================================================================== 2D (dimension 2)
+def _discs():
+    """A 2D disc packing of two bond materials and a thickness other than 1 m."""
+    s = jaxbpm.generate.disc_packing(60, seed=1, thickness=0.25,
+                                     materials={"E": [1e9, 3e9], "nu": [0.2, 0.3], "tensile_strength": [2e6, 5e6],
+                                                "shear_strength": [4e6, np.inf]})
+    return s.replace(bond_material=np.arange(s.n_bonds) % 2)
+
+
+def test_lammps_data_2d_round_trip_and_layout(tmp_path):
+    """A disc sample writes z = 0 in a slab around it and its rectangular sections' coefficients, and reads back
+    exactly as discs of its thickness."""
+    sample = _discs()
+    path = formats.write_lammps_data(tmp_path / "d.data", sample)
+    back = formats.read_lammps_data(path)
+    assert back.dim == 2 and back.thickness == 0.25
+    _assert_same(sample, back)
+    text = path.read_text()
+    zlo, zhi = (float(w) for w in re.search(r"^(\S+) (\S+) zlo zhi$", text, re.M).groups())
+    assert (zlo, zhi) == (-0.125, 0.125)
+    atoms = text.split("Atoms # bpm/sphere\n\n")[1].split("\n\n")[0].splitlines()
+    assert len(atoms) == sample.n_particles and all(float(a.split()[7]) == 0.0 for a in atoms)
+    # Kr = E A / L, Kb = E I / L, Fcr = sigma A, Tcb = sigma I / r_b with A = 2 r_b t, I = (2 r_b)^3 t / 12
+    coeffs = lammps_coefficients(sample)
+    rb, t = np.asarray(sample.bond_radius), 0.25
+    E = np.asarray(sample.materials.E)[np.asarray(sample.bond_material)]
+    sig = np.asarray(sample.materials.tensile_strength)[np.asarray(sample.bond_material)]
+    A, I = 2 * rb * t, (2 * rb) ** 3 * t / 12
+    L = np.asarray(sample.bond_length)
+    np.testing.assert_allclose(coeffs[:, 0], E * A / L, rtol=1e-13)
+    np.testing.assert_allclose(coeffs[:, 3], E * I / L, rtol=1e-13)
+    np.testing.assert_allclose(coeffs[:, 4], sig * A, rtol=1e-13)
+    np.testing.assert_allclose(coeffs[:, 7], sig * I / rb, rtol=1e-13)
+
+
+def test_lammps_data_2d_from_another_program(tmp_path):
+    """A file without jaxbpm's comments whose z are all equal reads as discs (thickness given or 1 m), its bonds
+    translated from the coefficients of the rectangular sections; dim=3 keeps spheres; dim=2 with unequal z is
+    refused, naming the atom."""
+    sample = _discs()
+    text = formats.write_lammps_data(tmp_path / "d.data", sample).read_text().splitlines()
+    plain = [ln.split("#")[0].rstrip() if not ln.startswith(("Atoms", "Bond Coeffs")) else ln
+             for ln in text if not ln.startswith("# jaxbpm")]
+    plain[0] = "LAMMPS data file"
+    (tmp_path / "p.data").write_text("\n".join(plain) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InexactTranslationWarning)  # LAMMPS's summed failure rule
+        back = formats.read_lammps_data(tmp_path / "p.data", thickness=0.25)
+        default = formats.read_lammps_data(tmp_path / "p.data")
+        spheres = formats.read_lammps_data(tmp_path / "p.data", dim=3)
+    assert back.dim == 2 and back.thickness == 0.25 and default.thickness == 1.0 and spheres.dim == 3
+    np.testing.assert_array_equal(back.positions, sample.positions)
+    np.testing.assert_allclose(back.bond_radius, sample.bond_radius, rtol=1e-12)
+    bm = np.asarray(back.bond_material)
+    E = np.asarray(sample.materials.E)[np.asarray(sample.bond_material)]
+    np.testing.assert_allclose(np.asarray(back.materials.E)[bm], E, rtol=1e-12)
+    # read with the wrong thickness, the same coefficients are a stiffer material of thinner bonds: E t is kept
+    np.testing.assert_allclose(np.asarray(default.materials.E)[np.asarray(default.bond_material)], E * 0.25,
+                               rtol=1e-12)
+    lines = (tmp_path / "p.data").read_text().splitlines()
+    k = lines.index("Atoms # bpm/sphere") + 3
+    words = lines[k].split()
+    words[7] = "1e-4"
+    lines[k] = " ".join(words)
+    (tmp_path / "z.data").write_text("\n".join(lines) + "\n")
+    with pytest.raises(SampleFileError, match=r"dim=2 needs every atom at one z.*atom 2"):
+        formats.read_lammps_data(tmp_path / "z.data", dim=2)
