@@ -422,3 +422,13 @@ def test_lammps_runs_our_2d_files(tmp_path):
     np.testing.assert_allclose(back.positions, sample.positions, rtol=1e-14, atol=1e-18)
     np.testing.assert_allclose(back.bond_radius, sample.bond_radius, rtol=1e-12)
     np.testing.assert_allclose(back.materials.E, [1e9], rtol=1e-12)
+
+
+def test_lammps_2d_coefficients_are_the_solvers_bonds():
+    """The Kr written for a clamped 5 x 7 square lattice of discs (t = 0.3 m) gives the DSM's axial stiffness of
+    the lattice as springs in series and parallel: K = 5 Kr / (7 - 1)."""
+    sample = jaxbpm.generate.lattice("square", (5, 7)).replace(thickness=0.3)
+    kr = lammps_coefficients(sample)[:, 0]
+    np.testing.assert_allclose(kr, kr[0], rtol=1e-14)
+    res = jaxbpm.solve(sample, jaxbpm.scenes.UniaxialCompression(axis=1), "dsm")
+    np.testing.assert_allclose(res.stiffness, 5 * kr[0] / 6, rtol=1e-9)
