@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from jaxbpm._geometry import bond_section
 from jaxbpm.errors import ConventionError
 from jaxbpm.interop._translation import (REL, JaxbpmBond, as_float, from_stiffness, max_rel, nu_from_ratio,
                                          positive, strength, warn)
@@ -58,17 +59,19 @@ class PFCParallelBond:
     emod: Any = None
     kratio: Any = None
 
-    def stiffness(self, radius1, radius2) -> BondStiffness:
+    def stiffness(self, radius1, radius2, thickness: float | None = None) -> BondStiffness:
         """PFC's own stiffnesses: k_n = pb_kn A, k_s = pb_ks A, k_tw = pb_ks J, k_b = pb_kn I.
 
         Args:
           radius1, radius2: the particles' radii [m] (the bond radius is pb_rmul min(R1, R2)).
+          thickness: ``None`` (PFC3D: A = pi r_b^2, I = pi r_b^4 / 4), or the discs' thickness t (PFC2D: A = 2 r_b t,
+            I = (2 r_b)^3 t / 12; PFC2D's t is 1 m).
 
         Returns:
           ``(k_n, k_t, k_tw, k_b)``.
         """
         rb = as_float(self.pb_rmul) * np.minimum(as_float(radius1), as_float(radius2))
-        area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
+        area, inertia, polar = bond_section(rb, thickness)
         kn, ks = as_float(self.pb_kn), as_float(self.pb_ks)
         return BondStiffness(kn * area, ks * area, ks * polar, kn * inertia)
 
@@ -93,7 +96,7 @@ def to_pfc(bond: JaxbpmBond, length, radius1, radius2) -> PFCParallelBond:
 
 
 def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, emod=None, kratio=None,
-             pb_ten=np.inf, pb_coh=np.inf, pb_fa=0.0, pb_mcf=1.0) -> JaxbpmBond:
+             pb_ten=np.inf, pb_coh=np.inf, pb_fa=0.0, pb_mcf=1.0, thickness: float | None = None) -> JaxbpmBond:
     """Translate PFC linear parallel bonds into jaxbpm bonds.
 
     pb_fa != 0 or pb_mcf != 1 are not part of the translated bond (warned, with the size of the difference); the
@@ -108,6 +111,8 @@ def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, e
       pb_ten, pb_coh: tensile strength and cohesion [Pa].
       pb_fa: friction angle [deg].
       pb_mcf: moment contribution factor.
+      thickness: ``None`` (PFC3D), or the discs' thickness t [m] of a 2D (PFC2D) bond; the per-area values are the
+        same in both.
 
     Returns:
       The jaxbpm parameters.
@@ -139,7 +144,7 @@ def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, e
         warn(f"PFC pb_mcf = {beta:.6g} is not part of the translated bond, which counts the full moments (pb_mcf = "
               f"1). Pure tension and pure shear are exact; pure bending and pure twist break at {beta:.4g} x PFC's "
               f"moment ({100 * (beta - 1):.3g} %). The DEM models it: params bond_moment_factor = pb_mcf")
-    return JaxbpmBond(pb_kn * length, nu, rb, strength("pb_ten", pb_ten), coh)
+    return JaxbpmBond(pb_kn * length, nu, rb, strength("pb_ten", pb_ten), coh, thickness=thickness)
 
 
 # ---------------------------------------------------------------------------------------------- LAMMPS
