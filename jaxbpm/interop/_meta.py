@@ -124,13 +124,13 @@ def _check_meta(meta: dict, where: str) -> None:
         bad("materials", f"an object of non-empty number lists {list(names)}")
     if len({len(mats[k]) for k in names}) != 1:
         bad("materials", "lists of one length (one entry per material)")
+    if meta.get("dim", 3) not in (2, 3) or isinstance(meta.get("dim"), bool):
+        bad("dim", "2 or 3")
     d = meta.get("domain")
     if d is not None and not (isinstance(d, dict) and isinstance(d.get("kind"), str) and all(
             isinstance(d.get(k), list) and len(d[k]) == meta.get("dim", 3)
             and all(_is_number(v) and math.isfinite(v) for v in d[k]) for k in ("lo", "hi"))):
         bad("domain", f"null or an object with 'kind' and {meta.get('dim', 3)} finite 'lo' and 'hi' values")
-    if meta.get("dim", 3) not in (2, 3) or isinstance(meta.get("dim"), bool):
-        bad("dim", "2 or 3")
     t = meta.get("thickness")
     if (t is None) != (meta.get("dim", 3) == 3) or (t is not None and not (_is_number(t) and math.isfinite(t)
                                                                           and t > 0)):

@@ -20,7 +20,7 @@ from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.interop import conventions
 from jaxbpm.interop._lammps_fast import parse_fast
 from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, Line, coeff_row, coeffs_head, head_meta, header,
-                                           last_wins, split, table_arrays)
+                                           last_wins, planar_positions, split, table_arrays)
 from jaxbpm.interop._meta import (BIG, N_COEFFS, crc32, domain_of, exact_text, meta_line, meta_of, names_file,
                                   read_text, verify, without_line)
 from jaxbpm.sample import ParticleMaterial, Sample
@@ -308,7 +308,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     if normalize is None:
         normalize = bool(meta.get("normalize", False)) if meta else False
     kw = dict(sample_kw)
-    pos = _planar(path, pos, meta, dim, kw)
+    pos = planar_positions(path, pos, meta, dim, kw)
     kw.setdefault("types", atom_types)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
@@ -363,40 +363,6 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     mats, bm = materials_from_bonds(bond)
     return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
                               particle_material=pm, **kw)
-
-
-def _planar(path, pos: np.ndarray, meta: dict | None, dim: int | None, kw: dict) -> np.ndarray:
-    """The positions of a data file as a sample has them: ``[n, 2]`` for discs (``dimension 2``), else ``[n, 3]``.
-    A 2D file's thickness goes into ``kw`` (given there, else jaxbpm's header's, else 1 m).
-
-    Args:
-      path: the file, for messages.
-      pos: ``[n, 3]`` positions read.
-      meta: jaxbpm's header comment, or ``None``.
-      dim: 2, 3, or ``None`` (the header's, else 3).
-      kw: the :meth:`Sample.from_arrays` keywords, updated.
-
-    Returns:
-      The positions.
-
-    Raises:
-      SampleFileError: ``dim`` not 2, 3 or ``None``, or ``dim=2`` with unequal z (the first named).
-    """
-    from jaxbpm._geometry import DEFAULT_THICKNESS
-
-    if dim not in (None, 2, 3) or isinstance(dim, bool):
-        raise SampleFileError(f"{path}: dim must be 2 (discs, LAMMPS dimension 2), 3 (spheres) or None, got {dim!r}")
-    flat = bool(np.all(pos[:, 2] == pos[0, 2]))
-    if dim is None:
-        dim = int(meta.get("dim", 3)) if meta is not None else 3
-    if dim == 3:
-        return pos
-    if not flat:
-        k = int(np.flatnonzero(pos[:, 2] != pos[0, 2])[0])
-        raise SampleFileError(f"{path}: dim=2 needs every atom at one z (LAMMPS dimension 2: z = 0), but atom "
-                              f"{k + 1} (by ID order) has z = {pos[k, 2]!r}, the first {pos[0, 2]!r}")
-    kw.setdefault("thickness", meta.get("thickness", DEFAULT_THICKNESS) if meta is not None else DEFAULT_THICKNESS)
-    return np.ascontiguousarray(pos[:, :2])
 
 
 def _line_sections(path, raw: list[str], counts: dict[str, int], body_start: int) -> dict[str, tuple[Line, list[Line]]]:
