@@ -189,12 +189,25 @@ def _dump_series(src: pathlib.Path, dst: pathlib.Path, dext: str, sample) -> lis
         if len(f.ids) != ref.n_particles or np.any(f.ids != np.arange(1, ref.n_particles + 1)):
             raise SampleFileError(f"{src}: timestep {f.timestep} has atom IDs that are not 1..{ref.n_particles} "
                                   f"(the sample's particles)")
+    positions = [_in_plane(src, f, ref) for f in frames]
     if dext == ".vtkhdf":
         with VTKHDFSeries(dst, ref) as series:
-            for f in frames:
-                series.write(f.timestep, positions=f.positions)
+            for f, pos in zip(frames, positions):
+                series.write(f.timestep, positions=pos)
         return [dst]
     series = VTUSeries(dst, ref)
-    for f in frames:
-        series.write(f.timestep, positions=f.positions)
+    for f, pos in zip(frames, positions):
+        series.write(f.timestep, positions=pos)
     return [series.path] + [dst.with_name(name) for _, name in series.steps]
+
+
+def _in_plane(src, frame, ref: Sample) -> np.ndarray:
+    """A dump frame's positions for the reference sample: ``[n, 2]`` for a 2D sample (a ``dimension 2`` run's
+    atoms, all at one z), else as they are."""
+    pos = np.asarray(frame.positions, np.float64)
+    if ref.dim == 3 or pos.shape[1] == 2:
+        return pos
+    if np.any(pos[:, 2] != pos[0, 2]):
+        raise SampleFileError(f"{src}: timestep {frame.timestep} has atoms at different z, but the sample is 2D "
+                              f"(discs; a LAMMPS dimension 2 run keeps every z = 0)")
+    return pos[:, :2]
