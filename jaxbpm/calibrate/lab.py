@@ -46,7 +46,8 @@ class LabResult:
     material scaled alike). achieved: ``{target: (value, relative error)}`` by the method that checked it (DEM for
     strengths and, with ``check``, for the elastic targets). stages: each stage's
     :class:`~jaxbpm.calibrate.CalibrationResult`. unreached: ``{target: reason}``. conventions: the answer in other
-    codes' parameters. curves: the stress-strain curves of the strength runs at the answer. failure_rule: the bond
+    codes' parameters (a 2D sample: LAMMPS ``dimension 2`` and PFC2D from the bonds' ``2 r_b x t`` section, and
+    ``{"2D": why}`` for the codes without a disc form, Yade and MUSEN). curves: the stress-strain curves of the strength runs at the answer. failure_rule: the bond
     failure rule the strengths were calibrated under (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
     """
 
@@ -124,7 +125,7 @@ class LabResult:
             rows += ["", "Not reached:", ""] + [f"- **{k}**: {why}" for k, why in self.unreached.items()]
         rows += ["", "## In other codes (mean particle pair)", "", _rule_note(self.failure_rule), ""]
         for code, values in self.conventions.items():
-            shown = ", ".join(f"{k} = {v:.6g}" for k, v in values.items())
+            shown = ", ".join(f"{k} = {v:.6g}" if isinstance(v, float) else f"{k}: {v}" for k, v in values.items())
             rows.append(f"- **{code}**: {shown}")
         rows += ["", f"Solves: {self.solves}; wall time {self.wall_time:.1f} s.", "", f"![charts]({png.name})", ""]
         text = "\n".join(rows)
@@ -499,24 +500,33 @@ def _rule_note(rule) -> str:
 
 
 def _translations(sample, params) -> dict:
-    """The answer in other codes' parameters, for the sample's mean particle pair (touching, mean radius)."""
+    """The answer in other codes' parameters, for the sample's mean particle pair (touching, mean radius). A 2D
+    sample's bonds are ``2 r_b x t`` rectangles (PFC2D's; LAMMPS ``dimension 2``); codes with no 2D form get
+    ``{"2D": "why"}`` instead of numbers."""
     import warnings
 
     from jaxbpm.interop import conventions as cv
+    from jaxbpm.interop._codes import NO_2D
 
     r = float(np.mean(sample.radii))
     ratio = float(np.median(np.asarray(sample.bond_radius) / np.minimum(*np.asarray(sample.radii)[
         np.asarray(sample.bonds)].T))) if sample.n_bonds else 0.5
     bond = cv.JaxbpmBond(E=params["bond_E"], nu=params["bond_nu"], bond_radius=ratio * r,
                          tensile_strength=params["bond_tensile_strength"],
-                         shear_strength=params["bond_shear_strength"])
+                         shear_strength=params["bond_shear_strength"], thickness=sample.thickness)
     out = {"jaxbpm": {"E": params["bond_E"], "nu": params["bond_nu"], "bond_radius_ratio": ratio,
                       "tensile_strength": params["bond_tensile_strength"],
                       "shear_strength": params["bond_shear_strength"]}}
+    if sample.dim == 2:
+        out["jaxbpm"]["thickness"] = sample.thickness
+    makers = {"lammps": lambda: cv.to_lammps(bond, 2 * r), "pfc": lambda: cv.to_pfc(bond, 2 * r, r, r),
+              "yade": lambda: cv.to_yade(bond, 2 * r, r, r), "musen": lambda: cv.to_musen(bond)}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", cv.InexactTranslationWarning)
-        for name, made in (("lammps", cv.to_lammps(bond, 2 * r)), ("pfc", cv.to_pfc(bond, 2 * r, r, r)),
-                           ("yade", cv.to_yade(bond, 2 * r, r, r)), ("musen", cv.to_musen(bond))):
-            out[name] = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in dataclasses.asdict(made).items()
-                         if np.ndim(v) == 0 or np.size(v) == 1}
+        for name, make in makers.items():
+            if sample.dim == 2 and name in NO_2D:
+                out[name] = {"2D": NO_2D[name]}
+                continue
+            out[name] = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in dataclasses.asdict(make()).items()
+                         if k != "thickness" and (np.ndim(v) == 0 or np.size(v) == 1) and v is not None}
     return out

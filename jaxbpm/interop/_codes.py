@@ -9,13 +9,33 @@ from typing import Any
 
 import numpy as np
 
+from jaxbpm._geometry import bond_section
 from jaxbpm.errors import ConventionError
 from jaxbpm.interop._translation import (REL, JaxbpmBond, as_float, from_stiffness, max_rel, nu_from_ratio,
                                          positive, strength, warn)
 from jaxbpm.physics.bond import BondStiffness, check_failure_rule
 
 __all__ = ["PFCParallelBond", "LammpsBpmRotational", "YadeCohFrict", "MusenSolidBond", "to_pfc", "from_pfc",
-           "to_lammps", "from_lammps", "to_yade", "from_yade", "to_musen", "from_musen"]
+           "to_lammps", "from_lammps", "to_yade", "from_yade", "to_musen", "from_musen", "NO_2D", "three_d_only"]
+
+
+NO_2D = {"yade": "Yade's CohFrictPhys joins spheres (3D only): it has no two-dimensional (disc) form",
+         "musen": "MUSEN's solid bond is a cylinder between spheres (3D only): it has no two-dimensional (disc) form"}
+"""Why a convention has no translation of a 2D sample's bonds, by convention name."""
+
+
+def three_d_only(bond: JaxbpmBond, code: str) -> None:
+    """Raise a :class:`~jaxbpm.errors.ConventionError` for a 2D bond where ``code`` has no 2D form.
+
+    Args:
+      bond: the jaxbpm parameters.
+      code: ``"Yade"`` or ``"MUSEN"``.
+
+    Raises:
+      ConventionError: ``bond.thickness`` is given (a 2D sample's bond).
+    """
+    if bond.thickness is not None:
+        raise ConventionError(f"{NO_2D[code.lower()]}; translate 2D bonds to PFC (PFC2D) or LAMMPS (dimension 2)")
 
 
 # ---------------------------------------------------------------------------------------------- PFC
@@ -39,17 +59,19 @@ class PFCParallelBond:
     emod: Any = None
     kratio: Any = None
 
-    def stiffness(self, radius1, radius2) -> BondStiffness:
+    def stiffness(self, radius1, radius2, thickness: float | None = None) -> BondStiffness:
         """PFC's own stiffnesses: k_n = pb_kn A, k_s = pb_ks A, k_tw = pb_ks J, k_b = pb_kn I.
 
         Args:
           radius1, radius2: the particles' radii [m] (the bond radius is pb_rmul min(R1, R2)).
+          thickness: ``None`` (PFC3D: A = pi r_b^2, I = pi r_b^4 / 4), or the discs' thickness t (PFC2D: A = 2 r_b t,
+            I = (2 r_b)^3 t / 12; PFC2D's t is 1 m).
 
         Returns:
           ``(k_n, k_t, k_tw, k_b)``.
         """
         rb = as_float(self.pb_rmul) * np.minimum(as_float(radius1), as_float(radius2))
-        area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
+        area, inertia, polar = bond_section(rb, thickness)
         kn, ks = as_float(self.pb_kn), as_float(self.pb_ks)
         return BondStiffness(kn * area, ks * area, ks * polar, kn * inertia)
 
@@ -74,7 +96,7 @@ def to_pfc(bond: JaxbpmBond, length, radius1, radius2) -> PFCParallelBond:
 
 
 def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, emod=None, kratio=None,
-             pb_ten=np.inf, pb_coh=np.inf, pb_fa=0.0, pb_mcf=1.0) -> JaxbpmBond:
+             pb_ten=np.inf, pb_coh=np.inf, pb_fa=0.0, pb_mcf=1.0, thickness: float | None = None) -> JaxbpmBond:
     """Translate PFC linear parallel bonds into jaxbpm bonds.
 
     pb_fa != 0 or pb_mcf != 1 are not part of the translated bond (warned, with the size of the difference); the
@@ -89,6 +111,8 @@ def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, e
       pb_ten, pb_coh: tensile strength and cohesion [Pa].
       pb_fa: friction angle [deg].
       pb_mcf: moment contribution factor.
+      thickness: ``None`` (PFC3D), or the discs' thickness t [m] of a 2D (PFC2D) bond; the per-area values are the
+        same in both.
 
     Returns:
       The jaxbpm parameters.
@@ -120,7 +144,7 @@ def from_pfc(radius1, radius2, length, *, pb_rmul=1.0, pb_kn=None, pb_ks=None, e
         warn(f"PFC pb_mcf = {beta:.6g} is not part of the translated bond, which counts the full moments (pb_mcf = "
               f"1). Pure tension and pure shear are exact; pure bending and pure twist break at {beta:.4g} x PFC's "
               f"moment ({100 * (beta - 1):.3g} %). The DEM models it: params bond_moment_factor = pb_mcf")
-    return JaxbpmBond(pb_kn * length, nu, rb, strength("pb_ten", pb_ten), coh)
+    return JaxbpmBond(pb_kn * length, nu, rb, strength("pb_ten", pb_ten), coh, thickness=thickness)
 
 
 # ---------------------------------------------------------------------------------------------- LAMMPS
@@ -179,7 +203,9 @@ def to_lammps(bond: JaxbpmBond, length, *, normalize: bool = False,
     """Translate jaxbpm bonds into LAMMPS ``bpm/rotational`` coefficients.
 
     Stiffness exact; strengths exact when they were calibrated under ``failure_rule="summed"``, LAMMPS's rule;
-    under another rule the difference is warned about when a strength is finite.
+    under another rule the difference is warned about when a strength is finite. A 2D bond (``bond.thickness``)
+    gives the rectangle's A and I (``dimension 2``); its Kt and Tct, from the rectangle's J, are never loaded in a
+    2D LAMMPS run (a disc has no twist).
 
     Args:
       bond: the jaxbpm parameters.
@@ -202,8 +228,8 @@ def to_lammps(bond: JaxbpmBond, length, *, normalize: bool = False,
                                normalize=normalize)
 
 
-def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True,
-                failure_rule: str = "separate") -> JaxbpmBond:
+def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True, failure_rule: str = "separate",
+                thickness: float | None = None) -> JaxbpmBond:
     """LAMMPS ``bpm/rotational`` -> jaxbpm. ``breaking=False`` (LAMMPS's ``break no``) ignores the thresholds.
 
     Warned: a Kt that jaxbpm's law cannot match (see :func:`from_stiffness`), thresholds whose bending/twisting
@@ -215,6 +241,8 @@ def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True,
       length: initial bond length [m].
       breaking: ``False`` (LAMMPS's ``break no``) ignores the thresholds.
       failure_rule: the rule the jaxbpm scenes will break these bonds by.
+      thickness: ``None`` (spheres), or the discs' thickness t [m] of a 2D sample (``dimension 2``): the bonds
+        are ``2 r_b x t`` rectangles, Kt and Tct (twist, which a disc does not have) are not read.
 
     Returns:
       The jaxbpm parameters.
@@ -223,22 +251,24 @@ def from_lammps(p: LammpsBpmRotational, length, *, breaking: bool = True,
       ConventionError: coefficients with no jaxbpm counterpart.
     """
     k = p.stiffness(length)
-    E, nu, rb = from_stiffness(k.kn, k.kt, k.ktw, k.kb, length, what="LAMMPS bpm/rotational")
+    E, nu, rb = from_stiffness(k.kn, k.kt, k.ktw, k.kb, length, what="LAMMPS bpm/rotational", thickness=thickness)
     if not breaking:
-        return JaxbpmBond(E, nu, rb)
-    area, inertia, polar = np.pi * rb**2, np.pi * rb**4 / 4.0, np.pi * rb**4 / 2.0
+        return JaxbpmBond(E, nu, rb, thickness=thickness)
+    area, inertia, polar = JaxbpmBond(E, nu, rb, thickness=thickness).section()
     sig = positive("Fcr", p.Fcr) / area
     tau = positive("Fcs", p.Fcs) / area
-    for name, limit, law in (("Tcb", p.Tcb, sig * inertia / rb), ("Tct", p.Tct, tau * polar / rb)):
+    moments = (("Tcb", p.Tcb, sig * inertia / rb),) + ((("Tct", p.Tct, tau * polar / rb),) if thickness is None else ())
+    for name, limit, law in moments:
         off = max_rel(law, positive(name, limit))
         if off > REL:
+            bend = "Fcr r_b / 4" if thickness is None else "Fcr r_b / 3"
             warn(f"LAMMPS {name} cannot be represented exactly: jaxbpm's strengths fix it at "
-                  f"{'sigma_t I / r_b = Fcr r_b / 4' if name == 'Tcb' else 'tau_c J / r_b = Fcs r_b / 2'}, which "
+                  f"{'sigma_t I / r_b = ' + bend if name == 'Tcb' else 'tau_c J / r_b = Fcs r_b / 2'}, which "
                   f"differs from the given one by up to {100 * off:.3g} % (pure "
                   f"{'bending' if name == 'Tcb' else 'twist'} breaks at that moment in jaxbpm)")
     if check_failure_rule(failure_rule, ConventionError) != "summed":
         warn(_SUMMED_RULE)
-    return JaxbpmBond(E, nu, rb, sig, tau)
+    return JaxbpmBond(E, nu, rb, sig, tau, thickness=thickness)
 
 
 # ---------------------------------------------------------------------------------------------- Yade
@@ -319,7 +349,11 @@ def to_yade(bond: JaxbpmBond, length, radius1, radius2, *, failure_rule: str = "
 
     Returns:
       The Yade values.
+
+    Raises:
+      ConventionError: a 2D bond (``bond.thickness`` given): Yade's CohFrictPhys joins spheres, it has no disc form.
     """
+    three_d_only(bond, "Yade")
     k = bond.stiffness(length)
     r1, r2 = positive("radius1", radius1), positive("radius2", radius2)
     young = k.kn * (r1 + r2) / (2.0 * r1 * r2)
@@ -414,7 +448,11 @@ def to_musen(bond: JaxbpmBond) -> MusenSolidBond:
 
     Returns:
       The MUSEN parameters.
+
+    Raises:
+      ConventionError: a 2D bond (``bond.thickness`` given): MUSEN's solid bond is a cylinder between spheres.
     """
+    three_d_only(bond, "MUSEN")
     return MusenSolidBond(2.0 * bond.bond_radius, bond.E, bond.nu, bond.tensile_strength, bond.shear_strength)
 
 

@@ -10,11 +10,12 @@ from typing import Mapping
 
 import numpy as np
 
+from jaxbpm._geometry import DEFAULT_THICKNESS
 from jaxbpm.errors import SampleFileError
 from jaxbpm.interop._meta import N_COEFFS, checksums, parse_meta
 
 __all__ = ["SECTIONS", "HEADER", "ATOM_COLUMNS", "Line", "coeff_row", "table_arrays", "last_wins", "header",
-           "head_meta", "coeffs_head", "split"]
+           "head_meta", "coeffs_head", "split", "planar_positions"]
 
 SECTIONS = {"Atoms": "atoms", "Velocities": "atoms", "Masses": "atom types", "Bonds": "bonds",
              "Bond Coeffs": "bond types", "Pair Coeffs": "atom types", "Angles": "angles", "Dihedrals": "dihedrals",
@@ -181,3 +182,33 @@ def split(s: str) -> tuple[list[str], str]:
     return body.split(), comment
 
 
+def planar_positions(path, pos: np.ndarray, meta: dict | None, dim: int | None, kw: dict) -> np.ndarray:
+    """The positions of a data file as a sample has them: ``[n, 2]`` for discs (``dimension 2``), else ``[n, 3]``.
+    A 2D file's thickness goes into ``kw`` (given there, else jaxbpm's header's, else 1 m).
+
+    Args:
+      path: the file, for messages.
+      pos: ``[n, 3]`` positions read.
+      meta: jaxbpm's header comment, or ``None``.
+      dim: 2, 3, or ``None`` (the header's, else 3).
+      kw: the :meth:`Sample.from_arrays` keywords, updated.
+
+    Returns:
+      The positions.
+
+    Raises:
+      SampleFileError: ``dim`` not 2, 3 or ``None``, or ``dim=2`` with unequal z (the first named).
+    """
+    if dim not in (None, 2, 3) or isinstance(dim, bool):
+        raise SampleFileError(f"{path}: dim must be 2 (discs, LAMMPS dimension 2), 3 (spheres) or None, got {dim!r}")
+    flat = bool(np.all(pos[:, 2] == pos[0, 2]))
+    if dim is None:
+        dim = int(meta.get("dim", 3)) if meta is not None else 3
+    if dim == 3:
+        return pos
+    if not flat:
+        k = int(np.flatnonzero(pos[:, 2] != pos[0, 2])[0])
+        raise SampleFileError(f"{path}: dim=2 needs every atom at one z (LAMMPS dimension 2: z = 0), but atom "
+                              f"{k + 1} (by ID order) has z = {pos[k, 2]!r}, the first {pos[0, 2]!r}")
+    kw.setdefault("thickness", meta.get("thickness", DEFAULT_THICKNESS) if meta is not None else DEFAULT_THICKNESS)
+    return np.ascontiguousarray(pos[:, :2])

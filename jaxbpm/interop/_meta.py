@@ -56,6 +56,8 @@ def meta_of(sample: Sample, **extra) -> dict:
            "domain": None if sample.domain is None else
            {"kind": sample.domain.kind, "lo": list(map(float, sample.domain.lo)),
             "hi": list(map(float, sample.domain.hi))}}
+    if sample.dim == 2:
+        out.update(dim=2, thickness=float(sample.thickness))
     out.update(extra)
     return out
 
@@ -122,11 +124,17 @@ def _check_meta(meta: dict, where: str) -> None:
         bad("materials", f"an object of non-empty number lists {list(names)}")
     if len({len(mats[k]) for k in names}) != 1:
         bad("materials", "lists of one length (one entry per material)")
+    if meta.get("dim", 3) not in (2, 3) or isinstance(meta.get("dim"), bool):
+        bad("dim", "2 or 3")
     d = meta.get("domain")
     if d is not None and not (isinstance(d, dict) and isinstance(d.get("kind"), str) and all(
-            isinstance(d.get(k), list) and len(d[k]) == 3 and all(_is_number(v) and math.isfinite(v) for v in d[k])
-            for k in ("lo", "hi"))):
-        bad("domain", "null or an object with 'kind' and 3 finite 'lo' and 'hi' values")
+            isinstance(d.get(k), list) and len(d[k]) == meta.get("dim", 3)
+            and all(_is_number(v) and math.isfinite(v) for v in d[k]) for k in ("lo", "hi"))):
+        bad("domain", f"null or an object with 'kind' and {meta.get('dim', 3)} finite 'lo' and 'hi' values")
+    t = meta.get("thickness")
+    if (t is None) != (meta.get("dim", 3) == 3) or (t is not None and not (_is_number(t) and math.isfinite(t)
+                                                                          and t > 0)):
+        bad("thickness", "a finite number > 0 with dim 2, absent with dim 3")
     if "normalize" in meta and not isinstance(meta["normalize"], bool):
         bad("normalize", "true or false")
     if "bonds_file" in meta and not (isinstance(meta["bonds_file"], str) and meta["bonds_file"]

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from jaxbpm._geometry import bond_section
 from jaxbpm.errors import ConventionError
 from jaxbpm.physics.bond import BondStiffness, stiffness
 
@@ -78,7 +79,9 @@ def nu_from_ratio(kt_over_kn, what: str) -> np.ndarray:
 class JaxbpmBond:
     """jaxbpm's bond parameters, per bond (arrays broadcast).
 
-    E [Pa], nu [-], bond_radius r_b [m], tensile_strength and shear_strength [Pa] (``inf`` = unbreakable).
+    E [Pa], nu [-], bond_radius r_b [m], tensile_strength and shear_strength [Pa] (``inf`` = unbreakable);
+    thickness: ``None`` for a cylindrical bond between spheres, or the discs' thickness t [m] of a two-dimensional
+    sample, whose bonds have the rectangular cross-section ``2 r_b x t`` (PFC2D's parallel bond).
     """
 
     E: Any
@@ -86,10 +89,13 @@ class JaxbpmBond:
     bond_radius: Any
     tensile_strength: Any = np.inf
     shear_strength: Any = np.inf
+    thickness: float | None = None
 
     def __post_init__(self):
         for name in ("E", "nu", "bond_radius", "tensile_strength", "shear_strength"):
             object.__setattr__(self, name, as_float(getattr(self, name)))
+        if self.thickness is not None:
+            object.__setattr__(self, "thickness", float(positive("thickness", self.thickness)))
         positive("E", self.E)
         positive("bond_radius", self.bond_radius)
         strength("tensile_strength", self.tensile_strength)
@@ -98,19 +104,29 @@ class JaxbpmBond:
             raise ConventionError(f"nu must lie in (-1, 0.5), got {np.ravel(self.nu)[:5]}")
 
     @property
+    def dim(self) -> int:
+        """3 (cylindrical bonds between spheres) or 2 (rectangular bonds between discs, ``thickness`` given)."""
+        return 3 if self.thickness is None else 2
+
+    def section(self):
+        """The bonds' cross-section ``(A, I, J)`` (:func:`jaxbpm._geometry.bond_section`)."""
+        return bond_section(self.bond_radius, self.thickness)
+
+    @property
     def area(self):
-        """Bond cross-section A = pi r_b^2 [m^2]."""
-        return np.pi * self.bond_radius**2
+        """Bond cross-section A [m^2]: pi r_b^2, or 2 r_b t in 2D."""
+        return bond_section(self.bond_radius, self.thickness).area
 
     @property
     def inertia(self):
-        """Second moment of area I = pi r_b^4 / 4 [m^4]."""
-        return np.pi * self.bond_radius**4 / 4.0
+        """Second moment of area I [m^4]: pi r_b^4 / 4, or (2 r_b)^3 t / 12 in 2D."""
+        return bond_section(self.bond_radius, self.thickness).inertia
 
     @property
     def polar(self):
-        """Polar moment J = pi r_b^4 / 2 [m^4]."""
-        return np.pi * self.bond_radius**4 / 2.0
+        """Polar moment J [m^4]: pi r_b^4 / 2, or the rectangle's 2 r_b t ((2 r_b)^2 + t^2) / 12 in 2D (read by no
+        2D law: a disc has no twist)."""
+        return bond_section(self.bond_radius, self.thickness).polar
 
     def stiffness(self, length) -> BondStiffness:
         """jaxbpm's four stiffnesses (Eq. 1-4).
@@ -125,17 +141,20 @@ class JaxbpmBond:
                                                                   self.polar, positive("length", length))))
 
 
-def from_stiffness(kn, kt, ktw, kb, length, *, what: str = "stiffness") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def from_stiffness(kn, kt, ktw, kb, length, *, what: str = "stiffness",
+                   thickness: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(E, nu, r_b) of jaxbpm's law from four bond stiffnesses and the initial length.
 
-    k_b / k_n = r_b^2 / 4 gives r_b, k_t / k_n gives nu, then E = k_n L / A. jaxbpm's law ties the twisting
-    stiffness to the others (k_tw = k_b / (1 + nu)); a ``ktw`` that differs is warned about with the ratio.
+    k_b / k_n = I / A (r_b^2 / 4, or r_b^2 / 3 for a 2D bond's rectangle) gives r_b, k_t / k_n gives nu, then
+    E = k_n L / A. In 3D jaxbpm's law ties the twisting stiffness to the others (k_tw = k_b / (1 + nu)); a ``ktw``
+    that differs is warned about with the ratio. In 2D the twisting stiffness is not read (a disc has no twist).
 
     Args:
       kn, kt: normal and shear stiffness [N/m].
       ktw, kb: twisting and bending stiffness [N m/rad].
       length: initial bond length L [m].
       what: the source's name, for messages.
+      thickness: ``None`` (3D) or the discs' thickness t [m] of a 2D sample.
 
     Returns:
       ``(E, nu, bond_radius)``, arrays of the inputs' shape.
@@ -146,6 +165,9 @@ def from_stiffness(kn, kt, ktw, kb, length, *, what: str = "stiffness") -> tuple
     kn, kt, ktw, kb = (positive(n, v) for n, v in (("k_n", kn), ("k_t", kt), ("k_tw", ktw), ("k_b", kb)))
     length = positive("length", length)
     nu = nu_from_ratio(kt / kn, what)
+    if thickness is not None:
+        rb = np.sqrt(3.0 * kb / kn)
+        return kn * length / (2.0 * rb * thickness), nu, rb
     rb = 2.0 * np.sqrt(kb / kn)
     E = kn * length / (np.pi * rb**2)
     ktw_law = kb / (1.0 + nu)
@@ -164,12 +186,12 @@ def sample_bonds(sample) -> tuple[JaxbpmBond, np.ndarray, np.ndarray, np.ndarray
       sample: a :class:`~jaxbpm.sample.Sample`.
 
     Returns:
-      ``(JaxbpmBond, length, radius1, radius2)``, each ``[nb]``.
+      ``(JaxbpmBond, length, radius1, radius2)``, each ``[nb]``; the bond carries a 2D sample's thickness.
     """
     m = sample.materials
     bm = np.asarray(sample.bond_material)
     b = np.asarray(sample.bonds)
     rad = np.asarray(sample.radii)
     bond = JaxbpmBond(as_float(m.E)[bm], as_float(m.nu)[bm], as_float(sample.bond_radius), as_float(m.tensile_strength)[bm],
-                      as_float(m.shear_strength)[bm])
+                      as_float(m.shear_strength)[bm], thickness=getattr(sample, "thickness", None))
     return bond, as_float(sample.bond_length), rad[b[:, 0]], rad[b[:, 1]]

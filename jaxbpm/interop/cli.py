@@ -73,9 +73,10 @@ def _cmd_params(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         out = conventions.convert(args.source, args.target, values, radius1=r1, radius2=r2, length=args.length,
-                                  normalize=args.normalize)
+                                  normalize=args.normalize, thickness=args.thickness)
         length = args.length if args.length is not None else r1 + r2
-        bond = conventions.convert(args.source, "jaxbpm", values, radius1=r1, radius2=r2, length=args.length)
+        bond = conventions.convert(args.source, "jaxbpm", values, radius1=r1, radius2=r2, length=args.length,
+                                   thickness=args.thickness)
     fields = {f.name: getattr(out, f.name) for f in dataclasses.fields(out)
               if getattr(out, f.name) is not None}
     k = bond.stiffness(length)
@@ -139,5 +140,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--length", type=float, default=None, metavar="L",
                    help="initial centre distance [m] (default: R1 + R2)")
     p.add_argument("--normalize", action="store_true", help="LAMMPS target: for bpm/rotational normalize yes")
+    p.add_argument("--thickness", type=float, default=None, metavar="T",
+                   help="a 2D bond between discs of thickness T [m] (PFC2D, LAMMPS dimension 2: a 2 r_b x T "
+                        "rectangular section; PFC2D's T is 1)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_cmd_params)

@@ -75,8 +75,8 @@ from typing import Any
 import numpy as np
 
 from jaxbpm.errors import ConventionError
-from jaxbpm.interop._codes import (LammpsBpmRotational, MusenSolidBond, PFCParallelBond, YadeCohFrict, from_lammps,
-                                   from_musen, from_pfc, from_yade, to_lammps, to_musen, to_pfc, to_yade)
+from jaxbpm.interop._codes import (NO_2D, LammpsBpmRotational, MusenSolidBond, PFCParallelBond, YadeCohFrict,
+                                   from_lammps, from_musen, from_pfc, from_yade, to_lammps, to_musen, to_pfc, to_yade)
 from jaxbpm.interop._registry import CONVENTIONS  # (kept JAX-free for the CLI's help)
 from jaxbpm.interop._translation import (InexactTranslationWarning, JaxbpmBond, as_float, from_stiffness, positive,
                                          sample_bonds)
@@ -118,14 +118,17 @@ def failure_index(rule: str, normal, shear, twist, bend, bond: JaxbpmBond):
     raise ConventionError(f"unknown failure rule {rule!r}; expected 'jaxbpm', 'lammps' or 'yade'")
 
 
-def _to_jaxbpm(name: str, values: dict[str, Any], length, r1, r2) -> JaxbpmBond:
+def _to_jaxbpm(name: str, values: dict[str, Any], length, r1, r2, thickness=None) -> JaxbpmBond:
     if name == "jaxbpm":
-        return JaxbpmBond(**values)
+        return JaxbpmBond(**values, thickness=thickness)
     if name == "pfc":
-        return from_pfc(r1, r2, length, **values)
+        return from_pfc(r1, r2, length, **values, thickness=thickness)
     if name == "lammps":
         coeffs = {k: v for k, v in values.items() if k != "normalize"}
-        return from_lammps(LammpsBpmRotational(**coeffs, normalize=bool(values.get("normalize", 0.0))), length)
+        return from_lammps(LammpsBpmRotational(**coeffs, normalize=bool(values.get("normalize", 0.0))), length,
+                           thickness=thickness)
+    if thickness is not None and name in NO_2D:
+        raise ConventionError(f"{NO_2D[name]}; translate 2D bonds to PFC (PFC2D) or LAMMPS (dimension 2)")
     if name == "yade":
         return from_yade(YadeCohFrict(**values), r1, r2, length)
     if name == "musen":
@@ -148,7 +151,7 @@ def _from_jaxbpm(name: str, bond: JaxbpmBond, length, r1, r2, normalize: bool = 
 
 
 def convert(source: str, target: str, values: dict[str, Any], *, radius1, radius2, length=None,
-            normalize: bool = False):
+            normalize: bool = False, thickness: float | None = None):
     """Translate one bond's parameters ``values`` (names of ``CONVENTIONS[source]``) into ``target``'s dataclass,
     for particles of radii ``radius1``, ``radius2`` and initial centre distance ``length`` (default R1 + R2).
 
@@ -159,6 +162,8 @@ def convert(source: str, target: str, values: dict[str, Any], *, radius1, radius
       radius1, radius2: the particles' radii [m].
       length: initial centre distance [m]; default R1 + R2.
       normalize: for a LAMMPS target, coefficients for ``normalize yes``.
+      thickness: ``None`` (spheres), or the discs' thickness t [m] of a 2D bond (a ``2 r_b x t`` rectangle; Yade
+        and MUSEN, which have no disc form, raise).
 
     Returns:
       ``target``'s parameter dataclass.
@@ -187,5 +192,5 @@ def convert(source: str, target: str, values: dict[str, Any], *, radius1, radius
     missing = [k for k, d in spec.items() if d is None and k not in given and k not in either]
     if missing:
         raise ConventionError(f"{source}: missing parameters {missing} ({CONVENTIONS[source]['doc']})")
-    bond = _to_jaxbpm(source, given, length, r1, r2)
+    bond = _to_jaxbpm(source, given, length, r1, r2, thickness)
     return _from_jaxbpm(target, bond, length, r1, r2, normalize=normalize)

@@ -31,6 +31,9 @@ def _bonds_path(path: pathlib.Path) -> pathlib.Path:
 def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     """Write particles to ``path`` and bonds to ``<stem>_bonds.csv`` next to it (both atomic; exact decimals).
 
+    A two-dimensional sample (discs) has the columns ``id,x,y,radius,type`` (no ``z``), its thickness in the header
+    comment.
+
     Args:
       path: the particles file.
       sample: the sample.
@@ -45,8 +48,9 @@ def write_csv(path, sample: Sample) -> tuple[pathlib.Path, pathlib.Path]:
     meta = meta_of(sample, bonds_file=bpath.name, particles=sample.n_particles, bonds=sample.n_bonds)
     pos, rad = np.asarray(sample.positions), np.asarray(sample.radii)
     types = np.ones(sample.n_particles, np.int64) if sample.types is None else np.asarray(sample.types, np.int64)
-    plines = [meta_line(meta), "id,x,y,z,radius,type"]
-    plines += [f"{i},{exact_text(pos[i, 0])},{exact_text(pos[i, 1])},{exact_text(pos[i, 2])},{exact_text(rad[i])},"
+    axes = "xyz"[:pos.shape[1]]  # a 2D sample (discs): x,y only
+    plines = [meta_line(meta), f"id,{','.join(axes)},radius,type"]
+    plines += [f"{i}," + "".join(f"{exact_text(pos[i, c])}," for c in range(len(axes))) + f"{exact_text(rad[i])},"
                f"{types[i]}" for i in range(sample.n_particles)]
     b, rb, bm = np.asarray(sample.bonds), np.asarray(sample.bond_radius), np.asarray(sample.bond_material)
     m = sample.materials
@@ -127,9 +131,11 @@ def _column(path, header, rows, names, cast=float, required=True):
 
 
 def _particles(path, header, rows) -> tuple[np.ndarray, np.ndarray, dict[int, int], np.ndarray | None]:
-    """The particles file's centres ``[n, 3]``, radii ``[n]``, ``{particle id: row index}`` and types ``[n]`` (a
-    ``type``, ``group`` or ``material`` column; ``None`` without one)."""
-    pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in "xyz"], axis=1)
+    """The particles file's centres ``[n, 3]`` (``[n, 2]`` without a ``z`` column: discs), radii ``[n]``,
+    ``{particle id: row index}`` and types ``[n]`` (a ``type``, ``group`` or ``material`` column; ``None`` without
+    one)."""
+    axes = "xyz" if "z" in header or "Z" in header else "xy"
+    pos = np.stack([_column(path, header, rows, (c, c.upper()))[0] for c in axes], axis=1)
     rad, rname = _column(path, header, rows, ("radius", "r", "diameter", "d"))
     if rname in ("diameter", "d"):
         rad = rad / 2.0
@@ -176,7 +182,8 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     """Read particles (``path``) and bonds (``bonds_path``, default ``<stem>_bonds.csv`` beside it, else the bonds
     file named in the particles file's metadata) CSV files.
 
-    See the module docstring for the columns.
+    See the module docstring for the columns. A particles file without a ``z`` column is a two-dimensional sample
+    (discs; ``thickness=`` as a keyword, else the header comment's, else 1 m).
 
     Args:
       path: the particles file.
@@ -206,6 +213,8 @@ def read_csv(path, bonds_path=None, *, bond_radius_ratio: float | None = None, *
     pos, rad, index, types = _particles(path, header, rows)
     kw = dict(sample_kw)
     kw.setdefault("types", types)
+    if pos.shape[1] == 2 and meta is not None and "thickness" in meta:
+        kw.setdefault("thickness", meta["thickness"])
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
         kw.setdefault("bond_contact", meta["bond_contact"])

@@ -17,6 +17,8 @@ LAMMPS data (:func:`write_lammps_data`, :func:`read_lammps_data`)
     (``type Kr Ks Kt Kb Fcr Fcs Tct Tcb gamma_r gamma_s gamma_t gamma_b``, see :mod:`jaxbpm.interop.conventions`). LAMMPS
     can only define ``bond_style bpm/rotational`` after the box exists, so read the file in LAMMPS with
     ``read_data FILE nocoeff`` followed by the ``bond_style``/``bond_coeff`` lines of :func:`write_lammps_coeffs`.
+    A 2D sample (discs) is written for ``dimension 2`` (z = 0, ``zlo zhi`` a slab of its thickness, the coefficients
+    of its ``2 r_b x t`` bond sections); read LAMMPS's own 2D files with ``dim=2``.
     jaxbpm also writes its exact parameters as comments (a ``# jaxbpm {...}`` JSON header line; per bond ``#
     bond_radius material``), which LAMMPS ignores and which make jaxbpm -> LAMMPS data -> jaxbpm exact. Files
     without them are translated from the coefficients (one material component per distinct (E, nu, strengths)).
@@ -25,7 +27,7 @@ LAMMPS dump (:func:`read_lammps_dump`)
     ``type``: :attr:`DumpFrame.types`, any other columns) and
     ``ITEM: ENTRIES`` frames of ``dump local`` (bond lists from ``compute property/local batom1 batom2 btype``).
 CSV (:func:`write_csv`, :func:`read_csv`)
-    ``NAME.csv`` (particles: ``id,x,y,z,radius,type``; foreign files: the type from a ``type``, ``group`` or
+    ``NAME.csv`` (particles: ``id,x,y,z,radius,type``, a 2D sample's ``id,x,y,radius,type``; foreign files: the type from a ``type``, ``group`` or
     ``material`` column, else 1) and ``NAME_bonds.csv`` (``i,j,bond_radius,material,E,nu,
     tensile_strength,shear_strength``, i and j particle ids); a ``# jaxbpm {...}`` first line keeps what the columns
     cannot (particle material, material table, bond_contact, domain). Foreign files may use ``diameter`` instead of
@@ -187,12 +189,25 @@ def _dump_series(src: pathlib.Path, dst: pathlib.Path, dext: str, sample) -> lis
         if len(f.ids) != ref.n_particles or np.any(f.ids != np.arange(1, ref.n_particles + 1)):
             raise SampleFileError(f"{src}: timestep {f.timestep} has atom IDs that are not 1..{ref.n_particles} "
                                   f"(the sample's particles)")
+    positions = [_in_plane(src, f, ref) for f in frames]
     if dext == ".vtkhdf":
         with VTKHDFSeries(dst, ref) as series:
-            for f in frames:
-                series.write(f.timestep, positions=f.positions)
+            for f, pos in zip(frames, positions):
+                series.write(f.timestep, positions=pos)
         return [dst]
     series = VTUSeries(dst, ref)
-    for f in frames:
-        series.write(f.timestep, positions=f.positions)
+    for f, pos in zip(frames, positions):
+        series.write(f.timestep, positions=pos)
     return [series.path] + [dst.with_name(name) for _, name in series.steps]
+
+
+def _in_plane(src, frame, ref: Sample) -> np.ndarray:
+    """A dump frame's positions for the reference sample: ``[n, 2]`` for a 2D sample (a ``dimension 2`` run's
+    atoms, all at one z), else as they are."""
+    pos = np.asarray(frame.positions, np.float64)
+    if ref.dim == 3 or pos.shape[1] == 2:
+        return pos
+    if np.any(pos[:, 2] != pos[0, 2]):
+        raise SampleFileError(f"{src}: timestep {frame.timestep} has atoms at different z, but the sample is 2D "
+                              f"(discs; a LAMMPS dimension 2 run keeps every z = 0)")
+    return pos[:, :2]

@@ -20,7 +20,7 @@ from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.interop import conventions
 from jaxbpm.interop._lammps_fast import parse_fast
 from jaxbpm.interop._lammps_layout import (ATOM_COLUMNS, SECTIONS, Line, coeff_row, coeffs_head, head_meta, header,
-                                           last_wins, split, table_arrays)
+                                           last_wins, planar_positions, split, table_arrays)
 from jaxbpm.interop._meta import (BIG, N_COEFFS, crc32, domain_of, exact_text, meta_line, meta_of, names_file,
                                   read_text, verify, without_line)
 from jaxbpm.sample import ParticleMaterial, Sample
@@ -158,6 +158,12 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
                       coefficients: bool = True, title: str | None = None) -> pathlib.Path:
     """Write ``sample`` as a LAMMPS data file (``atom_style bpm/sphere``, units si), atomically.
 
+    A two-dimensional sample (discs, ``sample.dim == 2``) is written for ``dimension 2``: positions at z = 0, the box
+    ``zlo zhi`` a slab of the discs' thickness around z = 0, the bond coefficients of the ``2 r_b x t`` rectangular
+    sections (:func:`lammps_coefficients`), and the thickness in jaxbpm's header comment. The density column is the
+    material's density; LAMMPS computes sphere masses from it, so give discs their masses ``rho pi R^2 t`` in the
+    input with ``set group all density/disc`` (rho t) and integrate with ``fix nve/bpm/sphere disc``.
+
     Args:
       path: the data file. Atom IDs are particle index + 1, bond IDs bond index + 1.
       sample: the sample.
@@ -212,6 +218,9 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
     density = float(sample.particle_material.density)
     pad = 10.0 * rad.max()
     lo, hi = pos.min(axis=0) - pad, pos.max(axis=0) + pad
+    if sample.dim == 2:  # dimension 2: z = 0, a slab of the discs' thickness around it (LAMMPS needs zlo < 0 < zhi)
+        pos = np.concatenate([pos, np.zeros((n, 1))], axis=1)
+        lo, hi = np.append(lo, -0.5 * sample.thickness), np.append(hi, 0.5 * sample.thickness)
     from jaxbpm._version import __version__
 
     lines = [meta_line(meta_of(sample, normalize=bool(normalize))), "",
@@ -232,8 +241,8 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
             list(range(1, nb + 1)), btype.tolist(), (b[:, 0].astype(np.int64) + 1).tolist(),
             (b[:, 1].astype(np.int64) + 1).tolist(), rb, bm.astype(np.int64).tolist()]))
     body = "".join(parts)
-    head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si) written by "
-                     f"jaxbpm {__version__}")
+    head = title or (f"LAMMPS data file (atom_style bpm/sphere, bond_style bpm/rotational, units si"
+                     f"{', dimension 2' if sample.dim == 2 else ''}) written by jaxbpm {__version__}")
     text = f"{head} crc32={crc32(body)}\n{body}"
 
     def write(tmp):
@@ -245,7 +254,7 @@ def write_lammps_data(path, sample: Sample, *, normalize: bool = False, atom_typ
 @names_file
 def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_style: str | None = None,
                      breaking: bool = True, bond_radius_ratio: float | None = None,
-                     materials: Mapping[str, Any] | None = None, **sample_kw) -> Sample:
+                     materials: Mapping[str, Any] | None = None, dim: int | None = None, **sample_kw) -> Sample:
     """Read a LAMMPS data file with spheres and bonds into a :class:`Sample`.
 
     Particles are ordered by atom ID; their atom types become ``Sample.types`` (groups by type:
@@ -263,8 +272,11 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
       breaking: ``False`` ignores the failure thresholds (LAMMPS ``break no``).
       bond_radius_ratio, materials: ignore the coefficients; bond radius ratio and material table as in
         :meth:`Sample.from_arrays`.
+      dim: 2 reads a ``dimension 2`` file as discs (positions ``[n, 2]``; every z must be equal), 3 as spheres;
+        default: jaxbpm's header comment, else 3 (a data file does not say its dimension, and spheres in one plane
+        are a 3D sample too: pass ``dim=2`` for LAMMPS's own 2D files).
       **sample_kw: more :meth:`Sample.from_arrays` keywords (``particle_material``, ``bond_contact``, ``types`` in
-        place of the atom types, ...).
+        place of the atom types, ``thickness`` of 2D discs (default: jaxbpm's header comment, else 1 m), ...).
 
     Returns:
       The sample, particles in the order of their atom IDs.
@@ -296,6 +308,7 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     if normalize is None:
         normalize = bool(meta.get("normalize", False)) if meta else False
     kw = dict(sample_kw)
+    pos = planar_positions(path, pos, meta, dim, kw)
     kw.setdefault("types", atom_types)
     if meta is not None:
         kw.setdefault("particle_material", meta["particle_material"])
@@ -345,7 +358,8 @@ def read_lammps_data(path, *, coeffs=None, normalize: bool | None = None, atom_s
     limits = np.where(coef[:, 4:8] >= 0.999 * BIG, np.inf, coef[:, 4:8])  # jaxbpm's "unbreakable"
     p = conventions.LammpsBpmRotational(*(coef[:, c] for c in range(4)), *(limits[:, c] for c in range(4)),
                                         normalize=normalize)
-    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()))
+    bond = conventions.from_lammps(p, length, breaking=breaking and bool(np.isfinite(limits).any()),
+                                   thickness=kw.get("thickness") if pos.shape[1] == 2 else None)
     mats, bm = materials_from_bonds(bond)
     return Sample.from_arrays(pos, radii, bonds, bond.bond_radius, bond_material=bm, materials=mats,
                               particle_material=pm, **kw)

@@ -26,7 +26,7 @@ import pathlib
 import numpy as np
 
 from jaxbpm._atomic import atomic_write
-from jaxbpm.errors import SampleFileError
+from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.interop._meta import exact_text, names_file, read_text
 from jaxbpm.interop.dump import DumpFrame, read_lammps_dump
 from jaxbpm.interop.lammps import read_lammps_data
@@ -160,11 +160,17 @@ def write_yade_text(path, sample: Sample, *, comment: str | None = None,
 
     Returns:
       ``path`` as a :class:`pathlib.Path`.
+
+    Raises:
+      SampleError: a two-dimensional sample (Yade has no discs).
     """
     if not isinstance(sample, Sample):
         raise TypeError(f"write_yade_text expects a jaxbpm Sample, got {type(sample).__name__}")
     if comment is not None and (comment.splitlines() != [comment]):
         raise SampleFileError(f"{path}: comment must be one line of text, got {comment!r}")
+    if sample.dim == 2:
+        raise SampleError("write_yade_text: Yade models spheres (3D only); a 2D sample (discs, positions [n, 2]) has "
+                          "no Yade form: write it for LAMMPS (dimension 2, write_lammps_data) or as CSV")
     pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
     types = np.ones(len(rad), np.int64) if sample.types is None else np.asarray(sample.types, np.int64)
     with_ids = bool(np.any(types != 1)) if mat_ids is None else bool(mat_ids)

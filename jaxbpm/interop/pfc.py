@@ -27,6 +27,13 @@ exact for bonded particles that touch, and a bond gap g changes the bond's k_n b
 (with ``sample=``, an :class:`~jaxbpm.interop.conventions.InexactTranslationWarning` states the largest). The per-bond
 translations of :mod:`jaxbpm.interop.conventions` (``from_pfc``, ``to_pfc`` there) are exact bond by bond.
 
+Two-dimensional samples (PFC2D) take the same names and values: PFC's properties are moduli, ratios and stresses,
+and PFC2D's parallel bond is jaxbpm's 2D bond, the ``2 r_b x t`` rectangle (``A = 2 r_b t``, ``I = (2 r_b)^3 t /
+12``), so ``pb_emod A / (R1 + R2)`` is the bond's k_n in both. PFC2D's thickness is 1 m; jaxbpm's is the sample's
+(``Sample.thickness``, default 1 m): forces scale with it, stresses and moduli do not. ``pb_rmul`` is checked
+against a 2D sample's bond radii as in 3D. The linear contacts' ``emod`` enters with PFC2D's contact area per
+unit thickness, ``2 min(R1, R2)`` (:func:`jaxbpm.physics.linear.contact_area`), i.e. for ``t = 1 m``.
+
 Examples:
     >>> from jaxbpm.interop.pfc import from_pfc, to_pfc
     >>> params = from_pfc({"emod": 211e9, "kratio": 1.21, "pb_emod": 211e9, "pb_kratio": 2.5, "pb_ten": 5e9,

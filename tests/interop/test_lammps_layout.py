@@ -48,3 +48,22 @@ def test_head_meta_reads_the_checksum_and_the_metadata_line():
     crc, meta = layout.head_meta("f", ["title crc32=89abcdef", line, ""])
     assert crc == "89abcdef" and meta == _meta.parse_meta(line, "f:2") and meta["bond_contact"] == "superimpose"
     assert layout.head_meta("f", ["LAMMPS data file", "", "4 atoms"]) == (None, None)
+
+
+def test_planar_positions():
+    """dim from jaxbpm's header (thickness too), else 3; dim=2 drops z when every z is equal; bad dims named."""
+    from jaxbpm.interop._lammps_layout import planar_positions
+
+    pos = np.array([[0.0, 1.0, 0.0], [2.0, 3.0, 0.0]])
+    kw = {}
+    np.testing.assert_array_equal(planar_positions("f", pos, {"dim": 2, "thickness": 0.5}, None, kw), pos[:, :2])
+    assert kw == {"thickness": 0.5}
+    kw = {"thickness": 0.1}
+    assert planar_positions("f", pos, {"dim": 2, "thickness": 0.5}, None, kw).shape == (2, 2) and kw["thickness"] == 0.1
+    kw = {}
+    assert planar_positions("f", pos, None, None, kw).shape == (2, 3) and kw == {}
+    assert planar_positions("f", pos, None, 2, kw).shape == (2, 2) and kw == {"thickness": 1.0}
+    with pytest.raises(SampleFileError, match="dim must be 2"):
+        planar_positions("f", pos, None, 4, {})
+    with pytest.raises(SampleFileError, match="atom 2"):
+        planar_positions("f", pos + [[0, 0, 0], [0, 0, 1e-9]], None, 2, {})

@@ -66,3 +66,19 @@ def test_read_text_names_what_is_wrong(tmp_path):
     (tmp_path / "b.bin").write_bytes(b"\xff\xfe\x00\x81")
     with pytest.raises(SampleFileError, match=r"b\.bin: not a text file"):
         _meta.read_text(tmp_path / "b.bin")
+
+
+def test_meta_of_a_2d_sample():
+    """A 2D sample's header holds dim 2, its thickness and a 2-component domain; a damaged one is named."""
+    import json
+
+    import jaxbpm
+
+    sample = jaxbpm.generate.lattice("square", (3, 2)).replace(thickness=0.7)
+    meta = _meta.parse_meta(_meta.meta_line(_meta.meta_of(sample)), "f:1")
+    assert meta["dim"] == 2 and meta["thickness"] == 0.7 and len(meta["domain"]["lo"]) == 2
+    assert "dim" not in _meta.meta_of(_multi())
+    for bad, field in (({"thickness": None}, "thickness"), ({"dim": 4}, "dim"), ({"dim": 3}, "domain")):
+        damaged = {**meta, **bad}
+        with pytest.raises(SampleFileError, match=repr(field)):
+            _meta.parse_meta(_meta.META + json.dumps(damaged), "f:1")

@@ -152,3 +152,11 @@ def test_liggghts_atom_types_are_the_particle_types(tmp_path):
     (tmp_path / "l.data").write_text(text.replace("4 1 0.0025", "4 2 0.0025"))
     s = formats.read_liggghts_data(tmp_path / "l.data", bond_radius_ratio=0.5)
     assert s.types.tolist() == [1, 1, 3, 2]  # atoms 1..4 (the file lists 1, 3, 2, 4)
+
+
+def test_yade_text_refuses_2d_samples(tmp_path):
+    from jaxbpm.errors import SampleError
+
+    with pytest.raises(SampleError, match="Yade models spheres"):
+        formats.write_yade_text(tmp_path / "d.txt", generate.lattice("square", (3, 3)))
+    assert not (tmp_path / "d.txt").exists()

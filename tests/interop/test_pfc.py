@@ -91,3 +91,21 @@ def test_bond_gaps_are_warned_with_their_size():
         from_pfc({"pb_emod": 1e9}, sample=_sample())  # touching: exact, no warning
     with pytest.warns(InexactTranslationWarning, match="up to 2.44 %"):
         from_pfc({"pb_emod": 1e9}, sample=_sample(gap=0.05 * R))  # L = 2.05 R against R1 + R2 = 2 R
+
+
+def test_2d_sample_pb_rmul_and_pfc2d_stiffness():
+    """With a 2D disc sample (thickness t): pb_rmul is checked against its bond radii and returned; PFC2D's bond
+    stiffness pb_emod A / (R1 + R2) with A = 2 r_b t equals the sample's bond_E A / L for touching discs."""
+    sample = jaxbpm.generate.lattice("square", (4, 3)).replace(thickness=0.4)
+    params = from_pfc({"pb_emod": 2e9, "pb_kratio": 2.5, "pb_rmul": 0.5, "pb_ten": 1e6, "pb_coh": 2e6},
+                      sample=sample)
+    assert to_pfc({k: params[k] for k in ("bond_E", "bond_nu")}, sample=sample) == {
+        "pb_emod": 2e9, "pb_kratio": 2.5, "pb_rmul": 0.5}
+    with pytest.raises(ConventionError, match="pb_rmul = 0.7"):
+        from_pfc({"pb_rmul": 0.7}, sample=sample)
+    b, rad = np.asarray(sample.bonds), np.asarray(sample.radii)
+    rb = 0.5 * np.minimum(rad[b[:, 0]], rad[b[:, 1]])
+    pfc_kn = 2e9 * (2 * rb * 0.4) / (rad[b[:, 0]] + rad[b[:, 1]])
+    kn = np.asarray(params["bond_E"])[np.asarray(sample.bond_material)] * np.asarray(sample.bond_area) / np.asarray(
+        sample.bond_length)
+    np.testing.assert_allclose(kn, pfc_kn, rtol=1e-12)

@@ -48,3 +48,13 @@ def test_xdmf_shows_the_particle_types(tmp_path):
     s = s.replace(types=np.arange(s.n_particles) % 2 + 1)
     mesh = meshio.read(write_xdmf(io.save_sample(tmp_path / "s.h5", s)))
     np.testing.assert_array_equal(mesh.point_data["type"], s.types)
+
+
+def test_xdmf_of_a_2d_sample(tmp_path):
+    """A disc sample's companion has an XY geometry that an independent reader opens as the discs' centres."""
+    s = jaxbpm.generate.lattice("square", (3, 4)).replace(thickness=0.5)
+    xdmf = write_xdmf(io.save_sample(tmp_path / "d.h5", s))
+    assert 'GeometryType="XY"' in xdmf.read_text()
+    mesh = meshio.read(xdmf)
+    np.testing.assert_array_equal(mesh.points[:, :2], np.asarray(s.positions))
+    np.testing.assert_array_equal(mesh.cells_dict["line"], np.asarray(s.bonds))
