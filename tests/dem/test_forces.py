@@ -134,3 +134,38 @@ def test_bond_pass_in_blocks_through_breakage(monkeypatch):
     scale = np.max(np.abs(one.force))
     np.testing.assert_allclose(blocks.force[:first], one.force[:first], rtol=0, atol=1e-10 * scale)
     assert abs(blocks.stats["strength"] / one.stats["strength"] - 1) < 0.02
+
+
+def test_disc_contact_motion_is_the_3d_motion_about_z():
+    """Discs turn about z: the contact points' relative velocity ``v_j - v_i - (r_j w_j + r_i w_i) (-n_y, n_x)`` is
+    the 3D formula's with the spins along z; discs rolling on each other (equal and opposite contact-point speeds)
+    have none."""
+    from types import SimpleNamespace
+
+    from jaxbpm.dem.forces import _motion
+
+    rng = np.random.default_rng(3)
+    n, dt = 6, 1e-6
+    x, v, w = rng.normal(size=(n, 2)), rng.normal(size=(n, 2)), rng.normal(size=(n, 1))
+    radii = jnp.asarray(rng.uniform(0.5, 1.0, n))
+    i, j = jnp.array([0, 1, 2, 3, 4]), jnp.array([1, 2, 3, 4, 5])
+    d2 = tuple(jnp.asarray(x[j] - x[i]).T)
+    dxi2, v2 = _motion(SimpleNamespace(radii=radii), SimpleNamespace(velocities=jnp.asarray(v), omegas=jnp.asarray(w)),
+                       i, j, d2, dt)
+    pad = np.zeros((n, 1))
+    three = SimpleNamespace(velocities=jnp.asarray(np.hstack([v, pad])), omegas=jnp.asarray(np.hstack([pad, pad, w])))
+    _, v3 = _motion(SimpleNamespace(radii=radii), three, i, j, d2 + (jnp.zeros(5),), dt)
+    assert len(v2) == 2
+    np.testing.assert_allclose(np.stack(v2), np.stack(v3[:2]), rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(v3[2]), 0.0, atol=1e-15)
+    np.testing.assert_allclose(np.stack(dxi2), dt * np.stack(v2), rtol=1e-15)
+    # two discs side by side along x, turning as gears (r_i w_i = -r_j w_j): no slip; turning alike: 2 r w along -y
+    pair = SimpleNamespace(radii=jnp.array([1.0, 2.0]))
+    d = (jnp.array([3.0]), jnp.array([0.0]))
+    zero_v = jnp.zeros((2, 2))
+    _, gears = _motion(pair, SimpleNamespace(velocities=zero_v, omegas=jnp.array([[2.0], [-1.0]])),
+                       jnp.array([0]), jnp.array([1]), d, dt)
+    _, alike = _motion(pair, SimpleNamespace(velocities=zero_v, omegas=jnp.array([[1.0], [1.0]])),
+                       jnp.array([0]), jnp.array([1]), d, dt)
+    np.testing.assert_allclose(np.ravel(gears), 0.0, atol=1e-15)
+    np.testing.assert_allclose(np.ravel(alike), [0.0, -3.0], atol=1e-15)
