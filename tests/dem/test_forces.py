@@ -169,3 +169,25 @@ def test_disc_contact_motion_is_the_3d_motion_about_z():
                        jnp.array([0]), jnp.array([1]), d, dt)
     np.testing.assert_allclose(np.ravel(gears), 0.0, atol=1e-15)
     np.testing.assert_allclose(np.ravel(alike), [0.0, -3.0], atol=1e-15)
+
+
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the generated packing's bonded pairs overlap
+def test_disc_bond_pass_in_blocks_with_linear_contacts(monkeypatch):
+    """The blocked bond pass in 2D, the bonded pairs' linear contacts in the same blocks: the one-pass run's forces
+    to round-off before the first break, its strength after."""
+    from jaxbpm.physics import model as model_mod
+
+    s = jaxbpm.generate.disc_packing(250, aspect=(1, 2), seed=4).largest_cluster()
+    params = default_params(s) | {"bond_tensile_strength": np.array([3e6]), "bond_shear_strength": np.array([6e6])}
+    scene = jaxbpm.scenes.UniaxialCompression.to_failure(axis=1, contact_law="linear")
+    one = jaxbpm.solve(s, scene, "dem", params=params)
+    monkeypatch.setattr(model_mod, "BLOCKED_FROM", 0)
+    monkeypatch.setattr(model_mod, "BOND_BLOCK", 64)
+    assert build_model(s).bond_block == 64 and s.n_bonds % 64 != 0
+    blocks = jaxbpm.solve(s, scene, "dem", params=params)
+    curve = np.sum(one.stats["broken_curve"], axis=1)
+    first = int(np.argmax(curve > 0))
+    assert 0 < first and curve[-1] > 20
+    scale = np.max(np.abs(one.force))
+    np.testing.assert_allclose(blocks.force[:first], one.force[:first], rtol=0, atol=1e-10 * scale)
+    assert abs(blocks.stats["strength"] / one.stats["strength"] - 1) < 0.02
