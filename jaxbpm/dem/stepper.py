@@ -85,8 +85,8 @@ def _with_bond_springs(model: Model, state: DEMState) -> DEMState:
     where it has none."""
     if not model.contacts or model.contact_law == "cohesive" or state.bond_spring is not None:
         return state
-    return dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], model.dim),
-                                                                   state.positions.dtype))
+    springs = jnp.zeros((model.bonds.shape[0], model.dim), state.positions.dtype)
+    return dataclasses.replace(state, bond_spring=springs)
 
 
 
