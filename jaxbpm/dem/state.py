@@ -42,8 +42,8 @@ class DEMState:
         broken_time: ``[nb]`` when each bond broke [s], NaN while intact.
         cohesion: ``[C]`` per-contact cohesion history [Pa] with the cohesive contact law
             (:mod:`jaxbpm.physics.cohesive`), ``None`` otherwise.
-        bond_spring: ``[nb, 3]`` with Hertz or linear contacts, the tangential springs of the bonded pairs' contacts (``spring``
-            then holds those of the other pairs).
+        bond_spring: ``[nb, 3]`` with Hertz or linear contacts, the tangential springs of the bonded pairs' contacts
+            (``spring`` then holds those of the other pairs).
     """
 
     positions: Any
