@@ -107,13 +107,58 @@ def execute(path: pathlib.Path, *, env: dict | None = None, timeout: int = 900, 
     return nb
 
 
+def _reset(km) -> None:
+    """A fresh namespace in the kernel ``km`` (restarted if a notebook killed it)."""
+    if not km.is_alive():  # a notebook that killed its kernel fails alone, not the ones after it
+        km.restart_kernel(now=True)
+    kc = km.client()
+    kc.start_channels()
+    try:
+        kc.wait_for_ready(timeout=120)
+        reply = kc.execute_interactive("%reset -f\nimport matplotlib.pyplot as plt\nplt.close('all')\ndel plt",
+                                       timeout=120)
+        if reply["content"]["status"] != "ok":
+            raise RuntimeError(f"the kernel's namespace could not be reset: {reply['content']}")
+    finally:
+        kc.stop_channels()
+
+
+def run_shared(paths, into: pathlib.Path, *, timeout: int = 600) -> None:
+    """Run the notebooks ``paths`` one after another in one kernel, each in a fresh namespace (so they share its
+    imports and compiled programs), and write each executed notebook to ``into / name``, or, where a cell raised,
+    the cell and its traceback to ``into / (name + ".error")``. The stored notebooks are left as they are."""
+    import nbformat
+    from jupyter_client.manager import KernelManager
+    from nbclient.exceptions import CellExecutionError
+
+    km = KernelManager(kernel_name="python3")
+    with tempfile.TemporaryDirectory(prefix="jaxbpm-notebooks-") as cwd:
+        km.start_kernel(env=kernel_env(), cwd=cwd)
+        try:
+            for path in paths:
+                _reset(km)
+                try:
+                    nbformat.write(execute(path, km=km, timeout=timeout), into / path.name)
+                except CellExecutionError as err:
+                    (into / (path.name + ".error")).write_text(str(err), encoding="utf-8")
+        finally:
+            km.shutdown_kernel(now=True)
+
+
 def main(argv=None) -> int:
     """Execute the notebooks named on the command line (default all) and write them back with their outputs."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("names", nargs="*", help="notebooks to run (default: all under notebooks/)")
     parser.add_argument("--check", action="store_true", help="execute only, write nothing")
+    parser.add_argument("--into", default=None, metavar="DIR",
+                        help="run the notebooks (paths) in one kernel and write the executed ones (or NAME.error) "
+                             "into DIR, leaving the stored ones alone (what the test suite runs)")
     args = parser.parse_args(argv)
     import nbformat
+
+    if args.into is not None:
+        run_shared([pathlib.Path(n) for n in args.names], pathlib.Path(args.into))
+        return 0
 
     for path in notebooks(args.names):
         t = time.perf_counter()

@@ -4,18 +4,20 @@ Stored: every code cell has run, in order, with no error output; every figure a 
 ``image/png`` output); ``metadata["jaxbpm"]`` names the jaxbpm version and the SHA-256 of the code cells that made
 the outputs, and both must be the current ones (``python notebooks/execute.py`` stores them again).
 
-Run: each notebook is executed in a Jupyter kernel (``nbclient`` + ``ipykernel``, through
-``notebooks/execute.py``) at its small size (``JAXBPM_NOTEBOOK_SMALL=1``), in a temporary directory, with the
-suite's persistent compilation cache and strict JAX settings; a cell that raises fails the test with the cell and
-its traceback. The notebooks a test process runs share one kernel, each in a fresh namespace (``%reset -f``), so
-they share imports and compiled programs as they did when run as scripts in the test process;
-``python notebooks/execute.py`` runs each in a kernel of its own. Each notebook asserts a physical outcome of its own (e.g. the DSM within 5 % of the DEM, a calibrated
-modulus confirmed by a DEM run), so a failing check fails the test. The figures drawn now must be those stored.
+Run: the notebooks are executed in one Jupyter kernel (``nbclient`` + ``ipykernel``), each in a fresh namespace
+(``%reset -f``), by ``notebooks/execute.py --into`` in a process of its own (the test process never loads Jupyter's
+client, its threads and ZMQ), at their small size (``JAXBPM_NOTEBOOK_SMALL=1``), in a temporary directory, with the
+suite's strict JAX settings and a compilation cache of their own; a cell that raises fails the test with the cell
+and its traceback. ``python notebooks/execute.py`` runs each in a kernel of its own and stores it. Each notebook
+asserts a physical outcome of its own (e.g. the DSM within 5 % of the DEM, a calibrated modulus confirmed by a DEM
+run), so a failing check fails the test. The figures drawn now must be those stored.
 """
 
 import importlib.util
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -118,73 +120,58 @@ def test_stored_problems_are_found():
     assert stored_problems(broken) == ["code cell 1 stored with an error"]
 
 
-def _param(path):
-    # notebook 04's DEM failure runs are the strength-calibration DEM test's programs: on one worker, one after the
-    # other, the second reads them from the suite's compilation cache
-    marks = [pytest.mark.xdist_group("strength-150")] if path.stem == "04_strength_calibration" else []
-    return pytest.param(path, id=path.stem, marks=marks)
+def _runner_env(cache) -> dict:
+    """The runner's environment: the suite's strict JAX settings and XLA flags, a compilation cache of its own."""
+    env = dict(os.environ)
+    env.update(JAX_NUMPY_DTYPE_PROMOTION="strict", JAX_NUMPY_RANK_PROMOTION="raise", JAXBPM_CACHE_DIR=str(cache),
+               JAX_COMPILATION_CACHE_DIR=str(cache), JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
+    env.pop("JAXBPM_TEST_XLA_CACHE", None)
+    return env
 
 
-def _kernel_env() -> dict:
-    cache = os.environ["JAXBPM_TEST_XLA_CACHE"]  # conftest's: the suite's own compilation cache
-    return execute.kernel_env({
-        "JAX_COMPILATION_CACHE_DIR": cache, "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
-        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0", "JAX_NUMPY_DTYPE_PROMOTION": "strict",
-        "JAX_NUMPY_RANK_PROMOTION": "raise", "XLA_FLAGS": os.environ.get("XLA_FLAGS", "")})
+def run_notebooks(paths, into: Path, cache: Path) -> None:
+    """``notebooks/execute.py --into``: the notebooks run in one kernel, started by a process of its own (the test
+    process never loads Jupyter's client, its threads and ZMQ); the executed ones land in ``into``."""
+    into.mkdir(parents=True, exist_ok=True)
+    r = subprocess.run([sys.executable, str(NOTEBOOK_DIR / "execute.py"), "--into", str(into), *map(str, paths)],
+                       env=_runner_env(cache), capture_output=True, text=True, timeout=1800)
+    assert r.returncode == 0, r.stderr[-3000:]
 
 
 @pytest.fixture(scope="module")
-def kernel(tmp_path_factory):
-    """One kernel for the notebooks a test process runs (each in a fresh namespace: ``%reset -f`` before it), so
-    they share its imports and compiled programs as one Python process would; started in a temporary directory."""
-    from jupyter_client.manager import KernelManager
+def executed(tmp_path_factory):
+    """The five notebooks executed now, in one kernel: ``{name: notebook or the error text}``."""
+    import nbformat
 
-    km = KernelManager(kernel_name="python3")
-    km.start_kernel(env=_kernel_env(), cwd=str(tmp_path_factory.mktemp("kernel")))
-    yield km
-    km.shutdown_kernel(now=True)
-
-
-def _reset(km):
-    if not km.is_alive():  # a notebook that killed its kernel fails alone, not the ones after it
-        km.restart_kernel(now=True)
-    kc = km.client()
-    kc.start_channels()
-    try:
-        kc.wait_for_ready(timeout=120)
-        reply = kc.execute_interactive("%reset -f\nimport matplotlib.pyplot as plt\nplt.close('all')\ndel plt",
-                                       timeout=120)
-        assert reply["content"]["status"] == "ok", reply["content"]
-    finally:
-        kc.stop_channels()
+    into, cache = tmp_path_factory.mktemp("executed"), tmp_path_factory.mktemp("xla")
+    run_notebooks(NOTEBOOKS, into, cache)
+    out = {}
+    for path in NOTEBOOKS:
+        error = into / (path.name + ".error")
+        out[path.name] = error.read_text(encoding="utf-8") if error.exists() else nbformat.read(into / path.name, 4)
+    return out
 
 
-@pytest.mark.parametrize("path", [_param(p) for p in NOTEBOOKS])
-def test_notebook_runs_in_a_kernel(path, kernel):
-    from nbclient.exceptions import CellExecutionError
-
-    _reset(kernel)
-    try:
-        nb = execute.execute(path, km=kernel, timeout=600)
-    except CellExecutionError as err:
-        pytest.fail(f"{path.name}: a cell failed\n{err}", pytrace=False)
+@pytest.mark.xdist_group("notebooks")  # one worker runs the fixture, once
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_runs_in_a_kernel(path, executed):
+    nb = executed[path.name]
+    if isinstance(nb, str):
+        pytest.fail(f"{path.name}: a cell failed\n{nb}", pytrace=False)
     problems = [p for p in stored_problems(nb) if "execution counts" not in p]  # the kernel's counts go on
     assert not problems, (path.name, problems)
     assert _cells_with_figures(nb) == _cells_with_figures(_notebook(path)), "the figures drawn are not those stored"
 
 
-def test_a_cell_that_raises_fails(kernel, tmp_path):
+def test_a_cell_that_raises_fails(tmp_path):
+    """A cell that raises is reported with its error; the next notebook in the kernel starts from an empty
+    namespace."""
     import nbformat
-    from nbclient.exceptions import CellExecutionError
 
-    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("x = 1"),
-                                         nbformat.v4.new_code_cell("assert x == 2, 'x is not 2'")])
-    path = tmp_path / "failing.ipynb"
-    nbformat.write(nb, path)
-    _reset(kernel)
-    with pytest.raises(CellExecutionError, match="x is not 2"):
-        execute.execute(path, km=kernel, timeout=60)
-    _reset(kernel)  # the namespace a notebook leaves is gone before the next
-    with pytest.raises(CellExecutionError, match="NameError"):
-        nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print(x)")]), path)
-        execute.execute(path, km=kernel, timeout=60)
+    first, second = tmp_path / "a_failing.ipynb", tmp_path / "b_reset.ipynb"
+    nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("x = 1"),
+                                                   nbformat.v4.new_code_cell("assert x == 2, 'x is not 2'")]), first)
+    nbformat.write(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("print(x)")]), second)
+    run_notebooks([first, second], tmp_path / "out", tmp_path / "xla")
+    assert "x is not 2" in (tmp_path / "out" / "a_failing.ipynb.error").read_text()
+    assert "NameError" in (tmp_path / "out" / "b_reset.ipynb.error").read_text()
