@@ -251,8 +251,7 @@ def transit_time(sample, model: Model, params, length: float) -> float:
         elif model.contact_law == "linear":
             from jaxbpm.physics.linear import normal_stiffness as linear_stiffness
 
-            p = model.hertz_params(params)
-            kn = float(linear_stiffness(r, r, float(p.emod), model.dim, float(p.thickness)))
+            kn = float(linear_stiffness(r, r, float(model.hertz_params(params).emod), model.dim))
         else:
             kn = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r)
         spacing = 2.0 * r
