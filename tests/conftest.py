@@ -1,9 +1,10 @@
 """Strict numerics for every test: float64, strict dtype promotion, no silent rank broadcasting.
 
-The test session has a compilation cache directory of its own, a temporary directory (the first process of the
-session makes it and passes it on through ``JAXBPM_TEST_XLA_CACHE``; it is removed when that process exits). It is
-``JAXBPM_CACHE_DIR``, so ``jaxbpm`` commands run by the tests, in process or as subprocesses, never touch the user's
-cache; the test processes themselves do not write a persistent cache (see below). Tests that change JAX's cache settings get them put back afterwards. XLA's CPU runtime runs on one
+The test session has a persistent compilation cache of its own, a temporary directory shared by the pytest-xdist
+workers (the first process of the session makes it and passes it on through ``JAXBPM_TEST_XLA_CACHE``; it is
+removed when that process exits): a program one worker compiled is read by the other instead of compiled again.
+It is also ``JAXBPM_CACHE_DIR``, so ``jaxbpm`` commands run by the tests, in process or as subprocesses, never touch
+the user's cache. Tests that change JAX's cache settings get them put back afterwards. XLA's CPU runtime runs on one
 thread per process (the xdist workers share the cores).
 """
 
@@ -46,10 +47,9 @@ jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
-# The test processes themselves do not write JAX's persistent cache: on jaxlib 0.10 with this suite's codegen
-# flags, serialising executables for it (``put_executable_and_time``) crashed a worker now and then (a
-# segmentation fault or an abort inside XLA, in a different program each time). Tests of the cache turn it on
-# themselves (and the fixture below puts the settings back); jaxbpm commands the tests run use _CACHE_DIR.
+from jaxbpm import _cache  # noqa: E402
+
+_cache.enable_compilation_cache(_CACHE_DIR)
 
 _CACHE_OPTIONS = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
                   "jax_persistent_cache_min_entry_size_bytes", "jax_enable_compilation_cache")

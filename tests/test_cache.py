@@ -52,10 +52,9 @@ def test_enable_writes_entries_and_switches_directory(tmp_path, jax_cache_config
 
 
 def test_fixture_put_the_session_cache_back():
-    # the test above (and the in-process commands of test_cli) leave the session's settings as they were: no
-    # persistent cache written by the test processes; jaxbpm commands default to the session's directory
-    assert not jax.config.jax_compilation_cache_dir
-    assert jaxbpm.default_cache_dir() == pathlib.Path(os.environ["JAXBPM_TEST_XLA_CACHE"])
+    # the test above (and the in-process commands of test_cli) leave the session's cache as it was
+    assert jax.config.jax_compilation_cache_dir == os.environ["JAXBPM_TEST_XLA_CACHE"]
+    assert jaxbpm.compilation_cache_dir() == pathlib.Path(os.environ["JAXBPM_TEST_XLA_CACHE"])
 
 
 def test_default_dir(monkeypatch, tmp_path):
