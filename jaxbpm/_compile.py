@@ -168,6 +168,24 @@ def _nbytes(args) -> int:
     return sum(int(getattr(x, "nbytes", 0)) for x in jax.tree_util.tree_leaves(args))
 
 
+# every Program alive, so that their executables can be dropped together (release_executables)
+_PROGRAMS: weakref.WeakSet = weakref.WeakSet()
+
+
+def release_executables() -> None:
+    """Drop every compiled executable this process holds: those of jaxbpm's programs and JAX's own caches.
+
+    Each executable XLA's CPU backend loads keeps a dozen or more memory mappings (one per compiled kernel part)
+    until it is dropped, and Linux limits a process to ``vm.max_map_count`` of them (65,530 by default). A process
+    that compiles thousands of programs and keeps them all (a long test session, a sweep over many sample sizes)
+    reaches that limit, and XLA's next compilation then fails inside the compiler. Programs compile again on their
+    next call (or are read from the persistent compilation cache where it is enabled).
+    """
+    for program in list(_PROGRAMS):
+        program._compiled.clear()
+    jax.clear_caches()
+
+
 class Program:
     """A jitted function compiled ahead of time once per argument signature.
 
@@ -193,6 +211,7 @@ class Program:
         self._compiled: collections.OrderedDict = collections.OrderedDict()
         self.maxsize = maxsize
         self.compilations = 0
+        _PROGRAMS.add(self)
         self.__name__ = getattr(fn, "__name__", "program")
         self.__doc__ = fn.__doc__
 

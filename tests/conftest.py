@@ -68,3 +68,34 @@ def jax_cache_config():
         from jaxbpm._cache import _reset_jax_cache
 
         _reset_jax_cache()
+
+
+# A test process keeps every program it compiled (jaxbpm's programs and JAX's caches hold them), and each executable
+# keeps a dozen or more memory mappings: a worker that ran a few hundred tests reached Linux's limit of 65,530
+# mappings per process (vm.max_map_count), and the compilation that went over it failed inside XLA and took the
+# worker down. After a test that leaves the process above this many mappings, the executables are dropped (a later
+# test compiles again, or reads the session's persistent cache); between modules, or anywhere above the hard limit.
+_MAPPINGS_SOFT, _MAPPINGS_HARD = 25_000, 45_000
+
+
+def _mappings() -> int:
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return f.read().count(b"\n")
+    except OSError:  # not Linux
+        return 0
+
+
+def pytest_runtest_teardown(item, nextitem):
+    count = _mappings()
+    new_module = nextitem is None or nextitem.module is not item.module
+    if count > _MAPPINGS_HARD or (count > _MAPPINGS_SOFT and new_module):
+        import gc
+
+        from jaxbpm._compile import release_executables
+
+        release_executables()
+        gc.collect()
+        if os.environ.get("JAXBPM_TEST_MAPPINGS_LOG"):
+            with open(os.environ["JAXBPM_TEST_MAPPINGS_LOG"], "a") as f:
+                f.write(f"{os.getpid()} {item.nodeid} {count} -> {_mappings()}\n")
