@@ -114,3 +114,28 @@ def test_strength_advice_says_out_of_reach_when_a_bound_stops_it(monkeypatch):
         for key, text in expected.items():
             assert text in unreached[key], (key, unreached[key])
         assert ("raise max_iterations" in unreached["ucs"]) == (not unreachable)
+
+
+def test_first_jacobian_takes_the_estimates_secant_and_perturbs_across_it():
+    """On strengths linear in log space, the Jacobian from the two estimates' secant and ``n - 1`` perturbed sets
+    is the exact one; with no other set far enough, every axis is perturbed (``n`` sets)."""
+    from jaxbpm.calibrate.lab import _first_jacobian
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3):
+        A, b = rng.normal(size=(2, n)), rng.normal(size=2)
+        calls = []
+
+        def run(points, kind, A=A, b=b):
+            calls.append((kind, len(points)))
+            return points @ A.T + b
+
+        x1, x2 = rng.normal(size=n), rng.normal(size=n) + 2.0
+        seen = [(x1, x1 @ A.T + b), (x2, x2 @ A.T + b)]
+        J = _first_jacobian(run, x2, x2 @ A.T + b, seen, np.log1p(0.05))
+        np.testing.assert_allclose(J, A, rtol=1e-9, atol=1e-12)
+        assert sum(k for _, k in calls) == n - 1
+        calls.clear()
+        J = _first_jacobian(run, x2, x2 @ A.T + b, seen[1:], np.log1p(0.05))
+        np.testing.assert_allclose(J, A, rtol=1e-9, atol=1e-12)
+        assert calls == [("fd", n)]
