@@ -113,7 +113,8 @@ def _checked(result, key, params):
 
 def _observations(result) -> dict:
     obs = {"stiffness": float(result.stiffness), "youngs_modulus": float(result.youngs_modulus),
-           "strain": np.asarray(result.strain), "stress": np.asarray(result.stress)}
+           "strain": np.asarray(result.strain), "stress": np.asarray(result.stress),
+           "force": np.asarray(result.force)}
     stats = result.stats if isinstance(result.stats, dict) else {}
     nu = getattr(result, "poisson_ratio", None)
     if nu is None:

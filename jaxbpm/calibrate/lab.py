@@ -295,9 +295,10 @@ def _strengths(samples, scene_of, targets, wanted, params, stages, unreached, ac
     """Stage 2: the bond strengths by DEM failure runs (:func:`_strength_stage`), then one failure run per test at
     the answer; the answer goes into ``params`` and its record into ``stages``, ``unreached``, ``achieved`` and
     ``solves``. Returns the stress-strain curves of the runs at the answer."""
+    kept: dict = {}
     res = _strength_stage(samples, scene_of, targets, wanted, params, tol=tol, max_iterations=max_iterations,
                           fd_step=fd_step, solve_options=dict(solve_options or {"transits": 30}),
-                          executor=executor, progress=progress)
+                          executor=executor, progress=progress, kept=kept)
     stages["strength"] = res
     solves["strength (DEM failure runs)"] = res.evaluations
     params.update(bond_tensile_strength=res.values.get("bond_tensile_strength", params["bond_tensile_strength"]),
@@ -314,8 +315,9 @@ def _strengths(samples, scene_of, targets, wanted, params, stages, unreached, ac
                                        for p, side, b in out_of_reach[name]["pinned"])
                     unreached[k] = f"out of reach of the bond strength range ({best}): {pinned}; more iterations " \
                                    "will not reach it"
-    curves = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved, targets)
-    solves["answer runs (DEM)"] = len(wanted)
+    curves, ran = _curves(samples, scene_of, wanted, params, dict(solve_options or {"transits": 30}), achieved,
+                          targets, kept)
+    solves["answer runs (DEM)"] = ran
     return curves
 
 
@@ -338,7 +340,7 @@ def _with(sample, params):
 
 
 def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iterations, fd_step, solve_options,
-                    executor, progress):
+                    executor, progress, kept=None):
     """Bond strengths by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space on a
     finite-difference Jacobian (its perturbed runs batched: one task each on ``executor``), updated by Broyden's
     rule after every step (one parameter set per iteration; the first Jacobian takes the secant of the two estimates
@@ -419,6 +421,8 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
         length = 1.0 if error < best[0] else 0.5 * length  # a worse set is not kept: the next step is half as long
         best = min(best, (error, x_new, r_new), key=lambda b: b[0])
     _, x, r = best
+    if kept is not None:  # the answer's own runs (their curves): no run again at the answer
+        kept.update(problem.observed.get(tuple(np.exp(x).tolist()), {}))
     notes = ["estimates 1 and 2 of Qu et al. 2020 (Eq. 14-15), then Gauss-Newton steps in log space from the best "
              "set so far (Jacobian by the estimates' secant and finite differences across it, Broyden updates, a step that does worse halves the next)"]
     if stalled is not None:
@@ -459,22 +463,27 @@ def _first_jacobian(run, x, r, seen, step):
     return np.linalg.solve(np.asarray(moves), np.asarray(changes)).T
 
 
-def _curves(samples, scene_of, wanted, params, solve_options, achieved, targets) -> dict:
-    """The failure runs at the answer: stress-strain curves and the strengths they give (the check)."""
+def _curves(samples, scene_of, wanted, params, solve_options, achieved, targets, kept=None) -> tuple[dict, int]:
+    """The failure runs at the answer: stress-strain curves and the strengths they give (the check). A test whose
+    run at the answer the strength stage already made (``kept``: its observations by scene) is not run again.
+    Returns the curves and the number of runs made."""
     from jaxbpm.physics.model import default_params
     from jaxbpm.solving import solve
 
-    out = {}
+    out, ran = {}, 0
     for key in wanted:
         s = samples[key]
-        p = {**default_params(s), "bond_tensile_strength": np.asarray([params["bond_tensile_strength"]]),
-             "bond_shear_strength": np.asarray([params["bond_shear_strength"]])}
-        r = solve(s, scene_of[key], method="dem", params=p, throw=False, **solve_options)
-        strength = float(r.stats.get("strength", np.nan))
+        obs = (kept or {}).get(_SCENE_OF[key])
+        if obs is None or "force" not in obs:
+            p = {**default_params(s), "bond_tensile_strength": np.asarray([params["bond_tensile_strength"]]),
+                 "bond_shear_strength": np.asarray([params["bond_shear_strength"]])}
+            r = solve(s, scene_of[key], method="dem", params=p, throw=False, **solve_options)
+            obs, ran = {"strain": r.strain, "force": r.force, "strength": r.stats.get("strength", np.nan)}, ran + 1
+        strength = float(obs.get("strength", np.nan))
         achieved[key] = (strength, strength / targets[key] - 1.0)
         # the test's own stress measure (UCS: F / A; BTS: 2 F / (pi D t); bending: the flexural formula)
-        out[key] = (np.asarray(r.strain), np.asarray(scene_of[key].strength(np.asarray(r.force), s)))
-    return out
+        out[key] = (np.asarray(obs["strain"]), np.asarray(scene_of[key].strength(np.asarray(obs["force"]), s)))
+    return out, ran
 
 
 #: the codes whose bonds break by each failure rule (their strength translation is exact only under it)

@@ -57,6 +57,8 @@ class Problem:
         self.evaluations = 0
         self.solve_time = 0.0
         self._last = None  # (values, outputs) of the last single point: a repeated point costs no new solve
+        #: the observations of the last sets solved one by one (not batched), ``{tuple(values): {scene: obs}}``
+        self.observed: dict = {}
         self._sweep_fn = None  # the one-set model function that sharded batches run (see outputs)
 
     # -------------------------------------------------------------- pieces
@@ -209,7 +211,9 @@ class Problem:
             else:
                 rows = []
                 for i, v in enumerate(vb):
-                    rows.append(self._row(self.forward.evaluate(self.space.to_params(jnp.asarray(v)))))
+                    obs = self.forward.evaluate(self.space.to_params(jnp.asarray(v)))
+                    self._observed(v, obs)
+                    rows.append(self._row(obs))
                     if on_row is not None:
                         on_row(i, rows[-1])
                     shown.update(1)
@@ -220,6 +224,12 @@ class Problem:
         if len(vb) == 1:
             self._last = (vb[0].copy(), y[0].copy())
         return y
+
+    def _observed(self, values, obs):
+        """Keep ``obs`` (a set's observations by scene) for :attr:`observed`, the last 16 sets."""
+        self.observed[tuple(np.asarray(values, dtype=np.float64).tolist())] = obs
+        while len(self.observed) > 16:
+            self.observed.pop(next(iter(self.observed)))
 
     def _row(self, obs) -> np.ndarray:
         return np.concatenate([np.reshape(np.asarray(t.extract(obs)), (-1,)) for t in self.targets])
@@ -244,6 +254,7 @@ class Problem:
             got = parts.setdefault(i, {})
             got[scenes[k]] = value
             if len(got) == owner.count(i):
+                self._observed(vb[i], got)
                 rows[i] = self._row(got)
                 if on_row is not None:
                     on_row(i, rows[i])

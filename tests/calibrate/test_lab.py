@@ -38,6 +38,11 @@ def test_lab_reaches_every_target_from_wrong_parameters(specimens, tmp_path):
         np.testing.assert_allclose(value, targets[key] * (1 + err))
     assert res.stages["elastic"].evaluations <= 4
     assert res.solves["strength (DEM failure runs)"] <= 2 * 8  # at most 8 parameter sets of 2 runs
+    # the answer is a set the strength stage ran: its runs give the curves and the check, none is run again
+    assert res.solves["answer runs (DEM)"] == 0
+    stage = res.stages["strength"]
+    for key in ("ucs", "bts"):
+        np.testing.assert_allclose(res.achieved[key][1], stage.errors[f"{key}.strength"], rtol=1e-12, atol=1e-15)
     # the bond strength that the tension test fixes comes back (the UCS is tension-limited here too)
     np.testing.assert_allclose(res.params["bond_tensile_strength"], TRUE["tensile_strength"], rtol=0.1)
     np.testing.assert_allclose(res.params["bond_E"], TRUE["E"], rtol=0.02)
@@ -99,7 +104,7 @@ def test_strength_advice_says_out_of_reach_when_a_bound_stops_it(monkeypatch):
             converged=False, errors={"ucs.strength": -0.9, "bts.strength": 0.2}, iterations=6, evaluations=9,
             values={}, info={"unreachable": unreachable})
 
-    monkeypatch.setattr(lab_module, "_curves", lambda *args, **kwargs: {})
+    monkeypatch.setattr(lab_module, "_curves", lambda *args, **kwargs: ({}, 0))
     for unreachable, expected in (
             ([{"target": "ucs.strength", "pinned": [("bond_shear_strength", "upper", 8e9)]}],
              {"ucs": "out of reach of the bond strength range (best -90.0%): bond_shear_strength at its upper bound "
