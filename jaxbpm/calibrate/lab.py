@@ -6,12 +6,12 @@ tensile strength and flexural strength.
 1. **Elastic** (``E``, ``nu``): :func:`~jaxbpm.calibrate.elastic.calibrate_elastic` on the elastic specimen with the
    DSM (the bond Poisson ratio by secant, the bond modulus in closed form; 2-4 solves), checked once by the DEM. The
    bond modulus and Poisson ratio then hold for every specimen.
-2. **Strength** (``ucs``, ``bts``, ``flexural``): the bond tensile strength ``sigma_c`` and shear strength
-   ``tau_c`` by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (the Jacobian
-   from the estimates' secant and finite differences across it, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the UCS
-   (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
-   fail in tension). A strength target without its tied parameter's partner leaves the other at its current value.
-   The failure runs of one iteration go to ``executor`` when given (:mod:`jaxbpm.parallel`).
+2. **Strength** (``ucs``, ``bts``, ``flexural``): the bond tensile strength ``sigma_c`` and shear strength ``tau_c`` by
+   DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (the Jacobian from the estimates'
+   secant and finite differences across it, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the
+   UCS (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
+   fail in tension). A strength target without its tied parameter's partner leaves the other at its current value. The
+   failure runs of one iteration go to ``executor`` when given (:mod:`jaxbpm.parallel`).
 3. **Translation**: the answer as the parameters of LAMMPS, PFC, Yade and MUSEN (:mod:`jaxbpm.interop.conventions`)
    for the specimen's mean particle pair.
 
@@ -343,12 +343,13 @@ def _with(sample, params):
 def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iterations, fd_step, solve_options,
                     executor, progress, kept=None):
     """Bond strengths by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space on a
-    finite-difference Jacobian (its perturbed runs batched: one task each on ``executor``), updated by Broyden's
-    rule after every step (one parameter set per iteration; the first Jacobian takes the secant of the two estimates
-    along their direction, see :func:`_first_jacobian`). Elastic-brittle strengths are close to homogeneous of
-    degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of the bonds:
-    the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1 sigma_c, so
-    Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
+    Jacobian from the two estimates' secant along their direction and finite differences across it
+    (:func:`_first_jacobian`; its perturbed runs batched: one task each on ``executor``), updated by Broyden's rule
+    after every step (one parameter set per iteration). ``kept`` (a dict) receives the observations of the answer's
+    own runs by scene, where they are still held (:attr:`Problem.observed`). Elastic-brittle strengths are close to
+    homogeneous of degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of
+    the bonds: the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1
+    sigma_c, so Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
     from jaxbpm.calibrate.objective import Parameter, ParameterSpace, Problem, Target, base_params, forward_model
     from jaxbpm.calibrate.history import History
 
@@ -425,7 +426,8 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     if kept is not None:  # the answer's own runs (their curves): no run again at the answer
         kept.update(problem.observed.get(tuple(np.exp(x).tolist()), {}))
     notes = ["estimates 1 and 2 of Qu et al. 2020 (Eq. 14-15), then Gauss-Newton steps in log space from the best "
-             "set so far (Jacobian by the estimates' secant and finite differences across it, Broyden updates, a step that does worse halves the next)"]
+             "set so far (Jacobian by the estimates' secant and finite differences across it, Broyden updates, a "
+             "step that does worse halves the next)"]
     if stalled is not None:
         notes.append("stopped: no step of 1 % or more is left to take from the best set; these targets are not "
                      "reached together by the bond strengths on these specimens (the linearised model's best: "
