@@ -47,8 +47,9 @@ class LabResult:
     strengths and, with ``check``, for the elastic targets). stages: each stage's
     :class:`~jaxbpm.calibrate.CalibrationResult`. unreached: ``{target: reason}``. conventions: the answer in other
     codes' parameters (a 2D sample: LAMMPS ``dimension 2`` and PFC2D from the bonds' ``2 r_b x t`` section, and
-    ``{"2D": why}`` for the codes without a disc form, Yade and MUSEN). curves: the stress-strain curves of the strength runs at the answer. failure_rule: the bond
-    failure rule the strengths were calibrated under (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
+    ``{"2D": why}`` for the codes without a disc form, Yade and MUSEN). curves: the stress-strain curves of the
+    strength runs at the answer. failure_rule: the bond failure rule the strengths were calibrated under
+    (:data:`jaxbpm.physics.bond.FAILURE_RULES`).
     """
 
     targets: dict
