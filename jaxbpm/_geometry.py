@@ -136,7 +136,8 @@ def check_three_d(sample, what: str) -> None:
 
     if getattr(sample, "dim", 3) == 2:
         names = " and ".join(f"the {m.upper()}" for m in SOLVERS_2D)
-        done = (f"2D samples are solved by {names} (bonds between clamped layers) so far; " if SOLVERS_2D else
+        done = (f"2D samples are solved by {names} (bonds between clamped layers; the DEM also with linear contacts, "
+                "contact_law='linear') so far; " if SOLVERS_2D else
                 "2D samples (discs) can be built, stored and exported, and their bond law evaluated "
                 "(jaxbpm.physics.model.build_model), but no solver takes them yet: ")
         raise SceneError(f"{done}{what} in 2D is not yet available (the sample's positions are [n, 2])")

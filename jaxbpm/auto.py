@@ -412,9 +412,19 @@ def solve_auto(sample, scene, params, options: dict, solve: Callable[..., Result
 
 def _plane(sample, scene, params, throw, solve, tol) -> Result:
     """``method="auto"`` on a two-dimensional sample: the linear DSM (exact for the linear model of bonds between
-    clamped layers, and the one solver of 2D samples so far); other scenes are refused."""
+    clamped layers); the DEM where bonds break or discs touch by the linear law (the DSM has neither in 2D); other
+    scenes are refused."""
+    linear = bool(scene.contacts) and scene.linear_law is not None
+    if (scene.breakage is True or linear) and not scene.uses_walls and (linear or not scene.contacts):
+        result = solve(sample, scene, params, resolve_options("dem", {"throw": throw}))
+        result.stats["method_choice"] = {
+            "method": "dem", "route": "dem", "options": {}, "tol": tol, "contact_share": None, "expected_error": None,
+            "probe_time": 0.0, "reused_probe": False, "geometric_error": None,
+            "why": "a two-dimensional sample with breakage or linear contacts: the DEM (the DSM of 2D samples has "
+                   "neither)"}
+        return result
     if scene.breakage is True or scene.contacts or scene.uses_walls:
-        check_three_d(sample, "method='auto' on a scene with breakage, contacts or walls")
+        check_three_d(sample, "method='auto' on a scene with breakage, Hertz or cohesive contacts, or walls")
     result = solve(sample, scene, params, resolve_options("dsm", {"throw": throw}))
     result.stats["method_choice"] = {
         "method": "dsm", "route": "dsm_bonds", "options": {}, "tol": tol, "contact_share": None,

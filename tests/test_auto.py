@@ -222,3 +222,15 @@ def test_auto_on_a_two_dimensional_sample_is_the_linear_dsm():
     assert abs(r.stiffness / (4 * kn / 5) - 1) < 1e-9  # 4 columns of 5 bonds in series
     with pytest.raises(SceneError, match="not yet available"):
         jaxbpm.solve(flat, UniaxialCompression(axis=1, breakage=True, contacts=True), "auto")
+
+
+def test_auto_on_a_two_dimensional_sample_with_linear_contacts_is_the_dem():
+    from jaxbpm.generate import lattice
+
+    flat = lattice("square", (4, 6))
+    scene = UniaxialCompression(axis=1, strain=1e-4, contacts=True, contact_law="linear")
+    r = jaxbpm.solve(flat, scene, "auto")
+    assert r.method == "dem" and r.stats["method_choice"]["method"] == "dem"
+    assert r.stiffness == jaxbpm.solve(flat, scene, "dem").stiffness
+    with pytest.raises(SceneError, match="not yet available"):
+        jaxbpm.solve(flat, UniaxialCompression(axis=1, contacts=True), "auto")  # Hertz-Mindlin between discs

@@ -105,7 +105,7 @@ def test_a_static_solver_refuses_a_failure_scene_at_once(lattice, method, monkey
                                           (jaxbpm.scenes.UniaxialCompression(axis=1, boundary="walls"), "dsm")])
 def test_a_two_dimensional_sample_is_refused_where_no_solver_models_it(scene, method):
     flat = jaxbpm.generate.lattice("square", (4, 4))
-    with pytest.raises(SceneError, match="not yet available"):
+    with pytest.raises(SceneError, match="not (yet )?available"):
         jaxbpm.solve(flat, scene, method)
     with pytest.raises(SceneError, match="start='elastic'"):
         jaxbpm.solve(flat, jaxbpm.scenes.UniaxialCompression(axis=1), "dem", start="elastic")

@@ -61,7 +61,7 @@ def _contact_step(model: Model, params, load: Loading, state: DEMState, spring, 
     size = max(capacity // 3, 1)
     i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)
     # the contact law's own test (so that no pair it would find in contact is left out)
-    touching = valid & (model.radii[i] + model.radii[j] - jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0)
+    touching = valid & (model.radii[i] + model.radii[j] - _length(d) > 0)
 
     if model.contact_law == "cohesive":
         return _cohesive_step(model, params, load, state, spring, cohesion, dt, pairs, valid, touching, size)
@@ -172,24 +172,33 @@ def initial_cohesion(model: Model, state: DEMState):
     """
     pairs, valid = _contact_pairs(model, state.nbrs, state.intact)
     i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)
-    gap = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) - model.radii[i] - model.radii[j]
+    gap = _length(d) - model.radii[i] - model.radii[j]
     c = model.cohesive
     return jnp.where(valid & (gap <= c.initial_gap), -c.c0, 0.0)
 
 
 def _contact_motion(model: Model, state: DEMState, pairs, valid, dt):
     """Relative displacement in this step and relative velocity of the contact points of the pairs, as ``(x, y, z)``
-    tuples of ``[C]`` arrays: ``v_rel = v_j - v_i - (r_j w_j + r_i w_i) x n``, ``dxi = dt v_rel``."""
+    (2D: ``(x, y)``) tuples of ``[C]`` arrays: ``v_rel = v_j - v_i - (r_j w_j + r_i w_i) x n``, ``dxi = dt v_rel``."""
     i, j, d = contact_mod.pair_vectors(state.positions, pairs, valid)  # padding has d = (1, 1, 1)
     return _motion(model, state, i, j, d, dt)
 
 
+def _length(d):
+    """``|d|`` of component tuples (two or three)."""
+    return jnp.sqrt(sum(c * c for c in d))
+
+
 def _motion(model: Model, state: DEMState, i, j, d, dt):
-    """:func:`_contact_motion` of the pairs ``i, j`` whose vectors are ``d`` (``|d| > 0``)."""
-    dist = jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    """:func:`_contact_motion` of the pairs ``i, j`` whose vectors are ``d`` (``|d| > 0``); discs (two components,
+    one rotation each): ``v_rel = v_j - v_i - (r_j w_j + r_i w_i) (-n_y, n_x)``."""
+    dist = _length(d)
     v_t, w_t, r_i, r_j = state.velocities.T, state.omegas.T, model.radii[i], model.radii[j]
-    s = tuple(r_j * w_t[k][j] + r_i * w_t[k][i] for k in range(3))
-    spin = (s[1] * d[2] - s[2] * d[1], s[2] * d[0] - s[0] * d[2], s[0] * d[1] - s[1] * d[0])
+    s = tuple(r_j * w_t[k][j] + r_i * w_t[k][i] for k in range(w_t.shape[0]))
+    if len(d) == 2:
+        spin = (-s[0] * d[1], s[0] * d[0])
+    else:
+        spin = (s[1] * d[2] - s[2] * d[1], s[2] * d[0] - s[0] * d[2], s[0] * d[1] - s[1] * d[0])
     # one division per component, so that XLA computes each component once (see jaxbpm.physics.contact.law_components)
-    v_rel = tuple(((v_t[k][j] - v_t[k][i]) * dist - spin[k]) / dist for k in range(3))
+    v_rel = tuple(((v_t[k][j] - v_t[k][i]) * dist - spin[k]) / dist for k in range(len(d)))
     return tuple(dt * c for c in v_rel), v_rel  # the contact law takes component tuples as well as [C, 3] rows

@@ -173,7 +173,7 @@ class _Run:
         self.clock = {"t0": self.t0, "compiling": compiling, "kernel": []}
         self.r_min = float(np.min(np.asarray(model.radii)))
         self.owner, self.margin, self.near_slots = None, None, None
-        self.origin = jax.device_put(np.zeros(3, model.positions0.dtype))
+        self.origin = jax.device_put(np.zeros(model.dim, model.positions0.dtype))
         nbrs = None
         if model.contacts:
             nbrs, state = self._contacts(neighbors, state)
@@ -363,7 +363,7 @@ def _onto_list(model: Model, state: DEMState, nbrs) -> DEMState:
         state = dataclasses.replace(state, nbrs=nbrs, spring=spring, cohesion=cohesion)
     else:
         state = dataclasses.replace(state, nbrs=nbrs,
-                                    spring=jnp.zeros((nbrs.idx.shape[1], 3), model.positions0.dtype))
+                                    spring=jnp.zeros((nbrs.idx.shape[1], model.dim), model.positions0.dtype))
         if model.contact_law == "cohesive":
             state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
     return _with_bond_springs(model, state)

@@ -121,7 +121,7 @@ class _HostNeighbors:
         r_max = float(np.max(np.asarray(model.radii)))
         self.radius = 2 * r_max + 2 * settings.skin
         self.capacity = 0
-        self.origin = np.zeros(3)
+        self.origin = np.zeros(model.dim)
 
     def inside(self, pos_min, pos_max) -> bool:
         return True
@@ -288,7 +288,7 @@ def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Nea
     valid = pairs[:, 0] < model.n
     valid = valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0))
     i, j, d = pair_vectors(positions, pairs, valid)
-    close = valid & (model.radii[i] + model.radii[j] + margin - jnp.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > 0)
+    close = valid & (model.radii[i] + model.radii[j] + margin - jnp.sqrt(sum(c * c for c in d)) > 0)
     take, count = pack(close, size)
     return _Near(pairs=pairs.at[take].get(mode="fill", fill_value=model.n), slot=take,
                  spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions, overflow=count > size,
@@ -303,9 +303,9 @@ def near_springs(near: _Near, capacity: int):
       capacity: the candidate list's capacity.
 
     Returns:
-      ``[capacity, 3]`` (every candidate not within reach is apart: no spring).
+      ``[capacity, 3]`` (2D: ``[capacity, 2]``; every candidate not within reach is apart: no spring).
     """
-    return jnp.zeros((capacity, 3), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
+    return jnp.zeros((capacity, near.spring.shape[1]), near.spring.dtype).at[near.slot].set(near.spring, mode="drop")
 
 
 def near_stale(near: _Near, positions, margin):

@@ -251,7 +251,8 @@ def transit_time(sample, model: Model, params, length: float) -> float:
         elif model.contact_law == "linear":
             from jaxbpm.physics.linear import normal_stiffness as linear_stiffness
 
-            kn = float(linear_stiffness(r, r, float(model.hertz_params(params).emod), model.dim))
+            p = model.hertz_params(params)
+            kn = float(linear_stiffness(r, r, float(p.emod), model.dim, float(p.thickness)))
         else:
             kn = 2.0 * float(model.contact.E_star) * np.sqrt(0.5 * r * 0.01 * r)
         spacing = 2.0 * r

@@ -23,6 +23,9 @@ __all__ = ["DEMState", "pad_loading", "unpad_state", "kinetic_energy", "potentia
 class DEMState:
     """Integrator state (a pytree).
 
+    A two-dimensional sample's state has ``[n, 2]`` positions, velocities and forces, ``[n, 1]`` angles, spins and
+    moments, and ``[C, 2]`` / ``[nb, 2]`` springs.
+
     Attributes:
         positions: ``[n, 3]`` particle centres [m].
         velocities: ``[n, 3]`` [m/s].
@@ -39,8 +42,8 @@ class DEMState:
         broken_time: ``[nb]`` when each bond broke [s], NaN while intact.
         cohesion: ``[C]`` per-contact cohesion history [Pa] with the cohesive contact law
             (:mod:`jaxbpm.physics.cohesive`), ``None`` otherwise.
-        bond_spring: ``[nb, 3]`` with Hertz contacts, the tangential springs of the bonded pairs' contacts (``spring``
-            then holds those of the other pairs).
+        bond_spring: ``[nb, 3]`` with Hertz or linear contacts, the tangential springs of the bonded pairs' contacts
+            (``spring`` then holds those of the other pairs).
     """
 
     positions: Any

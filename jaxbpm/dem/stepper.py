@@ -66,7 +66,7 @@ def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
         force=jnp.zeros((n, model.dim), dtype),
         moment=jnp.zeros((n, 1 if flat else 3), dtype),
         intact=jnp.ones(model.bonds.shape[0], bool),
-        spring=jnp.zeros((capacity, 3), dtype),
+        spring=jnp.zeros((capacity, model.dim), dtype),
         nbrs=nbrs,
         time=jnp.zeros((), dtype),
         broken=jnp.zeros(model.bonds.shape[0], jnp.int8),
@@ -75,7 +75,7 @@ def _initial_state(model: Model, params, load: Loading, nbrs) -> DEMState:
     if model.contacts and model.contact_law == "cohesive":
         state = dataclasses.replace(state, cohesion=initial_cohesion(model, state))
     state = _with_bond_springs(model, state)
-    zeros = jnp.zeros((capacity, 3), dtype)
+    zeros = jnp.zeros((capacity, model.dim), dtype)
     force, moment, _ = _evaluate(model, params, state, load, zeros, zeros)
     return dataclasses.replace(state, force=force, moment=moment)
 
@@ -85,7 +85,8 @@ def _with_bond_springs(model: Model, state: DEMState) -> DEMState:
     where it has none."""
     if not model.contacts or model.contact_law == "cohesive" or state.bond_spring is not None:
         return state
-    return dataclasses.replace(state, bond_spring=jnp.zeros((model.bonds.shape[0], 3), state.positions.dtype))
+    springs = jnp.zeros((model.bonds.shape[0], model.dim), state.positions.dtype)
+    return dataclasses.replace(state, bond_spring=springs)
 
 
 

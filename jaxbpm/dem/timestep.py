@@ -79,15 +79,16 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
 
 def _linear_omega2(model: Model, params, r_min: float) -> float:
     """``k m / m`` of the stiffest mode of one linear contact on a particle of the smallest radius and mass ``m``: the
-    normal spring ``k_n = E* A / L`` (largest between two of the smallest particles: ``pi E* r_min / 2`` in 3D), or
-    the shear spring ``k_s = k_n / kratio`` on the contact point, which moves with the particle's translation and
-    rotation (``1 / m + r^2 / I = 3.5 / m`` for a solid sphere, ``1 / m`` without rotations); the dashpots lower the
-    stable step of an explicit scheme by ``sqrt(1 + beta^2) - beta``."""
+    normal spring ``k_n = E* A / L`` (largest between two of the smallest particles: ``pi E* r_min / 2`` in 3D,
+    ``E* t`` for discs of thickness t), or the shear spring ``k_s = k_n / kratio`` on the contact point, which moves
+    with the particle's translation and rotation (``1 / m + r^2 / I = 3.5 / m`` for a solid sphere, ``3 / m`` for a
+    disc, ``1 / m`` without rotations); the dashpots lower the stable step of an explicit scheme by
+    ``sqrt(1 + beta^2) - beta``."""
     from jaxbpm.physics.linear import normal_stiffness
 
     p = model.hertz_params(params)
-    kn = float(normal_stiffness(r_min, r_min, float(p.emod), model.dim))
-    lever = 3.5 if model.rotations else 1.0
+    kn = float(normal_stiffness(r_min, r_min, float(p.emod), model.dim, float(p.thickness)))
+    lever = (3.5 if model.dim == 3 else 3.0) if model.rotations else 1.0
     k = max(kn, lever * kn / float(p.kratio))
     if p.beta is not None:
         beta = float(p.beta)

@@ -234,7 +234,7 @@ def pair_vectors(positions, pairs, valid):
     """Particle indices and pair vectors of the candidate pairs.
 
     Args:
-        positions: ``[n, 3]`` particle positions [m].
+        positions: ``[n, 3]`` particle positions [m] (or ``[n, 2]``: discs).
         pairs: ``[C, 2]`` candidate pairs.
         valid: ``[C]`` bool, ``False`` on padding and excluded pairs.
 
@@ -246,9 +246,9 @@ def pair_vectors(positions, pairs, valid):
     # unsigned indices: no wrapping of negative ones to compute in every gather
     i = jnp.where(valid, pairs[:, 0], 0).astype(jnp.uint32)
     j = jnp.where(valid, pairs[:, 1], 1 % n).astype(jnp.uint32)
-    # gather columns of the transposed [3, n] positions: the law runs on [C] component arrays
+    # gather columns of the transposed [dim, n] positions: the law runs on [C] component arrays
     x_t = positions.T
-    return i, j, tuple(jnp.where(valid, x_t[k][j] - x_t[k][i], 1.0) for k in range(3))
+    return i, j, tuple(jnp.where(valid, x_t[k][j] - x_t[k][i], 1.0) for k in range(positions.shape[1]))
 
 
 def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: ContactParams):
@@ -264,16 +264,19 @@ def pair_forces(positions, pairs, valid, radii, mass, spring, dxi, v_rel, p: Con
         p: the contact parameters.
 
     Returns:
-        ``(forces, moments, per_pair)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] and the pairs' :class:`ContactForces`
-        (``[C, ...]``).
+        ``(forces, moments, per_pair)``: ``[n, 3]`` [N], ``[n, 3]`` [N m] (2D, the linear law: ``[n, 2]`` and
+        ``[n, 1]``) and the pairs' :class:`ContactForces` (``[C, ...]``).
     """
     n = positions.shape[0]
     i, j, d = pair_vectors(positions, pairs, valid)
     cf = law_components(d, radii[i], radii[j], mass[i], mass[j], _components(spring), _components(dxi),
                         _components(v_rel), p, valid)
-    # one scatter of (force, 0, moment, 0) rows for both ends (see jaxbpm.physics.bond.bond_forces)
-    zero = jnp.zeros_like(cf.normal)
-    rows_i = jnp.stack(cf.f_i + (zero,) + cf.m_i + (zero,), axis=1)
-    rows_j = jnp.stack(tuple(-f for f in cf.f_i) + (zero,) + cf.m_j + (zero,), axis=1)
+    # one scatter of (force, 0, moment, 0) rows for both ends (see jaxbpm.physics.bond.bond_forces; 2D: rows
+    # (f_x, f_y, m, 0))
+    zero = (jnp.zeros_like(cf.normal),)
+    pad, tail = (zero, zero) if len(cf.f_i) == 3 else ((), zero)
+    rows_i = jnp.stack(cf.f_i + pad + cf.m_i + tail, axis=1)
+    rows_j = jnp.stack(tuple(-f for f in cf.f_i) + pad + cf.m_j + tail, axis=1)
     total = jax.ops.segment_sum(jnp.concatenate([rows_i, rows_j]), jnp.concatenate([i, j]), n)
-    return total[:, :3], total[:, 4:7], stack(cf)
+    dim = len(cf.f_i)
+    return total[:, :dim], total[:, dim + len(pad):dim + len(pad) + len(cf.m_i)], stack(cf)

@@ -95,13 +95,14 @@ class LinearLaw:
             if not (isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) and ok(v)):
                 raise SceneError(f"linear contact law: {name}={v!r} {why}")
 
-    def params(self, particle_material, dtype=None, damping: bool = False) -> "LinearParams":
+    def params(self, particle_material, dtype=None, damping: bool = False, thickness: float = 1.0) -> "LinearParams":
         """The law's scalars as JAX arrays.
 
         Args:
             particle_material: the sample's :class:`~jaxbpm.sample.ParticleMaterial`, for the values left ``None``.
             dtype: the arrays' type (default JAX's).
             damping: the dashpots on (``beta`` from the restitution) or off (``beta`` ``None``).
+            thickness: the discs' thickness t [m] of a two-dimensional sample (the contact area ``2 r t``).
 
         Returns:
             The :class:`LinearParams`.
@@ -111,7 +112,7 @@ class LinearLaw:
         kratio = float(default_kratio(float(pm.nu))) if self.kratio is None else self.kratio
         friction = float(pm.friction) if self.friction is None else self.friction
         restitution = float(pm.restitution) if self.restitution is None else self.restitution
-        return linear_params(emod, kratio, friction, restitution, damping, dtype)
+        return linear_params(emod, kratio, friction, restitution, damping, dtype, thickness)
 
 
 class LinearParams(NamedTuple):
@@ -123,12 +124,14 @@ class LinearParams(NamedTuple):
         kratio: k_n / k_s.
         friction: the friction coefficient mu.
         beta: the dashpots' fraction of critical damping, or ``None``: no damping (no damping terms computed).
+        thickness: the discs' thickness t [m] in 2D (the contact area ``2 r t``; not read in 3D).
     """
 
     emod: Any
     kratio: Any
     friction: Any
     beta: Any
+    thickness: Any = 1.0
 
 
 class LinearForces(NamedTuple):
@@ -154,7 +157,8 @@ class LinearForces(NamedTuple):
     active: Any
 
 
-def linear_params(emod, kratio, friction, restitution=1.0, damping: bool = False, dtype=None) -> LinearParams:
+def linear_params(emod, kratio, friction, restitution=1.0, damping: bool = False, dtype=None,
+                  thickness: float = 1.0) -> LinearParams:
     """The linear law's scalars.
 
     Args:
@@ -164,6 +168,7 @@ def linear_params(emod, kratio, friction, restitution=1.0, damping: bool = False
         restitution: the coefficient of restitution e (with ``damping``).
         damping: the dashpots on: ``beta = -ln e / sqrt(ln^2 e + pi^2)``; off: ``beta`` ``None``.
         dtype: the arrays' type (default JAX's).
+        thickness: the discs' thickness t [m] (2D).
 
     Returns:
         The :class:`LinearParams` (host values are moved to the device as they are: no program is compiled).
@@ -175,7 +180,8 @@ def linear_params(emod, kratio, friction, restitution=1.0, damping: bool = False
     if damping:
         log_e = math.log(float(restitution))
         beta = put(-log_e / math.sqrt(log_e**2 + math.pi**2))
-    return LinearParams(emod=put(emod), kratio=put(kratio), friction=put(friction), beta=beta)
+    return LinearParams(emod=put(emod), kratio=put(kratio), friction=put(friction), beta=beta,
+                        thickness=put(thickness))
 
 
 def default_kratio(nu):
@@ -190,32 +196,34 @@ def default_kratio(nu):
     return (2.0 - nu) / (2.0 * (1.0 - nu))
 
 
-def contact_area(r_i, r_j, dim: int = 3):
+def contact_area(r_i, r_j, dim: int = 3, thickness=1.0):
     """The area of PFC's deformability method.
 
     Args:
         r_i, r_j: the radii [m].
-        dim: the spatial dimension: 3 (spheres) or 2 (discs of unit thickness).
+        dim: the spatial dimension: 3 (spheres) or 2 (discs).
+        thickness: the discs' thickness t [m] (2D; PFC2D's unit thickness by default).
 
     Returns:
-        ``pi r^2`` (3D) or ``2 r`` (2D, thickness 1 m), ``r = min(r_i, r_j)`` [m^2].
+        ``pi r^2`` (3D) or ``2 r t`` (2D), ``r = min(r_i, r_j)`` [m^2].
     """
     r = jnp.minimum(r_i, r_j)
-    return jnp.pi * r * r if dim == 3 else 2.0 * r
+    return jnp.pi * r * r if dim == 3 else 2.0 * r * thickness
 
 
-def normal_stiffness(r_i, r_j, emod, dim: int = 3):
+def normal_stiffness(r_i, r_j, emod, dim: int = 3, thickness=1.0):
     """The normal stiffness ``k_n = E* A / (r_i + r_j)``.
 
     Args:
         r_i, r_j: the radii [m].
         emod: the effective modulus E* [Pa].
         dim: the spatial dimension (see :func:`contact_area`).
+        thickness: the discs' thickness t [m] (2D).
 
     Returns:
         k_n [N/m].
     """
-    return emod * contact_area(r_i, r_j, dim) / (r_i + r_j)
+    return emod * contact_area(r_i, r_j, dim, thickness) / (r_i + r_j)
 
 
 def _dot(a, b):
@@ -255,7 +263,7 @@ def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: LinearParams, v
     overlap = r_i + r_j - dist
     delta = once(jnp.where((overlap > 0) & valid, overlap, 0.0), one)
     active = delta > 0
-    kn = once(normal_stiffness(r_i, r_j, p.emod, dim), one)
+    kn = once(normal_stiffness(r_i, r_j, p.emod, dim, p.thickness), one)
     ks = kn / p.kratio
     spring_n = kn * delta  # PFC's F_n^l: the Coulomb limit's normal force
     fn = spring_n

@@ -393,20 +393,21 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         The :class:`Model`.
 
     Raises:
-        SceneError: an unknown contact law, cohesive parameters out of range, or contacts or walls asked of a
-            two-dimensional sample.
+        SceneError: an unknown contact law, cohesive parameters out of range, or walls or contacts other than the
+            linear law's asked of a two-dimensional sample.
         ValueError: an unknown wall law or failure rule, ``walls="linear"`` without ``wall_stiffness``, padding with
             contacts or walls, or to capacities too small.
     """
     pm = sample.particle_material
-    if sample.dim == 2 and (contacts or walls is not None):
-        from jaxbpm.errors import SceneError
-
-        raise SceneError("a two-dimensional sample's model has bonds only so far: contacts and walls between discs "
-                         "are not yet available in 2D")
     law = cohesive_mod.resolve_contact_law(contact_law, cohesive)
     linear = law if isinstance(law, linear_mod.LinearLaw) else None
     law = None if linear is not None else law
+    if sample.dim == 2 and (walls is not None or (contacts and linear is None)):
+        from jaxbpm.errors import SceneError
+
+        raise SceneError("a two-dimensional sample's model has bonds and linear contacts (contact_law='linear') "
+                         "only: walls and Hertz-Mindlin or cohesive contacts between discs are not available in 2D")
+    thickness = float(sample.thickness) if sample.dim == 2 else 1.0
     if rotations is None:
         if law is not None:
             rotations = sample.n_bonds > 0
@@ -414,7 +415,7 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
             mu = pm.friction if linear is None or linear.friction is None else linear.friction
             rotations = sample.n_bonds > 0 or (contacts and float(mu) > 0)
     if linear is not None and contacts:
-        _warn_rest_overlaps(sample, linear.params(pm))
+        _warn_rest_overlaps(sample, linear.params(pm, thickness=thickness))
     dtype = _float_dtype()
     if dtype != np.float64:
         warnings.warn("jaxbpm: JAX is running in float32; bonded-particle stiffness solves lose precision. "
@@ -459,7 +460,7 @@ def build_model(sample: Sample, *, contacts: bool = False, walls: str | None = N
         bond_cohesion=_put(mats.shear_strength, dtype),
         contact=(contact_params(float(pm.E), float(pm.nu), float(pm.friction), float(pm.restitution), dtype.name,
                                 bool(contact_damping)) if linear is None
-                 else linear.params(pm, dtype, bool(contact_damping))),
+                 else linear.params(pm, dtype, bool(contact_damping), thickness)),
         wall_stiffness=_put(ws, dtype),
         rotations=bool(rotations),
         contacts=bool(contacts),
@@ -484,7 +485,7 @@ def _warn_rest_overlaps(sample: Sample, p) -> None:
     rel = overlap / np.minimum(r_i, r_j)
     over = rel > 1e-9
     if over.any():
-        kn = float(p.emod) * np.pi * np.minimum(r_i, r_j) ** 2 / (r_i + r_j)
+        kn = np.asarray(linear_mod.normal_stiffness(r_i, r_j, float(p.emod), sample.dim, float(p.thickness)))
         warnings.warn(f"linear contacts: {int(over.sum())} of {sample.n_bonds} bonded pairs overlap at rest (up to "
                       f"{float(rel.max()):.3g} of the smaller radius): the linear law (k_n delta) pushes them apart "
                       f"from the start, with up to {float(np.max(kn * np.maximum(overlap, 0.0))):.3g} N, which the "

@@ -174,6 +174,8 @@ def estimator(sample: Sample, scene=None, *, dofs: int = 3, first_neighbour: boo
         raise SceneError(f"precision must be 'float64' or 'float32', got {precision!r}")
     axis = 2 if scene is None else int(scene.axis)
     use_contacts = (scene is not None and bool(scene.contacts)) if contacts is None else bool(contacts)
+    if sample.dim == 2 and use_contacts:
+        check_three_d(sample, "the STE with contacts")
     model = _bond_model(sample, dofs)
     pairs, d, cpairs, cd = _interactions(sample, model, scene, axis, use_contacts, contact_fraction)
     valid = _non_singular(pairs, d, sample.n_particles)

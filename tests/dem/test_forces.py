@@ -134,3 +134,60 @@ def test_bond_pass_in_blocks_through_breakage(monkeypatch):
     scale = np.max(np.abs(one.force))
     np.testing.assert_allclose(blocks.force[:first], one.force[:first], rtol=0, atol=1e-10 * scale)
     assert abs(blocks.stats["strength"] / one.stats["strength"] - 1) < 0.02
+
+
+def test_disc_contact_motion_is_the_3d_motion_about_z():
+    """Discs turn about z: the contact points' relative velocity ``v_j - v_i - (r_j w_j + r_i w_i) (-n_y, n_x)`` is
+    the 3D formula's with the spins along z; discs rolling on each other (equal and opposite contact-point speeds)
+    have none."""
+    from types import SimpleNamespace
+
+    from jaxbpm.dem.forces import _motion
+
+    rng = np.random.default_rng(3)
+    n, dt = 6, 1e-6
+    x, v, w = rng.normal(size=(n, 2)), rng.normal(size=(n, 2)), rng.normal(size=(n, 1))
+    radii = jnp.asarray(rng.uniform(0.5, 1.0, n))
+    i, j = jnp.array([0, 1, 2, 3, 4]), jnp.array([1, 2, 3, 4, 5])
+    d2 = tuple(jnp.asarray(x[j] - x[i]).T)
+    dxi2, v2 = _motion(SimpleNamespace(radii=radii), SimpleNamespace(velocities=jnp.asarray(v), omegas=jnp.asarray(w)),
+                       i, j, d2, dt)
+    pad = np.zeros((n, 1))
+    three = SimpleNamespace(velocities=jnp.asarray(np.hstack([v, pad])), omegas=jnp.asarray(np.hstack([pad, pad, w])))
+    _, v3 = _motion(SimpleNamespace(radii=radii), three, i, j, d2 + (jnp.zeros(5),), dt)
+    assert len(v2) == 2
+    np.testing.assert_allclose(np.stack(v2), np.stack(v3[:2]), rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(v3[2]), 0.0, atol=1e-15)
+    np.testing.assert_allclose(np.stack(dxi2), dt * np.stack(v2), rtol=1e-15)
+    # two discs side by side along x, turning as gears (r_i w_i = -r_j w_j): no slip; turning alike: 2 r w along -y
+    pair = SimpleNamespace(radii=jnp.array([1.0, 2.0]))
+    d = (jnp.array([3.0]), jnp.array([0.0]))
+    zero_v = jnp.zeros((2, 2))
+    _, gears = _motion(pair, SimpleNamespace(velocities=zero_v, omegas=jnp.array([[2.0], [-1.0]])),
+                       jnp.array([0]), jnp.array([1]), d, dt)
+    _, alike = _motion(pair, SimpleNamespace(velocities=zero_v, omegas=jnp.array([[1.0], [1.0]])),
+                       jnp.array([0]), jnp.array([1]), d, dt)
+    np.testing.assert_allclose(np.ravel(gears), 0.0, atol=1e-15)
+    np.testing.assert_allclose(np.ravel(alike), [0.0, -3.0], atol=1e-15)
+
+
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the generated packing's bonded pairs overlap
+def test_disc_bond_pass_in_blocks_with_linear_contacts(monkeypatch):
+    """The blocked bond pass in 2D, the bonded pairs' linear contacts in the same blocks: the one-pass run's forces
+    to round-off before the first break, its strength after."""
+    from jaxbpm.physics import model as model_mod
+
+    s = jaxbpm.generate.disc_packing(250, aspect=(1, 2), seed=4).largest_cluster()
+    params = default_params(s) | {"bond_tensile_strength": np.array([3e6]), "bond_shear_strength": np.array([6e6])}
+    scene = jaxbpm.scenes.UniaxialCompression.to_failure(axis=1, contact_law="linear")
+    one = jaxbpm.solve(s, scene, "dem", params=params)
+    monkeypatch.setattr(model_mod, "BLOCKED_FROM", 0)
+    monkeypatch.setattr(model_mod, "BOND_BLOCK", 64)
+    assert build_model(s).bond_block == 64 and s.n_bonds % 64 != 0
+    blocks = jaxbpm.solve(s, scene, "dem", params=params)
+    curve = np.sum(one.stats["broken_curve"], axis=1)
+    first = int(np.argmax(curve > 0))
+    assert 0 < first and curve[-1] > 20
+    scale = np.max(np.abs(one.force))
+    np.testing.assert_allclose(blocks.force[:first], one.force[:first], rtol=0, atol=1e-10 * scale)
+    assert abs(blocks.stats["strength"] / one.stats["strength"] - 1) < 0.02

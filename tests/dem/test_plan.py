@@ -98,3 +98,19 @@ def test_the_model_is_kept_for_the_same_sample_and_scene_by_content(column):
     before = plan_mod._models.builds  # (the layered plan above may have built: the cache keeps the last four)
     plan(again, other, params, transits=10)
     assert plan_mod._models.builds == before + 1
+
+
+def test_transit_time_of_touching_discs_is_that_of_the_linear_law():
+    """Bond-free discs with linear contacts: mass and k_n = E* t both scale with the thickness, so the transit time
+    is sqrt(m / k_n) per diameter crossed, with m = rho pi R^2 t, whatever t."""
+    from jaxbpm.physics.model import build_model
+
+    r, rho, emod = 1e-3, 2500.0, 1e9
+    times = []
+    for t in (1.0, 0.05):
+        s = jaxbpm.Sample.from_arrays(np.array([[0.0, 0.0], [0.0, 2 * r]]), r, np.zeros((0, 2), int),
+                                      bond_radius=np.zeros(0), thickness=t,
+                                      particle_material={"E": emod, "nu": 0.25, "density": rho})
+        model = build_model(s, contacts=True, contact_law=jaxbpm.physics.linear.LinearLaw(emod=emod))
+        times.append(transit_time(s, model, default_params(s), 4 * r))
+    np.testing.assert_allclose(times, 2 * np.sqrt(rho * np.pi * r**2 / emod), rtol=1e-12)

@@ -119,3 +119,62 @@ def test_linear_contacts_time_step_is_safe_and_the_run_stable():
     _, damped = _linear_cluster(damping=True)
     beta = float(damped.contact.beta)
     assert dt * (np.sqrt(1 + beta**2) - beta) < critical_time_step(damped, default_params(s)) < 0.9 * dt
+
+
+def _disc_cluster():
+    """Four discs on the corners of a square, overlapping their neighbours by 1 % of R, held by soft bonds along the
+    edges, linear contacts (the 2D twin of :func:`_linear_cluster`)."""
+    pos = 2 * R * 0.99 * np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    s = jaxbpm.Sample.from_arrays(pos, R, [[0, 1], [0, 2], [1, 3], [2, 3]], bond_radius_ratio=0.5, thickness=0.1,
+                                  materials={"E": 1e7, "nu": 0.25},
+                                  particle_material={"E": 1e9, "nu": 0.25, "friction": 1e3, "restitution": 0.5})
+    return s, build_model(s, contacts=True, contact_law=linear.LinearLaw(emod=1e9, kratio=1.21))
+
+
+def _disc_omega2_max(s, model):
+    """omega_max^2 of the disc cluster (dense M^-1 K over x, y and the angle of each disc; the contact points' slip
+    ``u_j - u_i - (r_j w_j + r_i w_i) (-n_y, n_x)``, no sliding)."""
+    n, x0, params = s.n_particles, model.positions0, default_params(s)
+    pairs = jnp.array([[a, b] for a in range(n) for b in range(a + 1, n)])
+    valid = jnp.ones(pairs.shape[0], bool)
+
+    def generalised_forces(z):
+        u, w = z[:2 * n].reshape(n, 2), z[2 * n:].reshape(n, 1)
+        d = x0[pairs[:, 1]] - x0[pairs[:, 0]]
+        nrm = d / jnp.linalg.norm(d, axis=1, keepdims=True)
+        r = model.radii[pairs]
+        turn = r[:, 1:] * w[pairs[:, 1]] + r[:, :1] * w[pairs[:, 0]]
+        slip = u[pairs[:, 1]] - u[pairs[:, 0]] - turn * jnp.stack([-nrm[:, 1], nrm[:, 0]], axis=1)
+        zero = jnp.zeros_like(slip)
+        f, m, _ = model.forces(x0 + u, w, params, contacts=(pairs, valid, zero, slip, zero))
+        return jnp.concatenate([f.ravel(), m.ravel()])
+
+    k = -np.asarray(jax.jacfwd(generalised_forces)(jnp.zeros(3 * n)))
+    mass = np.concatenate([np.repeat(np.asarray(s.mass), 2), np.asarray(s.inertia)])
+    scaled = k / np.sqrt(mass)[:, None] / np.sqrt(mass)[None, :]
+    return float(np.max(np.linalg.eigvalsh(0.5 * (scaled + scaled.T))))
+
+
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the cluster overlaps at rest on purpose
+def test_linear_contacts_between_discs_time_step_is_safe_and_the_run_stable():
+    s, model = _disc_cluster()
+    exact = 2.0 / np.sqrt(_disc_omega2_max(s, model))
+    dt = critical_time_step(model, default_params(s))
+    assert 0.2 * exact < dt < exact, (dt, exact)
+    n = s.n_particles
+    empty = jnp.zeros((0, 2))
+    load = jaxbpm.dem.Loading(clamped=jnp.zeros(n, bool), velocity=jnp.zeros((n, 2)), wall_points0=empty,
+                              wall_normals=empty, wall_velocity=empty)
+
+    def run(step):
+        return jaxbpm.dem.simulate(model, default_params(s), load, dt=step, n_steps=4000, chunk=4000)[0]
+
+    def kinetic(step):
+        v = np.asarray(run(step).velocities)
+        assert np.all(np.isfinite(v))
+        return 0.5 * float(np.sum(np.asarray(s.mass)[:, None] * v**2))
+
+    # bounded at the estimate by the start's strain energy, 1/2 k_n (0.02 R)^2 per contact (k_n = E* t between equal
+    # discs); past the exact limit the motion grows beyond it (until the contacts part: the soft bonds hold the discs)
+    bound = 4 * 0.5 * (1e9 * 0.1) * (0.02 * R) ** 2
+    assert kinetic(dt) < bound < kinetic(3.0 * exact)

@@ -180,3 +180,23 @@ def test_bonded_pairs_overlapping_at_rest_are_warned_about():
         warnings.simplefilter("error")
         build_model(touching, contacts=True, contact_law="linear")
         build_model(s, contacts=True)  # Hertz-Mindlin: no warning
+
+
+def test_discs_of_any_thickness_and_the_model_of_a_2d_sample():
+    t, delta = 0.3, 1e-6
+    zero = (jnp.asarray(0.0),) * 2
+    out = linear.law_components((jnp.asarray(R1 + R2 - delta), jnp.asarray(0.0)), R1, R2, 1.0, 1.0, zero, zero,
+                                zero, linear.linear_params(EMOD, KRATIO, MU, thickness=t))
+    kn = EMOD * 2 * R1 * t / (R1 + R2)  # A = 2 r t
+    np.testing.assert_allclose(float(out.f_i[0]), -kn * delta, rtol=1e-12)
+    # a 2D sample's model carries its thickness into the law: the DEM's pair forces in [n, 2] and [n, 1]
+    s = jaxbpm.Sample.from_arrays(np.array([[0.0, 0.0], [R1 + R2 - delta, 0.0]]), [R1, R2], np.zeros((0, 2), int),
+                                  bond_radius=np.zeros(0), thickness=t,
+                                  particle_material={"E": 1e9, "nu": 0.25, "friction": MU})
+    model = build_model(s, contacts=True, contact_law=linear.LinearLaw(emod=EMOD, kratio=KRATIO))
+    assert float(model.contact.thickness) == t and model.dofs == 3
+    zeros = jnp.zeros((1, 2))
+    f, m, _ = model.forces(model.positions0, jnp.zeros((2, 1)), default_params(s),
+                           contacts=(jnp.array([[0, 1]]), jnp.array([True]), zeros, zeros, zeros))
+    assert f.shape == (2, 2) and m.shape == (2, 1)
+    np.testing.assert_allclose(np.asarray(f), [[-kn * delta, 0.0], [kn * delta, 0.0]], rtol=1e-12, atol=1e-20)
