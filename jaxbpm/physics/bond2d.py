@@ -59,7 +59,7 @@ def rotate(theta, v):
     return c * v[0] - s * v[1], s * v[0] + c * v[1]
 
 
-def law_components(d, r0, theta_i, theta_j, kn, kt, kb):
+def law_components(d, r0, theta_i, theta_j, kn, kt, kb, turn_i=None, turn_j=None):
     """The 2D bond law on components, for one bond (scalars) or all bonds at once (``[nb]`` arrays).
 
     Args:
@@ -67,6 +67,8 @@ def law_components(d, r0, theta_i, theta_j, kn, kt, kb):
         r0: ``(x, y)``, the same vector in the reference state [m].
         theta_i, theta_j: the discs' rotations from the reference state [rad].
         kn, kt, kb: the normal, shear and bending stiffnesses.
+        turn_i, turn_j: ``(cos theta, sin theta)`` of each disc when known (computed once per disc and gathered per
+            bond, they spare the bond pass four sines and cosines a bond); ``None``: computed here.
 
     Returns:
         ``(f_i, m_i, m_j, normal, shear, twist, bend)``, the fields of
@@ -79,7 +81,7 @@ def law_components(d, r0, theta_i, theta_j, kn, kt, kb):
     inv = 1.0 / length
     n = (d[0] * inv, d[1] * inv)
     h = (0.5 * r0[0], 0.5 * r0[1])
-    a_i, a_j = rotate(theta_i, h), rotate(theta_j, h)
+    a_i, a_j = _turn(theta_i, turn_i, h), _turn(theta_j, turn_j, h)
     delta = (d[0] - a_i[0] - a_j[0], d[1] - a_i[1] - a_j[1])
     slide = kt * (n[0] * delta[1] - n[1] * delta[0])  # k_t (delta . t), t = (-n_y, n_x)
     shear = (-slide * n[1], slide * n[0])
@@ -88,3 +90,11 @@ def law_components(d, r0, theta_i, theta_j, kn, kt, kb):
     lever = 0.5 * (d[0] * shear[1] - d[1] * shear[0])
     f_i = (normal * n[0] + shear[0], normal * n[1] + shear[1])
     return f_i, (lever + bend,), (lever - bend,), normal, shear, jnp.zeros_like(normal), (bend,)
+
+
+def _turn(theta, turn, v):
+    """:func:`rotate` with ``turn = (cos theta, sin theta)`` when given."""
+    if turn is None:
+        return rotate(theta, v)
+    c, s = turn
+    return c * v[0] - s * v[1], s * v[0] + c * v[1]

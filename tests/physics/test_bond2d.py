@@ -142,3 +142,31 @@ def test_blocked_pass_is_the_one_pass():
     for a, b in zip(one[:2], blocks[:2]):
         assert np.allclose(a, b, rtol=1e-12, atol=1e-12 * float(jnp.abs(a).max()))
     assert np.array_equal(one[3], blocks[3]) and 0 < int(jnp.sum(one[4] > 0)) < s.n_bonds
+
+
+@pytest.mark.parametrize("block", [None, 64])
+def test_bond_pass_sums_the_law_of_each_intact_bond(block):
+    """The pass (one sine and cosine per disc, the broken bonds' rows masked once) gives, at large rotations and with
+    some bonds broken, the sums of the per-bond law evaluated one bond at a time with its own sines and cosines."""
+    from jaxbpm.generate import lattice
+
+    s = lattice("hex", (12, 10), 1e-3, materials={"E": 1e9})
+    model = build_model(s)
+    x = model.positions0 + 2e-5 * jax.random.normal(jax.random.PRNGKey(0), model.positions0.shape)
+    q = 0.8 * jax.random.normal(jax.random.PRNGKey(1), (model.n, 1))
+    intact = jax.random.uniform(jax.random.PRNGKey(2), (s.n_bonds,)) > 0.3
+    k = model.stiffness(default_params(s))
+    force, moment, *_ = bond.bond_forces_breaking(x, q, model.bonds, model.r0, k, intact, None, block=block)
+    want_f, want_m = np.zeros((model.n, 2)), np.zeros((model.n, 1))
+    xs, qs, b, r0 = np.asarray(x), np.asarray(q), np.asarray(model.bonds), np.asarray(model.r0)
+    for c in np.flatnonzero(np.asarray(intact)):
+        i, j = b[c]
+        f_i, m_i, m_j, *_ = bond2d.law_components(tuple(xs[j] - xs[i]), tuple(r0[c]), qs[i, 0], qs[j, 0],
+                                                  k.kn[c], k.kt[c], k.kb[c])
+        want_f[i] += np.asarray(f_i)
+        want_f[j] -= np.asarray(f_i)
+        want_m[i] += float(m_i[0])
+        want_m[j] += float(m_j[0])
+    assert 0.5 < float(jnp.mean(intact)) < 0.9
+    np.testing.assert_allclose(force, want_f, rtol=1e-12, atol=1e-12 * np.abs(want_f).max())
+    np.testing.assert_allclose(moment, want_m, rtol=1e-12, atol=1e-12 * np.abs(want_m).max())
