@@ -195,7 +195,8 @@ def _forward(args, out: dict) -> None:
             rows.append({"set": name, "seed": seed, "flexural": f, "flexural_paper": f_paper,
                          "flexural_vs_paper": f / f_paper - 1, "ucs": u, "ucs_paper": u_paper,
                          "ucs_vs_paper": u / u_paper - 1, "wall_tpb_s": wf, "wall_ucs_s": wu, "tpb": sf, "ucs_run": su})
-            print(f"  {name}: flexural {f / 1e9:.3f} GPa (paper {f_paper / 1e9:.3f}, {100 * (f / f_paper - 1):+.1f} %), "
+            print(f"  {name}: flexural {f / 1e9:.3f} GPa (paper {f_paper / 1e9:.3f}, "
+                  f"{100 * (f / f_paper - 1):+.1f} %), "
                   f"UCS {u / 1e9:.3f} GPa (paper {u_paper / 1e9:.3f}, {100 * (u / u_paper - 1):+.1f} %); "
                   f"{wf:.0f} s + {wu:.0f} s", flush=True)
     summary = []
