@@ -13,7 +13,9 @@ the specimens' dimensions, the porosity or the supports; the choices (see ``docs
   mid-span; the rollers touch the beam through linear contacts only (each is tied to the beam by a bond a thousandth
   of a disc's width, which the scene asks for as a load path and which carries nothing), so the supports do not hold the
   beam's ends horizontally as clamped support layers would;
-* packing fraction: ``generate.disc_packing``'s default (about 0.82).
+* packing fraction: ``generate.disc_packing``'s default (about 0.82);
+* loading: the UCS over ``--transits`` (30) elastic-wave transits, the beam ``--beam-slowdown`` (9) times slower
+  (its strength still falls by 40 % from 30 to 270 transits of the span).
 
 Then (a) the paper's own parameter sets (Table 4 rows 0 and 6, Table 5 row 3) forward over several packings, and (b)
 ``jaxbpm.calibrate.calibrate_strength`` with the original and the simplified scheme from Eq. 14's starting point,
@@ -21,6 +23,7 @@ printed beside Tables 4 and 5.
 
     python benchmarks/seed_case_qu2020.py --2d --quick          # ~2,250 + ~6,700 discs
     python benchmarks/seed_case_qu2020.py --2d                  # 22,507 + 66,743 discs
+    python benchmarks/seed_case_qu2020.py --2d --parts paper-beam --seeds 0   # one timed 22,507-disc beam run
 """
 
 from __future__ import annotations
