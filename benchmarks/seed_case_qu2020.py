@@ -15,6 +15,7 @@ particles up at the calibrated bond strengths, so that users know what size to c
     python benchmarks/seed_case_qu2020.py                 # ~60k + ~20k particles: hours on one core
     python benchmarks/seed_case_qu2020.py --quick         # ~3k + ~2k particles
     python benchmarks/seed_case_qu2020.py --ucs-n 8000 --tpb-n 4000 --sizes 250 1000 4000 16000
+    python benchmarks/seed_case_qu2020.py --2d [--quick]  # the paper's 2D case (seed_case_qu2020_2d.py)
 """
 
 from __future__ import annotations
@@ -52,6 +53,11 @@ def sic(n: int, shape: str, seed: int = 0):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "--2d" in argv:
+        import seed_case_qu2020_2d
+
+        return seed_case_qu2020_2d.main(argv)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--ucs-n", type=int, default=60000, dest="ucs_n")
     ap.add_argument("--tpb-n", type=int, default=20000, dest="tpb_n")
