@@ -55,8 +55,7 @@ def rotate(theta, v):
     Returns:
         ``R(theta) v`` as ``(x, y)`` components.
     """
-    c, s = jnp.cos(theta), jnp.sin(theta)
-    return c * v[0] - s * v[1], s * v[0] + c * v[1]
+    return _turn(theta, None, v)
 
 
 def law_components(d, r0, theta_i, theta_j, kn, kt, kb, turn_i=None, turn_j=None):
@@ -93,8 +92,6 @@ def law_components(d, r0, theta_i, theta_j, kn, kt, kb, turn_i=None, turn_j=None
 
 
 def _turn(theta, turn, v):
-    """:func:`rotate` with ``turn = (cos theta, sin theta)`` when given."""
-    if turn is None:
-        return rotate(theta, v)
-    c, s = turn
+    """:func:`rotate`, with ``turn = (cos theta, sin theta)`` when known (``None``: computed from ``theta``)."""
+    c, s = (jnp.cos(theta), jnp.sin(theta)) if turn is None else turn
     return c * v[0] - s * v[1], s * v[0] + c * v[1]
