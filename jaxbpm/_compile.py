@@ -172,6 +172,19 @@ def _nbytes(args) -> int:
 _PROGRAMS: weakref.WeakSet = weakref.WeakSet()
 
 
+def memory_mappings() -> int:
+    """The memory mappings this process holds (lines of Linux's ``/proc/self/maps``); 0 where there is no such file.
+
+    Returns:
+      The count, to compare with ``vm.max_map_count`` (see :func:`release_executables`).
+    """
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return f.read().count(b"\n")
+    except OSError:
+        return 0
+
+
 def release_executables() -> None:
     """Drop every compiled executable this process holds: those of jaxbpm's programs and JAX's own caches.
 

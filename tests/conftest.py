@@ -48,6 +48,7 @@ jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
 from jaxbpm import _cache  # noqa: E402
+from jaxbpm._compile import memory_mappings, release_executables  # noqa: E402
 
 _cache.enable_compilation_cache(_CACHE_DIR)
 
@@ -78,24 +79,14 @@ def jax_cache_config():
 _MAPPINGS_SOFT, _MAPPINGS_HARD = 25_000, 45_000
 
 
-def _mappings() -> int:
-    try:
-        with open("/proc/self/maps", "rb") as f:
-            return f.read().count(b"\n")
-    except OSError:  # not Linux
-        return 0
-
-
 def pytest_runtest_teardown(item, nextitem):
-    count = _mappings()
+    count = memory_mappings()
     new_module = nextitem is None or nextitem.module is not item.module
     if count > _MAPPINGS_HARD or (count > _MAPPINGS_SOFT and new_module):
         import gc
-
-        from jaxbpm._compile import release_executables
 
         release_executables()
         gc.collect()
         if os.environ.get("JAXBPM_TEST_MAPPINGS_LOG"):
             with open(os.environ["JAXBPM_TEST_MAPPINGS_LOG"], "a") as f:
-                f.write(f"{os.getpid()} {item.nodeid} {count} -> {_mappings()}\n")
+                f.write(f"{os.getpid()} {item.nodeid} {count} -> {memory_mappings()}\n")

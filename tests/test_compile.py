@@ -89,24 +89,19 @@ def test_program_compiles_once_per_signature():
         prog(np.ones(3), kk=1)
 
 
-def _mappings():
-    with open("/proc/self/maps", "rb") as f:
-        return f.read().count(b"\n")
-
-
 @pytest.mark.skipif(not os.path.exists("/proc/self/maps"), reason="memory mappings are read from Linux's /proc")
 def test_release_executables_gives_back_their_memory_mappings():
     """Executables hold memory mappings (a process has at most vm.max_map_count of them); released, they are gone,
     and a program compiles again on its next call."""
     prog = Program(lambda x, k: jax.numpy.sin(x * k) @ jax.numpy.cos(x.T + k), static_argnames=("k",))
     _compile.release_executables()
-    before = _mappings()
+    before = _compile.memory_mappings()
     for k in range(20):
         prog(np.ones((4, 4)), k=k)
-    grown = _mappings()
+    grown = _compile.memory_mappings()
     assert prog.compilations == 20 and grown > before + 20
     _compile.release_executables()
-    assert _mappings() < before + (grown - before) / 4
+    assert _compile.memory_mappings() < before + (grown - before) / 4
     prog(np.ones((4, 4)), k=0)
     assert prog.compilations == 21
 
