@@ -19,7 +19,8 @@ the specimens' dimensions, the porosity or the supports; the choices (see ``docs
 
 Then (a) the paper's own parameter sets (Table 4 rows 0 and 6, Table 5 row 3) forward over several packings, and (b)
 ``jaxbpm.calibrate.calibrate_strength`` with the original and the simplified scheme from Eq. 14's starting point,
-printed beside Tables 4 and 5.
+printed beside Tables 4 and 5, and jaxbpm's own scheme (``--schemes lab``: the strength stage of
+``jaxbpm.calibrate.lab``, the same two estimates, then Gauss-Newton steps with Broyden updates).
 
     python benchmarks/seed_case_qu2020.py --2d --quick          # ~2,250 + ~6,700 discs
     python benchmarks/seed_case_qu2020.py --2d                  # 22,507 + 66,743 discs
@@ -217,6 +218,7 @@ def _forward(args, out: dict) -> None:
 
 def _calibrate(args, out: dict) -> None:
     """(b) the original and the simplified scheme from Eq. 14's starting point, beside Tables 4 and 5."""
+    from jaxbpm.calibrate.lab import lab
     from jaxbpm.calibrate.strength import calibrate_strength, format_strength_table, strength_table
 
     (beam, tpb), (cyl, ucs) = beam_specimen(args.tpb_n, args.seeds[0]), ucs_specimen(args.ucs_n, args.seeds[0])
@@ -224,12 +226,19 @@ def _calibrate(args, out: dict) -> None:
     out["calibration"] = {}
     for scheme in args.schemes:
         t0 = time.perf_counter()
-        res = calibrate_strength(cyl, beam, ucs=TARGETS["ucs"], flexural=TARGETS["flexural"], scheme=scheme,
-                                 ucs_scene=ucs, tpb_scene=tpb, learning_rate=args.learning_rate, tol=args.tol,
-                                 max_iterations=args.max_iterations[scheme], solve_options={"transits": args.transits},
-                                 progress=True)
+        if scheme == "lab":  # jaxbpm's own: the strength stage of calibrate.lab (Gauss-Newton, Broyden updates)
+            res = lab({"ucs": cyl, "flexural": beam}, TARGETS, scenes={"ucs": ucs, "flexural": tpb}, tol=args.tol,
+                      max_iterations=args.max_iterations[scheme], solve_options={"transits": args.transits},
+                      progress=True).stages["strength"]
+            res.info.update(targets={"ucs": TARGETS["ucs"], "tpb": TARGETS["flexural"]},
+                            parameter_sets=res.evaluations // 2)
+        else:
+            res = calibrate_strength(cyl, beam, ucs=TARGETS["ucs"], flexural=TARGETS["flexural"], scheme=scheme,
+                                     ucs_scene=ucs, tpb_scene=tpb, learning_rate=args.learning_rate, tol=args.tol,
+                                     max_iterations=args.max_iterations[scheme],
+                                     solve_options={"transits": args.transits}, progress=True)
         rows = strength_table(res)
-        paper = TABLE4 if scheme == "original" else TABLE5
+        paper = TABLE4 if scheme in ("original", "lab") else TABLE5
         print(f"\n{scheme} scheme (jaxbpm, {cyl.n_particles} + {beam.n_particles - 3} discs; "
               f"{time.perf_counter() - t0:.0f} s):\n{format_strength_table(rows)}")
         print(f"Qu et al. 2020, {'Table 4' if scheme == 'original' else 'Table 5'}:")
@@ -238,7 +247,8 @@ def _calibrate(args, out: dict) -> None:
                   f"{100 * (u / 2e9 - 1):>+7.1f}%")
         out["calibration"][scheme] = {"rows": rows, "converged": bool(res.converged), "values": res.values,
                                       "parameter_sets": res.info["parameter_sets"], "notes": list(res.notes),
-                                      "wall_s": time.perf_counter() - t0, "qu2020_models": QU2020_MODELS[scheme]}
+                                      "wall_s": time.perf_counter() - t0,
+                                      "qu2020_models": QU2020_MODELS.get(scheme, QU2020_MODELS["original"])}
 
 
 def _paper_beam(args, out: dict) -> None:
@@ -274,14 +284,16 @@ def main(argv=None):
                     help="the beam is loaded this many times slower (its strength still moves at 30 transits)")
     ap.add_argument("--learning-rate", type=float, default=0.01, dest="learning_rate", help="Adam's (the paper's)")
     ap.add_argument("--tol", type=float, default=0.05)
-    ap.add_argument("--schemes", nargs="*", default=["original", "simplified"])
+    ap.add_argument("--schemes", nargs="*", default=["original", "simplified", "lab"],
+                    choices=["original", "simplified", "lab"], help="Qu et al.'s two schemes, and jaxbpm's own (the "
+                    "strength stage of calibrate.lab: Gauss-Newton steps with Broyden updates)")
     ap.add_argument("--parts", nargs="+", default=["forward", "calibrate"],
                     choices=["forward", "calibrate", "paper-beam"])
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     if args.quick:
         args.ucs_n, args.tpb_n = PAPER_COUNTS["ucs"] // 10, PAPER_COUNTS["tpb"] // 10
-    args.max_iterations = {"original": 3, "simplified": 5}
+    args.max_iterations = {"original": 3, "simplified": 5, "lab": 6}
     out_path = args.out or f"results/seed_case_qu2020_2d{'_quick' if args.quick else ''}_{'_'.join(args.parts)}.json"
     enable_x64()
     t0 = time.perf_counter()

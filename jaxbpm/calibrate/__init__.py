@@ -30,7 +30,7 @@ forwards (:meth:`Forward.from_function`). This package's ``__init__`` only re-ex
 
 from __future__ import annotations
 
-from jaxbpm.calibrate.adam import GRADIENTS, adam, loss_and_gradient
+from jaxbpm.calibrate.adam import GRADIENTS, adam, loss_and_gradient, tied_gradient
 from jaxbpm.calibrate.closed_form import closed_form
 from jaxbpm.calibrate.dispatch import METHODS, calibrate, default_parameters
 from jaxbpm.calibrate.elastic import calibrate_elastic
@@ -46,7 +46,8 @@ from jaxbpm.calibrate.surrogate import surrogate
 
 __all__ = [
     "calibrate", "METHODS", "CalibrationError", "Target", "Parameter", "ParameterSpace", "Forward", "Problem",
-    "forward_model", "default_parameters", "adam", "GRADIENTS", "loss_and_gradient", "closed_form", "surrogate",
+    "forward_model", "default_parameters", "adam", "GRADIENTS", "loss_and_gradient", "tied_gradient", "closed_form",
+    "surrogate",
     "RunSet", "run_set", "multifidelity", "default_levels", "calibrate_level", "CalibrationResult", "History",
     "plot_history", "load_history", "base_params", "calibrate_strength", "strength_table", "STRENGTH_KEYS",
     "STRENGTH_SCHEMES", "format_strength_table", "calibrate_elastic", "lab", "LabResult",

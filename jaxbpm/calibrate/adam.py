@@ -40,7 +40,7 @@ import jaxbpm.calibrate._common as _common
 from jaxbpm.calibrate.objective import CalibrationError, Problem
 from jaxbpm.calibrate.history import CalibrationResult, History
 
-__all__ = ["GRADIENTS", "adam", "loss_and_gradient"]
+__all__ = ["GRADIENTS", "adam", "loss_and_gradient", "tied_gradient"]
 
 GRADIENTS = ("fd-forward", "fd-central", "autodiff")
 
@@ -99,9 +99,42 @@ def loss_and_gradient(problem: Problem, z, method: str = "autodiff", *, step: fl
         g = np.array([(float(problem.loss_of(errs[i])) - float(problem.loss_of(errs[n + i]))) / (2 * step)
                       for i in range(n)])
     else:
-        parts0, parts1 = problem.target_losses(e0), problem.target_losses(errs[0])
-        g = np.array([(parts1[k] - parts0[k]) / step for k in tie])
+        g = tied_gradient(problem, e0, errs[0], np.full(n, step), tie)
     return loss0, g, e0
+
+
+def tied_gradient(problem: Problem, e, e_other, dz, tie: list[int]) -> np.ndarray:
+    """The simplified scheme's gradient (Qu et al. 2020, Eq. 16-19) at the point of errors ``e``: each parameter's
+    derivative of its tied target's term ``w_k mean(e_k^2)``, by the chain rule with the errors' difference quotient,
+    ``2 w_k mean(e_k (e'_k - e_k)) / dz_i``.
+
+    The difference quotient of the squared errors themselves, ``(w_k mean(e'_k^2) - w_k mean(e_k^2)) / dz_i``, is
+    the slope at the midpoint of the two points: where a target's error changes sign between them it has the wrong
+    sign (the squared error can fall while the error passes through zero and grows on the other side).
+
+    Args:
+      problem: the targets (their weights and slices).
+      e: the relative errors ``[m]`` at the point.
+      e_other: the errors ``[m]`` at the other point (perturbed, or the previous point of the secant).
+      dz: ``[n]`` the change of each parameter from the point to the other one.
+      tie: the index of the target each parameter is tied to.
+
+    Returns:
+      ``[n]`` the gradient.
+    """
+    return _chain(problem, e, _slopes(problem, e, e_other, dz, tie), tie)
+
+
+def _slopes(problem: Problem, e, e_other, dz, tie: list[int]) -> list[np.ndarray]:
+    """Each parameter's difference quotient of its tied target's errors, ``(e'_k - e_k) / dz_i``."""
+    diff = np.asarray(e_other, dtype=np.float64) - np.asarray(e, dtype=np.float64)
+    return [diff[problem.slices[k]] / dz[i] for i, k in enumerate(tie)]
+
+
+def _chain(problem: Problem, e, slopes: list[np.ndarray], tie: list[int]) -> np.ndarray:
+    """``2 w_k mean(e_k slope_i)`` per parameter: the derivative of its tied target's term."""
+    e = np.asarray(e, dtype=np.float64)
+    return np.array([2.0 * problem.weights[k] * np.mean(e[problem.slices[k]] * slopes[i]) for i, k in enumerate(tie)])
 
 
 def adam(problem: Problem, *, gradient: str = "fd-forward", learning_rate: float = 0.1, b1: float = 0.9,
@@ -238,6 +271,7 @@ class _Run:
         self.best = None  # (loss, values, errors)
         self.previous = None  # (z, errors) of the last evaluated point
         self.secants = 0
+        self.slopes: dict[int, np.ndarray] = {}  # the simplified scheme's last difference quotient per parameter
         self.pending_second = bool(plan.second_estimate)
 
     def start(self, notes: list[str]) -> None:
@@ -303,14 +337,24 @@ class _Run:
         return True
 
     def _gradient(self, e, fd_step):
-        """The gradient at ``z``: the secant between successive points (the simplified scheme, where every
-        parameter moved by at least ``fd_step / 10``), else finite differences around ``z``."""
-        problem, z, previous = self.problem, self.z, self.previous
-        if self.plan.secant and previous is not None and np.all(np.abs(z - previous[0]) >= 0.1 * fd_step):
-            parts, parts0 = problem.target_losses(e), problem.target_losses(previous[1])
-            self.secants += 1
-            return np.array([(parts[k] - parts0[k]) / (z[i] - previous[0][i]) for i, k in enumerate(self.plan.ties)])
-        _, g, _ = loss_and_gradient(problem, z, self.plan.grad_method, step=fd_step, tie=self.plan.ties, base=e)
+        """The gradient at ``z``: the simplified scheme's secant between successive points (:func:`tied_gradient`;
+        a parameter that moved by less than ``fd_step / 10`` keeps the last slope measured for it), else finite
+        differences around ``z`` (the simplified scheme's one perturbed point where a parameter has no slope yet)."""
+        problem, z, previous, ties = self.problem, self.z, self.previous, self.plan.ties
+        if self.plan.secant and previous is not None:
+            dz = previous[0] - z
+            moved = np.abs(dz) >= 0.1 * fd_step
+            if np.any(moved):
+                fresh = _slopes(problem, e, previous[1], np.where(moved, dz, 1.0), ties)
+                self.slopes.update({i: fresh[i] for i in np.flatnonzero(moved)})
+            if len(self.slopes) == len(ties):
+                self.secants += 1
+                return _chain(problem, e, [self.slopes[i] for i in range(len(ties))], ties)
+        if self.plan.grad_method == "simplified":  # one point, every parameter perturbed; its slopes are kept
+            e1 = np.asarray(problem.errors_of(problem.outputs(problem.space.from_z((z + fd_step)[None, :]))[0]))
+            self.slopes.update(enumerate(_slopes(problem, e, e1, np.full(z.size, fd_step), ties)))
+            return _chain(problem, e, [self.slopes[i] for i in range(len(ties))], ties)
+        _, g, _ = loss_and_gradient(problem, z, self.plan.grad_method, step=fd_step, tie=ties, base=e)
         return g
 
     def _step(self, g, loss, e, loss_scaled) -> None:

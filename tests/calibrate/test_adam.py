@@ -108,6 +108,25 @@ def test_simplified_scheme_runs_fewer_sets():
         cal.adam(_analytic_problem(targets, n=2), simplified="fast", **kw)
 
 
+def test_tied_gradient_keeps_its_sign_across_a_sign_change_of_the_error():
+    """Between two points whose error has opposite signs (E = 3 bond_E against 30: bond_E 8 gives -20 %, 11 gives
+    +10 %), the secant of the squared error points the wrong way; the chain rule with the errors' secant agrees in
+    sign (and here, a linear model, in value) with the derivative at the point."""
+    pb = _analytic_problem([Target("youngs_modulus", 30.0)])
+    z_prev, z = pb.space.to_z(np.array([8.0])), pb.space.to_z(np.array([11.0]))
+    e_prev, e = (np.asarray(pb.errors_of(pb.outputs(pb.space.from_z(p[None, :]))[0])) for p in (z_prev, z))
+    assert e_prev[0] < 0 < e[0]
+    g = cal.tied_gradient(pb, e, e_prev, z_prev - z, [0])
+    _, g_exact, _ = cal.loss_and_gradient(pb, z, "fd-central", step=1e-6)
+    squared_secant = (float(pb.loss_of(e)) - float(pb.loss_of(e_prev))) / (z - z_prev)[0]
+    assert g[0] > 0 and g_exact[0] > 0 and squared_secant < 0
+    # exact for a model linear in bond_E up to the log form's curvature: within the secant's span, 15 %
+    assert abs(g[0] / g_exact[0] - 1) < 0.15
+    # the perturbed form is the forward difference of the errors, within fd_step of the derivative
+    _, g_pert, _ = cal.loss_and_gradient(pb, z, "simplified", step=1e-5, tie=[0])
+    np.testing.assert_allclose(g_pert, g_exact, rtol=1e-4)
+
+
 def test_target_scaled_form():
     pb = _analytic_problem([Target("youngs_modulus", 30.0)], scaling="target", scales=[30.0])
     np.testing.assert_allclose(pb.space.to_z(np.array([30.0])), [1.0])
