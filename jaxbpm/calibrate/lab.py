@@ -172,7 +172,8 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       targets: any of ``{"E": Pa, "nu": -, "ucs": Pa, "bts": Pa, "flexural": Pa}``.
       scenes: override the tests' scenes (``"elastic"``, ``"ucs"``, ``"bts"``, ``"flexural"``); defaults
         ``UniaxialCompression(strain=1e-3)``, ``UniaxialCompression.to_failure(strain=0.02)``,
-        ``BrazilianDisc()``, ``ThreePointBending(strain=0.1)``.
+        ``BrazilianDisc()``, ``ThreePointBending(strain=0.1)``; for 2D specimens (discs) the same loaded in the
+        plane (``axis=1``; the beam ``span_axis=0``) with ``contact_law="linear"``.
       elastic_solver: the elastic stage's solver; check: the solver that checks its answer (``None``: none).
       elastic_tol, tol: relative tolerances of the elastic and the strength targets.
       max_iterations, fd_step: the strength stage's Gauss-Newton iterations after the two estimates, and its
@@ -191,17 +192,14 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
       and why, and the parameters in other codes' conventions.
 
     Raises:
-      CalibrationError: unknown or invalid targets, a missing specimen, strength scenes with different failure
-        rules, or a stage that fails for a reason other than an unreachable target.
+      CalibrationError: unknown or invalid targets, a missing specimen, 2D and 3D specimens mixed, strength scenes
+        with different failure rules, or a stage that fails for a reason other than an unreachable target.
     """
-    from jaxbpm.scenes import BrazilianDisc, ThreePointBending, UniaxialCompression
-
     elastic_solver = _common.renamed_keyword(elastic_solver, elastic_model, new="elastic_solver", old="elastic_model")
     t0 = time.perf_counter()
     targets = _checked_targets(targets)
     samples, need = _specimens(samples, targets)
-    scene_of = {"elastic": UniaxialCompression(strain=1e-3), "ucs": UniaxialCompression.to_failure(strain=0.02),
-                "bts": BrazilianDisc(), "flexural": ThreePointBending(strain=0.1), **dict(scenes or {})}
+    scene_of = {**_default_scenes(samples), **dict(scenes or {})}
     if failure_rule is not None:
         from jaxbpm.physics.bond import check_failure_rule
 
@@ -230,6 +228,25 @@ def lab(samples: Mapping[str, Any], targets: Mapping[str, float], *, scenes: Map
                      stages=stages, unreached=unreached, conventions=conventions, curves=curves,
                      wall_time=time.perf_counter() - t0, solves=solves,
                      failure_rule=rules[0] if rules else "separate")
+
+
+def _default_scenes(samples) -> dict:
+    """The tests' default scenes for the specimens' dimension: in 3D loaded along z with Hertz-Mindlin contacts; in
+    2D (discs in the x-y plane) the UCS along y and the beam bent along y, with PFC's linear contacts (the only
+    contacts between discs)."""
+    from jaxbpm.scenes import BrazilianDisc, ThreePointBending, UniaxialCompression
+
+    dims = {int(getattr(s, "dim", 3)) for s in samples.values()}
+    if len(dims) > 1:
+        kinds = ", ".join(f"{k}: {getattr(s, 'dim', 3)}D" for k, s in samples.items())
+        raise CalibrationError(f"the specimens mix 2D and 3D samples ({kinds}); calibrate discs and spheres apart")
+    if dims == {2}:
+        return {"elastic": UniaxialCompression(strain=1e-3, axis=1),
+                "ucs": UniaxialCompression.to_failure(strain=0.02, axis=1, contact_law="linear"),
+                "bts": BrazilianDisc(contact_law="linear"),
+                "flexural": ThreePointBending(strain=0.1, axis=1, span_axis=0, contact_law="linear")}
+    return {"elastic": UniaxialCompression(strain=1e-3), "ucs": UniaxialCompression.to_failure(strain=0.02),
+            "bts": BrazilianDisc(), "flexural": ThreePointBending(strain=0.1)}
 
 
 def _checked_targets(targets) -> dict:

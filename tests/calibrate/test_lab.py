@@ -163,3 +163,25 @@ def test_conventions_of_a_2d_sample():
     np.testing.assert_allclose([out["pfc"]["pb_kn"], out["pfc"]["pb_rmul"], out["pfc"]["kratio"]], [1e9 / L, 0.5, 2.5])
     assert out["jaxbpm"]["thickness"] == 0.3
     assert set(out["yade"]) == {"2D"} and "no two-dimensional" in out["musen"]["2D"]
+
+
+def test_lab_on_discs_uses_the_plane_scenes():
+    """2D specimens (a rectangle and a disc of discs): the default scenes load in the plane with linear contacts; E and
+    nu within 2 %, UCS and BTS within 5 % by the same tests run with the true parameters, from a start 3x off."""
+    rect = jaxbpm.generate.disc_packing(200, "rectangle", aspect=(1, 2), seed=0, materials=TRUE).largest_cluster()
+    disc = jaxbpm.generate.disc_packing(200, "disc", seed=0, materials=TRUE).largest_cluster()
+    scenes = {"ucs": jaxbpm.scenes.UniaxialCompression.to_failure(strain=0.02, axis=1, contact_law="linear"),
+              "bts": jaxbpm.scenes.BrazilianDisc(contact_law="linear")}
+    elastic = jaxbpm.solve(rect, jaxbpm.scenes.UniaxialCompression(strain=1e-3, axis=1), "dsm")
+    targets = {"E": elastic.youngs_modulus, "nu": elastic.poisson_ratio,
+               "ucs": jaxbpm.solve(rect, scenes["ucs"], "dem", transits=30).stats["strength"],
+               "bts": jaxbpm.solve(disc, scenes["bts"], "dem", transits=30).stats["strength"]}
+    start = BondMaterials.create(**START)
+    res = lab({"ucs": rect.replace(materials=start), "bts": disc.replace(materials=start)}, targets)
+    assert res.converged and not res.unreached, res.table()
+    for key, (value, err) in res.achieved.items():
+        assert abs(err) <= (0.02 if key in ("E", "nu") else 0.05), (key, value, err)
+    np.testing.assert_allclose(res.params["bond_tensile_strength"], TRUE["tensile_strength"], rtol=0.1)
+    assert res.solves["strength (DEM failure runs)"] <= 2 * 8
+    with pytest.raises(CalibrationError, match="mix 2D and 3D"):
+        lab({"ucs": rect, "bts": jaxbpm.generate.cylinder(100, seed=0)}, {"ucs": 1e6, "bts": 1e5})
