@@ -7,6 +7,7 @@ import pytest
 
 import jaxbpm
 from jaxbpm import SceneError
+from jaxbpm.generate import disc_packing, lattice
 from jaxbpm.scenes import ThreePointBending
 
 # one worker for the whole module under pytest-xdist (loadgroup): its specimen (a module fixture) is built once
@@ -42,3 +43,91 @@ def test_bending_scene_errors_are_named(beam):
         ThreePointBending(axis=0, span_axis=0)
     with pytest.raises(SceneError, match="punch"):
         ThreePointBending(punch_width=1e-9).layers(beam)
+
+
+def _old_default_finds(s, scene):
+    """Whether one mean diameter (the earlier default width) finds a bottom particle under each support and a top one
+    under the punch."""
+    pos, rad = np.asarray(s.positions), np.asarray(s.radii)
+    r = rad.mean()
+    z, x = pos[:, scene.axis], pos[:, scene.span_axis]
+    lo, hi = (pos - rad[:, None]).min(0)[scene.span_axis], (pos + rad[:, None]).max(0)[scene.span_axis]
+    mid, span = 0.5 * (lo + hi), scene.dimensions(s)[0]
+    bottom, top = z <= z.min() + r, z >= z.max() - r
+    return [bool((layer & (np.abs(x - c) <= r)).any())
+            for layer, c in ((bottom, mid - span / 2), (bottom, mid + span / 2), (top, mid))]
+
+
+def test_default_supports_take_the_nearest_particles_of_a_sparse_layer():
+    s = disc_packing(120, "beam", seed=0).largest_cluster()
+    scene = ThreePointBending(axis=1, span_axis=0)
+    assert _old_default_finds(s, scene) == [False, True, False]  # one diameter finds nothing at two of the points
+    supports, punch = scene.layers(s)
+    pos, rad = np.asarray(s.positions), np.asarray(s.radii)
+    r, y, x = rad.mean(), pos[:, 1], pos[:, 0]
+    lo, hi = (pos - rad[:, None]).min(0)[0], (pos + rad[:, None]).max(0)[0]
+    mid, span = 0.5 * (lo + hi), scene.dimensions(s)[0]
+    bottom, top = y <= y.min() + r, y >= y.max() - r
+    for mask, layer, c in ((supports & (x < mid), bottom, mid - span / 2), (punch, top, mid)):
+        dist = np.where(layer, np.abs(x - c), np.inf)
+        assert mask.any() and np.all(layer[mask])
+        np.testing.assert_array_equal(mask, dist <= dist.min() + r)  # the nearest, and those within r of it
+    right = supports & (x > mid)
+    np.testing.assert_array_equal(right, bottom & (np.abs(x - (mid + span / 2)) <= r))  # found: kept as it was
+    with pytest.raises(SceneError, match=r"support_width=.* finds no particle.*nearest lies"):
+        ThreePointBending(axis=1, span_axis=0, support_width=2 * r).layers(s)
+
+
+def _linear(**kw):
+    return ThreePointBending(axis=1, span_axis=0, contact_law="linear", rollers=True, **kw)
+
+
+def test_rollers_touch_the_beam_and_gain_no_bonds():
+    s = disc_packing(300, "beam", seed=1, materials={"E": 1e9}).largest_cluster()
+    scene = _linear(roller_radius=4e-3)
+    staged, bound = scene.stage(s)
+    n = s.n_particles
+    assert staged.n_particles == n + 3 and bound.beam_particles == n and staged.n_bonds == s.n_bonds
+    assert np.asarray(staged.bonds).max() < n  # no bond reaches a roller
+    np.testing.assert_array_equal(np.asarray(staged.bonds), np.asarray(s.bonds))
+    np.testing.assert_array_equal(np.asarray(staged.types)[n:], [2, 2, 2])  # the sample's types are 1
+    assert bound.dimensions(staged) == pytest.approx(scene.dimensions(s), rel=1e-12)
+    pos, rad = np.asarray(staged.positions), np.asarray(staged.radii)
+    span, _, h = scene.dimensions(s)
+    mid = 0.5 * ((pos[:n, 0] - rad[:n]).min() + (pos[:n, 0] + rad[:n]).max())
+    np.testing.assert_allclose(pos[n:, 0], [mid - span / 2, mid + span / 2, mid], rtol=1e-12)
+    for k in range(n, n + 3):
+        gap = np.linalg.norm(pos[:n] - pos[k], axis=1) - rad[:n] - rad[k]
+        assert abs(gap.min()) < 1e-12 and gap.min() > -1e-12 * 4e-3  # touching, overlapping none
+    supports, punch = bound.layers(staged)
+    assert list(np.flatnonzero(supports)) == [n, n + 1] and list(np.flatnonzero(punch)) == [n + 2]
+    assert scene.stage(s)[0] is staged and bound.stage(staged) == (staged, bound)  # cached; staged once
+    with pytest.raises(SceneError, match="stage"):
+        scene.layers(s)
+
+
+def test_rollers_in_3d_are_rows_of_spheres_across_the_width(beam):
+    scene = ThreePointBending(rollers=True, roller_radius=float(np.mean(beam.radii)) * 1.5)
+    staged, bound = scene.stage(beam)
+    n, added = beam.n_particles, staged.n_particles - beam.n_particles
+    span, b, h = scene.dimensions(beam)
+    per_row = max(1, round(b / (2 * scene.roller_radius)))
+    assert added == 3 * per_row and per_row > 1
+    pos, rad = np.asarray(staged.positions), np.asarray(staged.radii)
+    for k in range(n, n + added):
+        gap = np.linalg.norm(pos[:n] - pos[k], axis=1) - rad[:n] - rad[k]
+        assert abs(gap.min()) < 1e-12
+    supports, punch = bound.layers(staged)
+    assert supports.sum() == 2 * per_row and punch.sum() == per_row
+
+
+def test_bad_roller_input_is_named():
+    with pytest.raises(SceneError, match="contacts"):
+        ThreePointBending(rollers=True, contacts=False)
+    for radius in (0.0, -1e-3, float("nan")):
+        with pytest.raises(SceneError, match="roller_radius"):
+            ThreePointBending(rollers=True, roller_radius=radius)
+    with pytest.raises(SceneError, match="rollers=True"):
+        ThreePointBending(roller_radius=1e-3)
+    with pytest.raises(SceneError, match="supports"):
+        ThreePointBending(rollers=True, supports=[0], punch=[1])
