@@ -131,3 +131,41 @@ def test_bad_roller_input_is_named():
         ThreePointBending(roller_radius=1e-3)
     with pytest.raises(SceneError, match="supports"):
         ThreePointBending(rollers=True, supports=[0], punch=[1])
+
+
+def test_a_beam_on_rollers_bends_below_the_simply_supported_bound_and_its_rollers_carry_the_load(tmp_path):
+    from jaxbpm.dem import read_records
+
+    E, t, R, ny = 1e9, 0.1, 1e-3, 4
+    s = lattice("square", (25, ny), R, thickness=t, materials={"E": E}).replace(bond_contact="replace")
+    scene = ThreePointBending(axis=1, span_axis=0, contact_law="linear", breakage=False, strain=0.005,
+                              fit_range=(0.3, 1.0), rollers=True)
+    r = jaxbpm.solve(s, scene, "dem", transits=200, record_to=tmp_path / "run.h5")
+    assert r.stats["added_particles"] == 3
+    assert np.asarray(r.state.positions).shape == (s.n_particles + 3, 2)  # the rollers are the last rows
+    assert np.asarray(r.state.broken).shape == (s.n_bonds,)  # and they have no bond
+    # the lattice's bending stiffness: each row's bonds (E * 2R t) at its distance from the middle, plus the rows'
+    # own bending (E (2R)^3 t / 12 each); Euler-Bernoulli on simple supports is the stiffest a roller beam can be
+    # (shear, the rollers' contacts and the beam's indentation under them only add compliance)
+    span = scene.dimensions(s)[0]
+    EI = E * (2 * R * t * sum(((k - (ny - 1) / 2) * 2 * R) ** 2 for k in range(ny)) + ny * (2 * R) ** 3 * t / 12)
+    ratio = r.stiffness / (48 * EI / span**3)
+    assert 0.3 < ratio < 1.0, ratio
+    rec, _ = read_records(tmp_path / "run.h5")
+    reaction = np.asarray(rec["reaction"])[:, :, 1]  # (supports, punch) along y
+    late = slice(len(reaction) // 2, None)
+    load = np.mean(0.5 * (reaction[late, 0] - reaction[late, 1]))
+    assert load > 0 and abs(np.mean(reaction[late, 0] + reaction[late, 1])) < 0.05 * load  # supports hold the punch
+
+
+def test_groups_of_discs_resting_on_the_beam_need_no_bond_where_contacts_are_on():
+    from jaxbpm.errors import GroupError
+
+    s = disc_packing(200, "beam", seed=3).largest_cluster()
+    staged, _ = _linear().stage(s)  # three discs touching the beam, no bond to it
+    n = s.n_particles
+    own = dict(axis=1, span_axis=0, supports=[n, n + 1], punch=[n + 2])
+    supports, punch = ThreePointBending(contact_law="linear", **own).layers(staged)
+    assert list(np.flatnonzero(supports)) == [n, n + 1] and list(np.flatnonzero(punch)) == [n + 2]
+    with pytest.raises(GroupError, match="no bond path"):
+        ThreePointBending(contacts=False, **own).layers(staged)
