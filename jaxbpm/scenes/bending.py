@@ -57,7 +57,7 @@ class ThreePointBending(BaseScene):
 
     Observables: load-deflection curve, stiffness K = dF/dw over ``fit_range``, the beam modulus
     E = K S^3 / (48 I) with I = b h^3 / 12, and the flexural strength sigma_f = 3 F_peak S / (2 b h^2) (S: span,
-    b: width, h: height). Served by the DEM and the DSM (:attr:`methods`).
+    b: width, h: height). Served by the DEM and the DSM (:attr:`methods`); with ``rollers``, by the DEM alone.
 
     Args:
       span: [m], default 80 % of the beam length.
@@ -152,6 +152,8 @@ class ThreePointBending(BaseScene):
             return
         if not self.contacts:
             raise SceneError("rollers=True needs contacts=True: the rollers touch the beam through contacts only")
+        # the DSM's linearised contacts do not hold a beam that rests on its rollers: the DEM alone models it
+        object.__setattr__(self, "methods", ("dem",))
         if self.supports is not None:
             raise SceneError("rollers=True adds its own supports and punch: leave supports and punch out (or give "
                              "them, clamped, with rollers=False)")
