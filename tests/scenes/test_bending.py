@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import meshio
 import numpy as np
 import pytest
 
@@ -140,8 +141,11 @@ def test_a_beam_on_rollers_bends_below_the_simply_supported_bound_and_its_roller
     s = lattice("square", (25, ny), R, thickness=t, materials={"E": E}).replace(bond_contact="replace")
     scene = ThreePointBending(axis=1, span_axis=0, contact_law="linear", breakage=False, strain=0.005,
                               fit_range=(0.3, 1.0), rollers=True)
-    r = jaxbpm.solve(s, scene, "dem", transits=200, record_to=tmp_path / "run.h5")
+    r = jaxbpm.solve(s, scene, "dem", transits=200, record_to=tmp_path / "run.h5", snapshots=1,
+                     vtu=tmp_path / "run.pvd")
     assert r.stats["added_particles"] == 3
+    frame = meshio.read(sorted(tmp_path.glob("run*.vtu"))[-1])  # the rollers are the frames' last points, type 2
+    assert len(frame.points) == s.n_particles + 3 and list(frame.point_data["type"][-4:]) == [1, 2, 2, 2]
     assert np.asarray(r.state.positions).shape == (s.n_particles + 3, 2)  # the rollers are the last rows
     assert np.asarray(r.state.broken).shape == (s.n_bonds,)  # and they have no bond
     # the lattice's bending stiffness: each row's bonds (E A) at its distance y from the middle, plus the rows' own
