@@ -149,9 +149,10 @@ def test_a_beam_on_rollers_bends_below_the_simply_supported_bound_and_its_roller
     assert np.asarray(r.state.positions).shape == (s.n_particles + 3, 2)  # the rollers are the last rows
     assert np.asarray(r.state.broken).shape == (s.n_bonds,)  # and they have no bond
     # the lattice's bending stiffness: each row's bonds (E A) at its distance y from the middle, plus the rows' own
-    # bending (E I of a bond); Euler-Bernoulli on simple supports is the stiffest a roller beam can be: shear (S/h =
-    # 5 here: about 20 %), the rollers' contacts (about 7 %) and the beam's indentation under them add compliance,
-    # while clamped rows (which hold the ends' rotation) give 1.35 x Euler-Bernoulli on this beam
+    # bending (E I of a bond); here each roller lies right under (over) a disc and touches it alone, a simple support:
+    # Euler-Bernoulli is the stiffest the beam can be, shear (S/h = 5: about 20 %), the rollers' contacts (about 7 %)
+    # and the beam's indentation under them add compliance, while clamped rows (which hold the ends' rotation) give
+    # 1.35 x Euler-Bernoulli on this beam
     span = scene.dimensions(s)[0]
     area, inertia = float(np.asarray(s.bond_area)[0]), float(np.asarray(s.bond_I)[0])
     EI = E * (area * sum(((k - (ny - 1) / 2) * 2 * R) ** 2 for k in range(ny)) + ny * inertia)
