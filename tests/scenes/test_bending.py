@@ -158,7 +158,8 @@ def test_a_beam_on_rollers_bends_below_the_simply_supported_bound_and_its_roller
     EI = E * (area * sum(((k - (ny - 1) / 2) * 2 * R) ** 2 for k in range(ny)) + ny * inertia)
     ratio = r.stiffness / (48 * EI / span**3)
     assert 0.7 < ratio < 1.0, ratio
-    rec, _ = read_records(tmp_path / "run.h5")
+    rec, attrs = read_records(tmp_path / "run.h5")
+    assert attrs["added_particles"] == 3 and attrs["particles"] == s.n_particles + 3
     reaction = np.asarray(rec["reaction"])[:, :, 1]  # (supports, punch) along y
     late = slice(len(reaction) // 2, None)
     load = np.mean(0.5 * (reaction[late, 0] - reaction[late, 1]))
