@@ -1,5 +1,8 @@
 """Three-point bending of a bonded beam: two supports under its ends, a punch pressed down at mid-span.
 
+The supports and the punch are clamped rows of the beam's particles, or (``rollers=True``) roller discs or spheres the
+scene adds to the sample, which touch the beam through its contacts alone.
+
 Observables of :class:`ThreePointBending`: the load-deflection curve, the stiffness K = dF/dw, the beam modulus
 E = K S^3 / (48 I) and the flexural strength sigma_f = 3 F_peak S / (2 b h^2).
 """
@@ -73,6 +76,8 @@ class ThreePointBending(BaseScene):
       supports, punch: the held and the pressed particles, in place of those found from the widths (give both or
         neither): each a boolean mask ``[n]``, a list of particle indices, a type, a region or a combination (see
         :mod:`jaxbpm.scenes.groups`; a :class:`~jaxbpm.scenes.groups.Layer` measures along ``axis``). Kept as given.
+        With ``contacts``, a group's particle that touches another at rest is joined to it (roller discs of the
+        sample resting on the beam need no bond to it).
       stop_after_peak: with breakage, the DEM run stops once the punch force has fallen to this fraction of its
         peak, in (0, 1) (default 0.7); ``None``: it runs to the full ``strain`` (see
         :class:`~jaxbpm.scenes.UniaxialCompression`).
