@@ -10,9 +10,8 @@ the specimens' dimensions, the porosity or the supports; the choices (see ``docs
   end layers (2D walls are not available);
 * TPBT: a beam of the proportions of ASTM C1161's configuration A for advanced ceramics (25 x 3 mm, span 20 mm:
   length 8.33 x depth, span 80 % of the length), on two roller discs of 5 mean radii and pressed by a third at
-  mid-span; the rollers touch the beam through linear contacts only (each is tied to the beam by a bond a thousandth
-  of a disc's width, which the scene asks for as a load path and which carries nothing), so the supports do not hold the
-  beam's ends horizontally as clamped support layers would;
+  mid-span (``ThreePointBending(rollers=True)``: the scene adds them); the rollers touch the beam through linear
+  contacts only, so the supports do not hold the beam's ends horizontally as clamped support layers would;
 * packing fraction: ``generate.disc_packing``'s default (about 0.82);
 * loading: the UCS over ``--transits`` (30) elastic-wave transits, the beam ``--beam-slowdown`` (9) times slower
   (its strength still falls by 40 % from 30 to 270 transits of the span).
@@ -37,7 +36,6 @@ R_MEAN, SPREAD, BOND_GAP = 5.625e-6, 0.2, 2e-7  # 4.5-6.75 um uniform; Table 3's
 PAPER_COUNTS = {"tpb": 22507, "ucs": 66743}
 BEAM_ASPECT, SPAN_FRACTION, UCS_ASPECT = (25.0 / 3.0, 1.0), 0.8, (1.0, 2.0)
 ROLLER = 5.0  # roller radius, mean disc radii
-TIE = 1e-3  # a roller's tie to the beam: bond radius over the disc's
 FRICTION = 0.7
 TARGETS = {"flexural": 0.78e9, "ucs": 2.0e9}
 # Qu et al. 2020: (pb_ten, pb_coh) -> (flexural, UCS) [Pa]
@@ -95,65 +93,42 @@ def _bending_class():
     from jaxbpm.scenes import ThreePointBending
 
     @dataclasses.dataclass(frozen=True)
-    class RollerBending(ThreePointBending):
-        """Three-point bending on roller discs: the beam's dimensions are those of the beam alone, without the
-        rollers (``beam_length``, ``beam_height`` [m]); the loading time counts ``transit_scale`` transits along the
-        span per transit asked for (the beam's strength converges at slower loading than the UCS's)."""
+    class SlowBending(ThreePointBending):
+        """Three-point bending whose loading time counts ``transit_scale`` transits along the span per transit asked
+        for (the beam's strength converges at slower loading than the UCS's)."""
 
-        beam_length: float = 1.0
-        beam_height: float = 1.0
         transit_scale: float = 1.0
-
-        def dimensions(self, sample):
-            """``(S, t, h)``: the span, the discs' thickness and the beam's height (without the rollers)."""
-            return float(self.span), float(sample.thickness), float(self.beam_height)
 
         def transit_length(self, sample):
             """The span times ``transit_scale``."""
-            return float(self.span) * float(self.transit_scale)
+            return float(self.dimensions(sample)[0]) * float(self.transit_scale)
 
-    return RollerBending
+    return SlowBending
 
 
 def beam_specimen(n: int, seed: int = 0, roller: float = ROLLER):
-    """The TPBT beam of about ``n`` discs on two roller discs, pressed by a third, and its scene.
+    """The TPBT beam of about ``n`` discs and its scene: on two roller discs, pressed by a third.
 
-    The rollers (radius ``roller`` mean radii) are placed to touch the beam's lowest (highest) disc under (over) each
-    loading point; each is tied to its nearest beam disc by a bond of radius ``TIE`` x the disc's (a stiffness
-    a thousandth of a bond's, a bending stiffness 1e-9 of it): the load path the scene's groups ask for, which
-    carries nothing (it may break; the counts of broken bonds include it).
+    The scene adds the rollers (``ThreePointBending(rollers=True)``, radius ``roller`` mean radii), each touching the
+    beam (its lowest disc under each support point, its highest at mid-span) and carrying the load through the linear
+    contacts alone; ``jaxbpm.solve`` adds them to the beam (the result's ``stats["added_particles"]`` is 3).
 
     Returns:
-      ``(sample, scene)``: the beam with the rollers last (indices ``n_beam``, ``n_beam + 1``: supports;
-      ``n_beam + 2``: punch) and a :class:`~jaxbpm.scenes.ThreePointBending` whose dimensions are the beam's.
+      ``(sample, scene)``: the beam alone, and a :class:`~jaxbpm.scenes.ThreePointBending` with ``rollers=True``
+      (span 80 % of the beam's length).
     """
     import numpy as np
-
-    from jaxbpm.sample import Sample
 
     s = _packing(n, "beam", BEAM_ASPECT, seed)
     x, rad = np.asarray(s.positions), np.asarray(s.radii)
     lo, hi = (x - rad[:, None]).min(axis=0), (x + rad[:, None]).max(axis=0)
     length, height = hi - lo
-    span, mid, rr = SPAN_FRACTION * length, 0.5 * (lo[0] + hi[0]), roller * R_MEAN
-
-    def touching(xc, below):
-        reach = np.abs(x[:, 0] - xc) < rr + rad
-        dy = np.sqrt((rr + rad[reach]) ** 2 - (x[reach, 0] - xc) ** 2)
-        return [xc, (x[reach, 1] - dy).min() if below else (x[reach, 1] + dy).max()]
-
-    rollers = np.array([touching(mid - span / 2, True), touching(mid + span / 2, True), touching(mid, False)])
-    nb = s.n_particles
-    ties = [[nb + k, int(np.argmin(np.hypot(*(x - rollers[k]).T)))] for k in range(3)]
-    b = Sample.from_arrays(np.vstack([x, rollers]), np.concatenate([rad, np.full(3, rr)]),
-                           np.vstack([np.asarray(s.bonds), ties]),
-                           np.concatenate([np.asarray(s.bond_radius), TIE * rad[[t[1] for t in ties]]]),
-                           materials=s.materials, particle_material=s.particle_material, thickness=s.thickness)
-    strain = 0.1 * height / (height + 4 * rr)  # the punch travels 10 % of the beam's height
-    scene = _bending_class()(axis=1, span_axis=0, span=float(span), supports=[nb, nb + 1], punch=[nb + 2],
-                             contact_law=contact_law(), breakage=True, strain=strain, beam_length=float(length),
-                             beam_height=float(height))
-    return b, scene
+    rr = roller * R_MEAN
+    # the punch's travel: h^2 / (10 (h + 4 r_roller)), the loading speed of the runs in docs/two-dimensions.md
+    strain = 0.1 * height / (height + 4 * rr)
+    scene = _bending_class()(axis=1, span_axis=0, span=float(SPAN_FRACTION * length), rollers=True,
+                             roller_radius=float(rr), contact_law=contact_law(), breakage=True, strain=strain)
+    return s, scene
 
 
 def params_for(sample, pb_ten: float, pb_coh: float) -> dict:
@@ -190,8 +165,9 @@ def _forward(args, out: dict) -> None:
         t0 = time.perf_counter()
         (beam, tpb), (cyl, ucs) = beam_specimen(args.tpb_n, seed), ucs_specimen(args.ucs_n, seed)
         tpb = dataclasses.replace(tpb, transit_scale=args.beam_slowdown)
-        print(f"seed {seed}: beam {beam.n_particles - 3} discs / {beam.n_bonds - 3} bonds "
-              f"({tpb.beam_length * 1e3:.3f} x {tpb.beam_height * 1e3:.3f} mm, span {tpb.span * 1e3:.3f} mm), UCS "
+        span, _, height = tpb.dimensions(beam)
+        print(f"seed {seed}: beam {beam.n_particles} discs / {beam.n_bonds} bonds "
+              f"({span / SPAN_FRACTION * 1e3:.3f} x {height * 1e3:.3f} mm, span {span * 1e3:.3f} mm), UCS "
               f"{cyl.n_particles} / {cyl.n_bonds} ({time.perf_counter() - t0:.0f} s to generate)", flush=True)
         for name, (ten, coh, f_paper, u_paper) in PAPER_SETS.items():
             f, wf, sf = strength(beam, tpb, ten, coh, args.transits)
@@ -239,9 +215,9 @@ def _calibrate(args, out: dict) -> None:
                                      solve_options={"transits": args.transits}, progress=True)
         rows = strength_table(res)
         paper = TABLE4 if scheme in ("original", "lab") else TABLE5
-        print(f"\n{scheme} scheme (jaxbpm, {cyl.n_particles} + {beam.n_particles - 3} discs; "
+        print(f"\n{scheme} scheme (jaxbpm, {cyl.n_particles} + {beam.n_particles} discs; "
               f"{time.perf_counter() - t0:.0f} s):\n{format_strength_table(rows)}")
-        print(f"Qu et al. 2020, {'Table 4' if scheme == 'original' else 'Table 5'}:")
+        print(f"Qu et al. 2020, {'Table 4' if paper is TABLE4 else 'Table 5'}:")
         for i, (ten, coh, f, u) in enumerate(paper):
             print(f"{i:>3} {ten:>13.6g} {coh:>13.6g} {f:>14.6g} {u:>13.6g} {100 * (f / 0.78e9 - 1):>+7.1f}% "
                   f"{100 * (u / 2e9 - 1):>+7.1f}%")
@@ -258,9 +234,9 @@ def _paper_beam(args, out: dict) -> None:
     gen = time.perf_counter() - t0
     tpb = dataclasses.replace(tpb, transit_scale=args.beam_slowdown)
     f, wall, stats = strength(beam, tpb, *TABLE4[0][:2], args.transits)
-    print(f"paper-size beam: {beam.n_particles - 3} discs, {beam.n_bonds - 3} bonds, generated in {gen:.0f} s; "
+    print(f"paper-size beam: {beam.n_particles} discs, {beam.n_bonds} bonds, generated in {gen:.0f} s; "
           f"flexural {f / 1e9:.3f} GPa (paper {TABLE4[0][2] / 1e9:.3f}) in {wall:.0f} s, {stats}", flush=True)
-    out["paper_beam"] = {"discs": beam.n_particles - 3, "bonds": beam.n_bonds - 3, "generate_s": gen,
+    out["paper_beam"] = {"discs": beam.n_particles, "bonds": beam.n_bonds, "generate_s": gen,
                          "flexural": f, "wall_s": wall, **stats}
 
 

@@ -26,6 +26,9 @@ def solve(sample: Sample, scene, method="dem", *, params=None, **options) -> Res
     cheapest solver expected to meet ``tol`` on this scene (:mod:`jaxbpm.auto`) and says which and why in
     ``stats["method_choice"]``.
 
+    A scene that adds particles to the sample (``ThreePointBending(rollers=True)``, through its ``stage``) adds
+    them first; the solvers see them as the last particles, and ``stats["added_particles"]`` counts them.
+
     Failure is data: ``Result.status`` is a :class:`~jaxbpm.status.Status`, the same for every solver. ``throw``
     (every solver, default True) raises the status's error (a :class:`~jaxbpm.errors.SolveError` carrying the result
     in its ``result``); ``throw=False`` returns the result and the caller reads its status (``stats["failure"]``
@@ -63,6 +66,11 @@ def _solve(sample, scene, method, params, options) -> Result:
     then runs the solver."""
     if isinstance(scene, str):  # "ucs", "bts", "tpb", "uniaxial", ...: jaxbpm.scenes.names
         scene = scene_from_name(scene)
+    if isinstance(sample, Sample) and hasattr(scene, "stage"):  # a scene that adds particles (rollers) adds them here
+        given = sample.n_particles
+        sample, scene = scene.stage(sample)
+        if sample.n_particles > given:
+            return _added(sample.n_particles - given, lambda: _solve(sample, scene, method, params, options))
     if isinstance(method, str) and method == "auto":  # the cheapest solver expected to meet tol: jaxbpm.auto
         return solve_auto(sample, scene, params, options, solve=_dispatch)
     method = resolve_options(method, options)
@@ -74,6 +82,21 @@ def _solve(sample, scene, method, params, options) -> Result:
     if params is not None:  # one validation path for every solver, once per solve
         params = check_params(params, sample)
     return _dispatch(sample, scene, params, method)
+
+
+def _added(count: int, run) -> Result:
+    """``run()``'s result (or the result its error carries) with ``stats["added_particles"] = count``: the particles
+    the scene added to the sample (the last rows of the per-particle outputs)."""
+    from jaxbpm.errors import SimulationInterrupted, SolveError
+
+    try:
+        result = run()
+    except (SolveError, SimulationInterrupted) as e:
+        if getattr(e, "result", None) is not None:
+            e.result.stats["added_particles"] = count
+        raise
+    result.stats["added_particles"] = count
+    return result
 
 
 def _check_supported(scene, name: str) -> None:

@@ -44,7 +44,8 @@ class Plan:
         chunk: steps per compiled chunk.
         speed: the loading speed, from the steps run: the run ends exactly at ``target`` [m/s].
         load: the loading at that speed (padded with the model).
-        attrs: the run's scalar attributes (what a record file of it stores).
+        attrs: the run's scalar attributes (what a record file of it stores; ``added_particles`` where the scene
+            added particles to the sample, its rollers: the sample's last ones).
         start: the state the run starts from (``None``: the model at rest).
         steps_done: the steps of the run before ``start`` (0 from rest; a resumed run's steps so far).
         transit_time: the time an elastic wave needs to cross the sample along the scene's path [s] (the slowest
@@ -161,6 +162,9 @@ def plan(sample, scene, params, *, dt=None, safety=0.5, damping=0.7, loading_tim
     attrs = dict(method="dem", scene=type(scene).__name__, dt=dt, dt_crit=float(min(dt_crit)), speed=float(speed),
                  gauge_length=length, area=area, target_displacement=target, damping=float(damping), chunk=chunk,
                  contact_law=model.contact_law, breakage=breaks, failure_rule=model.failure_rule)
+    beam = getattr(scene, "beam_particles", None)  # a scene that added particles (rollers) to the sample
+    if beam is not None:
+        attrs["added_particles"] = sample.n_particles - int(beam)
     return Plan(model=model, size=size, breakage=breaks, dt=dt, dt_crit=dt_crit, damping=damping,
                 gauge_length=length, area=area, target=target, loading_time=float(loading_time), n_steps=n_steps,
                 chunk=chunk, speed=speed, load=load, attrs=attrs, start=state, transit_time=float(crossing))

@@ -60,7 +60,9 @@ class Scene(Protocol):
 
     A scene may also have ``stop_after_peak`` (the strength scenes do): the DEM stops a run with breakage once the
     force has fallen to that fraction of its peak (see :attr:`AxialScene.stop_after_peak`); a scene without it runs
-    to its full strain.
+    to its full strain. A scene that adds particles to the sample (the rollers of
+    ``ThreePointBending(rollers=True)``) has ``stage(sample) -> (specimen, scene)``: :func:`jaxbpm.solve` calls it
+    first and the solvers see the specimen, the added particles last (``stats["added_particles"]`` counts them).
     """
 
     methods: tuple[str, ...]

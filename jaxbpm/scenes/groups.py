@@ -18,7 +18,8 @@ A scene's group field (``UniaxialCompression(fixed=..., driven=...)``, ``ThreePo
 A scene keeps a group as it is given; :func:`clamped_groups` turns the pair into masks when the scene's ``layers`` is
 called (once per sample and scene: the masks are cached), and raises :class:`~jaxbpm.errors.GroupError` naming the
 group and the particles for a group that selects nothing or does not fit the sample, two groups that share particles,
-and particles of one group with no bond path to the other (they carry no load; the message says which).
+and particles of one group with no bond path to the other (they carry no load; the message says which; where the scene
+has contacts, a group's particle touching another at rest is joined to it, as a roller disc resting on a beam).
 The specs are frozen and hashable, so a scene holding them keys the solvers' setup caches as it is.
 """
 
@@ -35,7 +36,7 @@ from jaxbpm._validate import listed
 from jaxbpm.errors import GroupError
 from jaxbpm.sample import Sample
 
-__all__ = ["Group", "Ids", "Type", "Region", "Layer", "select", "clamped_groups"]
+__all__ = ["Group", "Ids", "Type", "Region", "Layer", "select", "clamped_groups", "touching_pairs"]
 
 _AXES = "xyz"
 
@@ -400,19 +401,57 @@ def _where(spec, sample: Sample) -> str:
     return f" (the particle centres span {[float(f'{v:.6g}') for v in lo]} .. {[float(f'{v:.6g}') for v in hi]})"
 
 
-def _connection(sample: Sample, group: np.ndarray, other: np.ndarray, names: tuple[str, str]) -> None:
-    """Raise where particles of ``group`` lie in bonded clusters that hold no particle of ``other``."""
-    labels = sample.clusters()
+def touching_pairs(sample: Sample, group: np.ndarray, tol: float | None = None) -> np.ndarray:
+    """The pairs of particles, one of ``group``, that touch at rest: a path for the load where contacts are on.
+
+    Args:
+      sample: the specimen.
+      group: ``[n]`` booleans, the particles whose contacts are looked for.
+      tol: the largest gap [m] of a pair that touches (``None``: 1e-6 of the mean particle radius).
+
+    Returns:
+      ``[k, 2]`` integer pairs ``(i, j)``, ``i`` in ``group``, ``j != i``, whose gap ``|x_j - x_i| - r_i - r_j`` is
+      at most ``tol``.
+    """
+    from scipy.spatial import cKDTree
+
+    pos, rad = np.asarray(sample.positions, np.float64), np.asarray(sample.radii, np.float64)
+    tol = 1e-6 * float(np.mean(rad)) if tol is None else float(tol)
+    rows = np.flatnonzero(group)
+    near = cKDTree(pos).query_ball_point(pos[rows], rad[rows] + rad.max() + tol)
+    pairs = np.array([(i, j) for i, js in zip(rows, near) for j in js if j != i], np.int64).reshape(-1, 2)
+    gap = np.linalg.norm(pos[pairs[:, 1]] - pos[pairs[:, 0]], axis=1) - rad[pairs[:, 0]] - rad[pairs[:, 1]]
+    return pairs[gap <= tol]
+
+
+def _labels(sample: Sample, touching) -> np.ndarray:
+    """The clusters of particles joined by bonds and by the ``touching`` pairs (``None``: by bonds alone)."""
+    if touching is None or not len(touching):
+        return sample.clusters()
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges = np.concatenate([np.asarray(sample.bonds, np.int64).reshape(-1, 2), np.asarray(touching, np.int64)])
+    n = sample.n_particles
+    return connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
+                                directed=False)[1]
+
+
+def _connection(sample: Sample, group: np.ndarray, other: np.ndarray, names: tuple[str, str], touching=None) -> None:
+    """Raise where particles of ``group`` lie in clusters (of bonds, and of the ``touching`` pairs) that hold no
+    particle of ``other``."""
+    labels = _labels(sample, touching)
+    path = "bond path" if touching is None else "path of bonds or contacts"
     reaches = np.zeros(labels.max() + 1, bool)
     reaches[labels[other]] = True
     cut = np.flatnonzero(group & ~reaches[labels])
     if not cut.size:
         return
     if cut.size == group.sum():
-        raise GroupError(f"no bond path joins {names[0]} and {names[1]}: the sample carries no load between them "
+        raise GroupError(f"no {path} joins {names[0]} and {names[1]}: the sample carries no load between them "
                          f"(their particles lie in different bonded clusters; Sample.clusters() labels them)",
                          names[0], cut)
-    raise GroupError(f"{names[0]} particles {listed(cut)} have no bond path to {names[1]} (they lie in bonded "
+    raise GroupError(f"{names[0]} particles {listed(cut)} have no {path} to {names[1]} (they lie in bonded "
                      f"clusters that hold no {names[1]} particle, so they carry no load): leave them out of the "
                      f"group, or solve sample.largest_cluster()", names[0], cut)
 
@@ -421,7 +460,8 @@ _RESOLVED: collections.OrderedDict = collections.OrderedDict()  # (id(sample), k
 
 
 def clamped_groups(sample: Sample, first, second, *, axis: int = 2, layer_thickness: float | None = None,
-                   names: tuple[str, str] = ("fixed", "driven")) -> tuple[np.ndarray, np.ndarray]:
+                   names: tuple[str, str] = ("fixed", "driven"),
+                   contacts: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """The masks of a scene's two clamped groups, checked against each other; cached per sample and groups.
 
     Args:
@@ -430,14 +470,18 @@ def clamped_groups(sample: Sample, first, second, *, axis: int = 2, layer_thickn
       axis: the scene's load axis.
       layer_thickness: the scene's layer thickness [m] (for a :class:`Layer` without its own).
       names: the groups' names in messages.
+      contacts: the scene has contacts: a group's particle that touches another particle at rest
+        (:func:`touching_pairs`) is joined to it as by a bond (a roller disc resting on a beam carries the load
+        through its contact).
 
     Returns:
       ``(first [n], second [n])``: boolean masks, each non-empty, disjoint.
 
     Raises:
-      GroupError: as :func:`select`; particles in both groups; particles of one group with no bond path to the other.
+      GroupError: as :func:`select`; particles in both groups; particles of one group with no path to the other
+        (of bonds; with ``contacts``, of bonds and of the groups' contacts at rest).
     """
-    key = (first, second, axis, layer_thickness, names)
+    key = (first, second, axis, layer_thickness, names, bool(contacts))
     key = key if hashable(key) else content_key(key)
     hit = _RESOLVED.get((id(sample), key)) if key is not None else None
     if hit is not None and hit[0]() is sample:
@@ -448,8 +492,9 @@ def clamped_groups(sample: Sample, first, second, *, axis: int = 2, layer_thickn
     if both.size:
         raise GroupError(f"{both.size} particles are in both {names[0]} and {names[1]}: {listed(both)}; give "
                          f"disjoint groups (for layers, a thinner layer_thickness)", names[0], both)
-    _connection(sample, b, a, names[::-1])
-    _connection(sample, a, b, names)
+    touching = touching_pairs(sample, a | b) if contacts else None
+    _connection(sample, b, a, names[::-1], touching)
+    _connection(sample, a, b, names, touching)
     if key is not None:
         _RESOLVED[(id(sample), key)] = (weakref.ref(sample), a, b)
         while len(_RESOLVED) > 32:

@@ -11,7 +11,7 @@ from jaxbpm import SceneError
 from jaxbpm._compile import content_key, count_compilations
 from jaxbpm.errors import GroupError
 from jaxbpm.scenes import BrazilianDisc, Ids, Layer, Region, ThreePointBending, Type, UniaxialCompression
-from jaxbpm.scenes.groups import clamped_groups, select
+from jaxbpm.scenes.groups import clamped_groups, select, touching_pairs
 
 R = 1e-3
 pytestmark = pytest.mark.xdist_group("groups")
@@ -229,3 +229,18 @@ def test_brazilian_groups_reproduce_its_strips():
     assert BrazilianDisc(platens="walls", fixed=fixed, driven=driven).uses_walls is False
     with pytest.raises(SceneError, match="give both fixed and driven"):
         BrazilianDisc(fixed=fixed)
+
+
+def test_touching_pairs_and_a_contact_path_between_groups():
+    # three unbonded discs in a row: 0 and 1 touch, 2 lies a hundredth of a radius away from 1
+    x = np.array([[0.0, 0.0], [2 * R, 0.0], [4.01 * R, 0.0]])
+    s = jaxbpm.Sample.from_arrays(x, R, np.zeros((0, 2), int), bond_radius=R)
+    pairs = touching_pairs(s, np.array([True, True, True]))
+    assert sorted(map(tuple, pairs.tolist())) == [(0, 1), (1, 0)]
+    assert len(touching_pairs(s, np.array([False, True, False]), tol=0.02 * R)) == 2  # (1, 0) and (1, 2)
+    a, b = clamped_groups(s, [0], [1], contacts=True)
+    assert a.tolist() == [True, False, False] and b.tolist() == [False, True, False]
+    with pytest.raises(GroupError, match="no bond path"):
+        clamped_groups(s, [0], [1])
+    with pytest.raises(GroupError, match="no path of bonds or contacts"):
+        clamped_groups(s, [0], [2], contacts=True)
