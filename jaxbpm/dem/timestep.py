@@ -28,7 +28,10 @@ def critical_time_step(model: Model, params, *, contact_overlap: float = 0.01, i
     step (scaled) to round-off.
     Contacts and walls add ``z k_c / m`` with the Hertz (or cohesive-law) stiffness at an overlap of
     ``contact_overlap`` times the smallest radius (z = 12 neighbours, 1 wall); the linear law's stiffness is
-    constant: its larger of k_n and the shear spring with the rotation's lever (``_linear_omega2``).
+    constant: its larger of k_n and the shear spring with the rotation's lever (``_linear_omega2``). Discs count
+    twelve too, not their six neighbours: the stiffest mode of a hexagonal packing of equal discs is ``8 max(k_n,
+    3 k_s) / m`` (all discs turning at once against their shear springs), up to ``9 max(k_n, k_s) / m`` without
+    rotations.
 
     Args:
         model: the run's model.

@@ -460,12 +460,14 @@ def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extr
 
 def _disc_turns(orientations, dim):
     """The orientations transposed for the bond pass: ``[4, n]`` quaternions, or for discs ``[3, n]`` rows (theta,
-    cos theta, sin theta): one sine and cosine per disc, not two of each per bond; ``None`` without rotations."""
+    cos theta, sin theta) by :func:`jaxbpm.physics.bond2d.cos_sin` (arithmetic: XLA copies the rows into the gathers
+    of both ends of every bond, where ``jnp.cos`` and ``jnp.sin`` cost library calls per bond); ``None`` without
+    rotations."""
     if orientations is None:
         return None
     if dim == 2:
         theta = orientations[:, 0]
-        return jnp.stack([theta, jnp.cos(theta), jnp.sin(theta)])
+        return jnp.stack([theta, *bond2d.cos_sin(theta)])
     return orientations.T
 
 

@@ -40,9 +40,51 @@ Examples:
 
 from __future__ import annotations
 
+import math
+
 import jax.numpy as jnp
 
-__all__ = ["law_components", "rotate"]
+__all__ = ["law_components", "rotate", "cos_sin"]
+
+#: pi / 2 in three parts of 33 significant bits or fewer (fdlibm's pio2_1, pio2_2 and pio2_2t): ``k`` times each is
+#: exact for ``|k| < 2^20``, so ``theta - k pi / 2`` is the remainder to the last bit of the double
+_PIO2 = (1.57079632673412561417e+00, 6.07710050630396597660e-11, 2.02226624879595063154e-21)
+#: the Taylor coefficients of sin(r) / r and cos(r) in r^2, up to r^18: below 1e-17 of the value for |r| <= pi / 4
+_SIN = tuple((-1) ** k / math.factorial(2 * k + 1) for k in range(10))
+_COS = tuple((-1) ** k / math.factorial(2 * k) for k in range(10))
+
+
+def cos_sin(theta):
+    """The cosine and sine of angles, by arithmetic alone: the remainder ``r`` of ``theta`` modulo pi / 2 (Cody and
+    Waite's three-part reduction), the Taylor polynomials of ``cos r`` and ``sin r`` and the quadrant's swap.
+
+    In float64 the values are those of ``jnp.cos`` and ``jnp.sin`` to a few units in the last place (absolute errors
+    below 3e-16) for ``|theta| < 1e6`` rad (160,000 turns). XLA on CPU computes those by a library call per element,
+    and some programs (a bond pass compiled on its own) copy them into the gathers of both ends of every bond: several
+    calls per bond. The polynomial is arithmetic that XLA vectorises, wherever it places it.
+
+    In float32 (x64 off), where the three-part reduction is not exact, it is ``jnp.cos`` and ``jnp.sin``.
+
+    Args:
+        theta: angles [rad], any shape.
+
+    Returns:
+        ``(cos theta, sin theta)``, each shaped as ``theta``.
+    """
+    theta = jnp.asarray(theta)
+    if theta.dtype != jnp.float64:
+        return jnp.cos(theta), jnp.sin(theta)
+    k = jnp.round(theta * (2.0 / math.pi))
+    r = ((theta - k * _PIO2[0]) - k * _PIO2[1]) - k * _PIO2[2]
+    r2 = r * r
+    s, c = _SIN[-1], _COS[-1]
+    for a, b in zip(_SIN[-2::-1], _COS[-2::-1]):
+        s, c = a + r2 * s, b + r2 * c
+    s = r * s
+    quarter = k - 4.0 * jnp.floor(0.25 * k)  # 0, 1, 2 or 3: theta = r + quarter pi / 2 (mod 2 pi)
+    cos = jnp.where(quarter == 0, c, jnp.where(quarter == 1, -s, jnp.where(quarter == 2, -c, s)))
+    sin = jnp.where(quarter == 0, s, jnp.where(quarter == 1, c, jnp.where(quarter == 2, -s, -c)))
+    return cos, sin
 
 
 def rotate(theta, v):
@@ -67,7 +109,7 @@ def law_components(d, r0, theta_i, theta_j, kn, kt, kb, turn_i=None, turn_j=None
         theta_i, theta_j: the discs' rotations from the reference state [rad].
         kn, kt, kb: the normal, shear and bending stiffnesses.
         turn_i, turn_j: ``(cos theta, sin theta)`` of each disc when known (computed once per disc and gathered per
-            bond, they spare the bond pass four sines and cosines a bond); ``None``: computed here.
+            bond); ``None``: :func:`cos_sin` of the angles.
 
     Returns:
         ``(f_i, m_i, m_j, normal, shear, twist, bend)``, the fields of
@@ -76,22 +118,25 @@ def law_components(d, r0, theta_i, theta_j, kn, kt, kb, turn_i=None, turn_j=None
         a disc has no twist).
     """
     length0 = jnp.sqrt(r0[0] * r0[0] + r0[1] * r0[1])
-    length = jnp.sqrt(d[0] * d[0] + d[1] * d[1])
-    inv = 1.0 / length
-    n = (d[0] * inv, d[1] * inv)
+    dd = d[0] * d[0] + d[1] * d[1]
+    length = jnp.sqrt(dd)
     h = (0.5 * r0[0], 0.5 * r0[1])
     a_i, a_j = _turn(theta_i, turn_i, h), _turn(theta_j, turn_j, h)
     delta = (d[0] - a_i[0] - a_j[0], d[1] - a_i[1] - a_j[1])
-    slide = kt * (n[0] * delta[1] - n[1] * delta[0])  # k_t (delta . t), t = (-n_y, n_x)
-    shear = (-slide * n[1], slide * n[0])
+    # F_s = k_t (delta . t) t with t = (-d_y, d_x) / |d|: the forces and moments are d's components times the two
+    # divisions below, which XLA on CPU computes once per bond in loops of their own (products it copies into every
+    # force and moment component it fuses them with: the rotations and projections six times a bond)
+    across = kt * (d[0] * delta[1] - d[1] * delta[0]) / dd  # k_t (delta . t) / |d|
     normal = kn * (length - length0)
+    stretch = normal / length
+    shear = (-across * d[1], across * d[0])
     bend = kb * (theta_j - theta_i)
-    lever = 0.5 * (d[0] * shear[1] - d[1] * shear[0])
-    f_i = (normal * n[0] + shear[0], normal * n[1] + shear[1])
+    lever = 0.5 * across * dd  # (d / 2) x F_s
+    f_i = (stretch * d[0] + shear[0], stretch * d[1] + shear[1])
     return f_i, (lever + bend,), (lever - bend,), normal, shear, jnp.zeros_like(normal), (bend,)
 
 
 def _turn(theta, turn, v):
-    """:func:`rotate`, with ``turn = (cos theta, sin theta)`` when known (``None``: computed from ``theta``)."""
-    c, s = (jnp.cos(theta), jnp.sin(theta)) if turn is None else turn
+    """:func:`rotate`, with ``turn = (cos theta, sin theta)`` when known (``None``: :func:`cos_sin` of ``theta``)."""
+    c, s = cos_sin(theta) if turn is None else turn
     return c * v[0] - s * v[1], s * v[0] + c * v[1]

@@ -178,3 +178,40 @@ def test_linear_contacts_between_discs_time_step_is_safe_and_the_run_stable():
     # discs); past the exact limit the motion grows beyond it (until the contacts part: the soft bonds hold the discs)
     bound = 4 * 0.5 * (1e9 * 0.1) * (0.02 * R) ** 2
     assert kinetic(dt) < bound < kinetic(3.0 * exact)
+
+
+@pytest.mark.filterwarnings("ignore:linear contacts:UserWarning")  # the cluster overlaps at rest on purpose
+def test_linear_contacts_in_a_dense_hexagonal_disc_cluster():
+    """The densest packing of equal discs (6 touching neighbours each, overlapping by 1 % of R, soft bonds): the
+    estimate, ``12 max(k_n, 3 k_s) / m`` for the contacts, is safe and the run at it bounded; well past the exact
+    limit the run diverges. The exact limit here is ``omega^2 = 7.5 max(k_n, 3 k_s) / m`` (the infinite lattice's is
+    8, by Bloch waves; the rotation mode of all discs at once, ``24 k_s / m``): six neighbours in place of twelve would
+    put the estimate above it."""
+    lattice = jaxbpm.generate.lattice("hex", (5, 5), R)
+    s = jaxbpm.Sample.from_arrays(0.99 * np.asarray(lattice.positions), R, np.asarray(lattice.bonds),
+                                  bond_radius_ratio=0.5, thickness=0.1, materials={"E": 1e7, "nu": 0.25},
+                                  particle_material={"E": 1e9, "nu": 0.25, "friction": 1e3, "restitution": 0.5})
+    kratio = 1.21
+    model = build_model(s, contacts=True, contact_law=linear.LinearLaw(emod=1e9, kratio=kratio))
+    omega2 = _disc_omega2_max(s, model)
+    exact = 2.0 / np.sqrt(omega2)
+    dt = critical_time_step(model, default_params(s))
+    assert 0.75 * exact < dt < exact, (dt, exact)
+    kn, m = 1e9 * 0.1, float(np.min(np.asarray(s.mass)))  # k_n = E* t between equal discs
+    assert 7 < omega2 * m / max(kn, 3 * kn / kratio) < 8
+    n = s.n_particles
+    empty = jnp.zeros((0, 2))
+    load = jaxbpm.dem.Loading(clamped=jnp.zeros(n, bool), velocity=jnp.zeros((n, 2)), wall_points0=empty,
+                              wall_normals=empty, wall_velocity=empty)
+    contacts = lattice.n_bonds  # the touching pairs are the lattice's bonds
+    bound = contacts * 0.5 * kn * (0.02 * R) ** 2  # the start's strain energy
+
+    def kinetic(step):
+        try:
+            final = jaxbpm.dem.simulate(model, default_params(s), load, dt=step, n_steps=4000, chunk=4000)[0]
+        except InstabilityError:
+            return np.inf
+        v = np.asarray(final.velocities)
+        return 0.5 * float(np.sum(np.asarray(s.mass)[:, None] * v**2)) if np.all(np.isfinite(v)) else np.inf
+
+    assert kinetic(dt) < bound < kinetic(2.5 * exact)

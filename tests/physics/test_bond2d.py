@@ -170,3 +170,64 @@ def test_bond_pass_sums_the_law_of_each_intact_bond(block):
     assert 0.5 < float(jnp.mean(intact)) < 0.9
     np.testing.assert_allclose(force, want_f, rtol=1e-12, atol=1e-12 * np.abs(want_f).max())
     np.testing.assert_allclose(moment, want_m, rtol=1e-12, atol=1e-12 * np.abs(want_m).max())
+
+
+def test_cos_sin_is_the_cosine_and_sine():
+    jax.config.update("jax_enable_x64", True)
+    rng = np.random.default_rng(0)
+    quarters = np.arange(-400, 401) * np.pi / 4
+    theta = np.concatenate([rng.uniform(-1e-6, 1e-6, 1000), rng.uniform(-4, 4, 20000), rng.uniform(-1e3, 1e3, 20000),
+                            rng.uniform(-1e6, 1e6, 20000), quarters, quarters + 1e-9, quarters - 1e-13, [0.0]])
+    c, s = (np.asarray(v) for v in bond2d.cos_sin(jnp.asarray(theta)))
+    assert np.abs(c - np.cos(theta)).max() < 3e-16 and np.abs(s - np.sin(theta)).max() < 3e-16
+    # near zero the sine keeps its relative precision; the unit circle to round-off
+    small = np.abs(theta) < 1e-6
+    assert np.all(np.abs(s[small] - np.sin(theta[small])) <= 2.3e-16 * np.abs(theta[small]))
+    assert np.abs(c * c + s * s - 1).max() < 1e-15
+    # derivatives (the DSM's tangents): d cos = -sin, d sin = cos
+    dc, ds = jax.vmap(jax.grad(lambda t: bond2d.cos_sin(t)[0]))(jnp.asarray(theta[:2000])), jax.vmap(
+        jax.grad(lambda t: bond2d.cos_sin(t)[1]))(jnp.asarray(theta[:2000]))
+    assert np.abs(np.asarray(dc) + s[:2000]).max() < 1e-15 and np.abs(np.asarray(ds) - c[:2000]).max() < 1e-15
+    # float32: jnp.cos and jnp.sin themselves
+    c32, s32 = bond2d.cos_sin(jnp.asarray(theta[:5000], jnp.float32))
+    assert c32.dtype == jnp.float32 and np.array_equal(c32, jnp.cos(jnp.asarray(theta[:5000], jnp.float32)))
+
+
+def test_law_is_the_kinematics_of_the_module_docstring():
+    """The law, as the pass and the one-bond API run it, against the docstring's formulas transcribed in NumPy
+    (n = d / |d|, the half-vectors turned by NumPy's cos and sin), at large and small rotations and deformations."""
+    jax.config.update("jax_enable_x64", True)
+    rng = np.random.default_rng(3)
+    m = 500
+    phi = rng.uniform(-np.pi, np.pi, m)
+    r0 = L * np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    theta = np.concatenate([rng.normal(0, 1e-4, (m // 2, 2)), rng.uniform(-7, 7, (m - m // 2, 2))])
+    common = rng.uniform(-3, 3, m)  # a rigid turn of the pair, plus a deformation of 1e-6 to 1e-2 of L
+    c, s = np.cos(common), np.sin(common)
+    d = np.stack([c * r0[:, 0] - s * r0[:, 1], s * r0[:, 0] + c * r0[:, 1]], axis=1)
+    d += L * 10.0 ** rng.uniform(-6, -2, (m, 1)) * rng.normal(size=(m, 2))
+    kn, kt, kb = (np.full(m, v) * rng.uniform(0.5, 2, m) for v in _k()[:2] + (_k().kb,))
+
+    def turned(t, v):
+        return np.stack([np.cos(t) * v[:, 0] - np.sin(t) * v[:, 1], np.sin(t) * v[:, 0] + np.cos(t) * v[:, 1]], 1)
+
+    length = np.linalg.norm(d, axis=1)
+    n = d / length[:, None]
+    t = np.stack([-n[:, 1], n[:, 0]], axis=1)
+    delta = d - turned(theta[:, 0], r0 / 2) - turned(theta[:, 1], r0 / 2)
+    shear = (kt * np.sum(delta * t, axis=1))[:, None] * t
+    normal = kn * (length - np.linalg.norm(r0, axis=1))
+    bend = kb * (theta[:, 1] - theta[:, 0])
+    lever = 0.5 * (d[:, 0] * shear[:, 1] - d[:, 1] * shear[:, 0])
+    f_i = normal[:, None] * n + shear
+    f, m_i, m_j, nrm, sh, _, bd = bond2d.law_components(tuple(jnp.asarray(d.T)), tuple(jnp.asarray(r0.T)),
+                                                       jnp.asarray(theta[:, 0]), jnp.asarray(theta[:, 1]),
+                                                       *(jnp.asarray(v) for v in (kn, kt, kb)))
+    scale_f = kn * L * 1e-6 + np.abs(normal) + np.linalg.norm(shear, axis=1)  # forces, to round-off of their size
+    np.testing.assert_array_less(np.abs(np.stack(f, 1) - f_i).max(axis=1), 1e-11 * scale_f)
+    np.testing.assert_array_less(np.abs(np.stack(sh, 1) - shear).max(axis=1), 1e-11 * scale_f)
+    np.testing.assert_array_less(np.abs(np.asarray(nrm) - normal), 1e-11 * scale_f)
+    scale_m = L * scale_f + np.abs(bend)
+    np.testing.assert_array_less(np.abs(np.asarray(m_i[0]) - (lever + bend)), 1e-11 * scale_m)
+    np.testing.assert_array_less(np.abs(np.asarray(m_j[0]) - (lever - bend)), 1e-11 * scale_m)
+    assert np.array_equal(np.asarray(bd[0]), bend)
