@@ -17,7 +17,7 @@ def pin_threads(threads: int | None) -> None:
         os.sched_setaffinity(0, cores)
     flags = os.environ.get("XLA_FLAGS", "")
     if threads == 1 and "multi_thread_eigen" not in flags:
-        os.environ["XLA_FLAGS"] = (flags + " --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1").strip()
+        os.environ["XLA_FLAGS"] = (flags + " --xla_cpu_multi_thread_eigen=false").strip()
     os.environ.setdefault("OMP_NUM_THREADS", str(threads))
 
 

@@ -66,7 +66,7 @@ What is compared
   the best) over its ~20 jitted chunks (jaxbpm, compilation excluded) or ``run M pre no post no`` segments after a
   ``run 0`` setup (LAMMPS, Cundall protocol). Background load on the machine shows up as noise: compare the best
   values as well. Both pinned to the same core, run one after the other; jaxbpm with
-  ``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``, LAMMPS serial with
+  ``XLA_FLAGS=--xla_cpu_multi_thread_eigen=false``, LAMMPS serial with
   ``OMP_NUM_THREADS=1``.
 
 Differences between the two bond laws (documented, not hidden)

@@ -33,7 +33,7 @@ The ``bonds`` scene (default)
   CPU-time rates (steps over the process's CPU seconds) beside them, the least noisy on a shared machine. Both
   pinned to the same core, one after the other (jaxbpm first, then LAMMPS in a subprocess of this script, since
   its MPI library must be on ``LD_LIBRARY_PATH`` when the process starts); jaxbpm with ``XLA_FLAGS=
-  --xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1``, LAMMPS serial with ``OMP_NUM_THREADS=1``.
+  --xla_cpu_multi_thread_eigen=false``, LAMMPS serial with ``OMP_NUM_THREADS=1``.
   Each code's run is timed once (no repetition, no best-of): the wall time of the call beside its setup, compile
   and kernel (steps) time. jaxbpm runs twice, with its defaults (a bonds-only run is padded to its size class, so
   that samples of about the same size share one compiled program: about 13 % more bonds and discs computed) and with
