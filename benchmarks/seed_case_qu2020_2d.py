@@ -19,7 +19,7 @@ the specimens' dimensions, the porosity or the supports; the choices (see ``docs
 Then (a) the paper's own parameter sets (Table 4 rows 0 and 6, Table 5 row 3) forward over several packings, and (b)
 ``jaxbpm.calibrate.calibrate_strength`` with the original and the simplified scheme from Eq. 14's starting point,
 printed beside Tables 4 and 5, and jaxbpm's own scheme (``--schemes lab``: the strength stage of
-``jaxbpm.calibrate.lab``, the same two estimates, then Gauss-Newton steps with Broyden updates).
+``jaxbpm.calibrate.lab``, the same two estimates, then Gauss-Newton steps).
 
     python benchmarks/seed_case_qu2020.py --2d --quick          # ~2,250 + ~6,700 discs
     python benchmarks/seed_case_qu2020.py --2d                  # 22,507 + 66,743 discs
@@ -202,7 +202,7 @@ def _calibrate(args, out: dict) -> None:
     out["calibration"] = {}
     for scheme in args.schemes:
         t0 = time.perf_counter()
-        if scheme == "lab":  # jaxbpm's own: the strength stage of calibrate.lab (Gauss-Newton, Broyden updates)
+        if scheme == "lab":  # jaxbpm's own: the strength stage of calibrate.lab (Gauss-Newton steps)
             res = lab({"ucs": cyl, "flexural": beam}, TARGETS, scenes={"ucs": ucs, "flexural": tpb}, tol=args.tol,
                       max_iterations=args.max_iterations[scheme], solve_options={"transits": args.transits},
                       progress=True).stages["strength"]
@@ -262,7 +262,7 @@ def main(argv=None):
     ap.add_argument("--tol", type=float, default=0.05)
     ap.add_argument("--schemes", nargs="*", default=["original", "simplified", "lab"],
                     choices=["original", "simplified", "lab"], help="Qu et al.'s two schemes, and jaxbpm's own (the "
-                    "strength stage of calibrate.lab: Gauss-Newton steps with Broyden updates)")
+                    "strength stage of calibrate.lab: Gauss-Newton steps)")
     ap.add_argument("--parts", nargs="+", default=["forward", "calibrate"],
                     choices=["forward", "calibrate", "paper-beam"])
     ap.add_argument("--out", default=None)

@@ -8,7 +8,7 @@ tensile strength and flexural strength.
    bond modulus and Poisson ratio then hold for every specimen.
 2. **Strength** (``ucs``, ``bts``, ``flexural``): the bond tensile strength ``sigma_c`` and shear strength ``tau_c`` by
    DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (the Jacobian from the estimates'
-   secant and finite differences across it, Broyden updates; one parameter set per iteration): ``tau_c`` is tied to the
+   secant and finite differences across it, then the plane through every set seen; one parameter set per iteration): ``tau_c`` is tied to the
    UCS (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
    fail in tension). A strength target without its tied parameter's partner leaves the other at its current value. The
    failure runs of one iteration go to ``executor`` when given (:mod:`jaxbpm.parallel`).
@@ -362,8 +362,8 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
                     executor, progress, kept=None):
     """Bond strengths by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space on a
     Jacobian from the two estimates' secant along their direction and finite differences across it
-    (:func:`_first_jacobian`; its perturbed runs batched: one task each on ``executor``), updated by Broyden's rule
-    after every step (one parameter set per iteration). ``kept`` (a dict) receives the observations of the answer's
+    (:func:`_first_jacobian`; its perturbed runs batched: one task each on ``executor``), then by the plane fitted
+    to every set seen (:func:`_fitted_jacobian`) after every step (one parameter set per iteration). ``kept`` (a dict) receives the observations of the answer's
     own runs by scene, where they are still held (:attr:`Problem.observed`). Elastic-brittle strengths are close to
     homogeneous of degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of
     the bonds: the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1
@@ -434,9 +434,7 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
             break
         x_new = np.clip(x + dx, lo, hi)
         r_new = run(x_new[None], "newton")[0]
-        step_x, step_r = x_new - x, r_new - r
-        if np.dot(step_x, step_x) > 0:  # Broyden's update: the Jacobian learns from the step just taken
-            J = J + np.outer(step_r - J @ step_x, step_x) / np.dot(step_x, step_x)
+        J = _fitted_jacobian(seen, J)  # the plane through every set seen: it learns from the step just taken
         error = np.max(np.abs(np.expm1(r_new)))
         length = 1.0 if error < best[0] else 0.5 * length  # a worse set is not kept: the next step is half as long
         best = min(best, (error, x_new, r_new), key=lambda b: b[0])
@@ -444,16 +442,17 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     if kept is not None:  # the answer's own runs (their curves): no run again at the answer
         kept.update(problem.observed.get(tuple(np.exp(x).tolist()), {}))
     notes = ["estimates 1 and 2 of Qu et al. 2020 (Eq. 14-15), then Gauss-Newton steps in log space from the best "
-             "set so far (Jacobian by the estimates' secant and finite differences across it, Broyden updates, a "
-             "step that does worse halves the next)"]
+             "set so far (Jacobian by the estimates' secant and finite differences across it, then the plane "
+             "through every set seen; a step that does worse halves the next)"]
     if stalled is not None:
         notes.append("stopped: no step of 1 % or more is left to take from the best set; these targets are not "
                      "reached together by the bond strengths on these specimens (the linearised model's best: "
                      + ", ".join(f"{w} {e:+.1%}" for w, e in zip(wanted, stalled)) + ")")
     for j, key in enumerate(keys):
         if J is not None and np.max(np.abs(J[:, j])) < 0.05:
-            notes.append(f"{key} is barely determined by these targets (the strengths change by < {5 * fd_step:.0%} "
-                         f"when it changes by {fd_step:.0%}): it stays near its estimate; other values fit as well")
+            notes.append(f"{key} is barely determined by these targets (the strengths change by < "
+                         f"{0.05 * fd_step:.0%} when it changes by {fd_step:.0%}): it stays near its estimate; other "
+                         "values fit as well")
     return _common.make_result(problem, history, np.exp(x), np.expm1(r), method="lab-strength", tol=tol,
                                wall_time=time.perf_counter() - t_start, evaluations=problem.evaluations, notes=notes,
                                iterations=iterations + 2)
@@ -482,6 +481,24 @@ def _first_jacobian(run, x, r, seen, step):
         moves, changes = moves + list(across), changes + list(rs - r[None, :])
     # J @ moves^T = changes^T
     return np.linalg.solve(np.asarray(moves), np.asarray(changes)).T
+
+
+def _fitted_jacobian(seen, J):
+    """The Jacobian ``[m, n]`` of the plane fitted by least squares to every set seen (log bond strengths against
+    log strength over target), or ``J`` where those sets do not span the ``n`` parameters (fewer than ``n + 1``, or
+    on one line).
+
+    A rank-one (Broyden) update keeps only the last step's slope along its direction; where a strength bends (a UCS
+    that stops rising with ``tau_c`` once it is tension-limited), two steps along one direction that land on either
+    side of a target then leave a slope that points nowhere, and the iteration stalls. The plane through all the
+    sets bridges them.
+    """
+    X = np.array([xo for xo, _ in seen])
+    A = np.column_stack([np.ones(len(X)), X - X.mean(axis=0)])
+    if len(X) < A.shape[1] or np.linalg.matrix_rank(A) < A.shape[1]:
+        return J
+    coef = np.linalg.lstsq(A, np.array([ro for _, ro in seen]), rcond=None)[0]
+    return coef[1:].T
 
 
 def _curves(samples, scene_of, wanted, params, solve_options, achieved, targets, kept=None) -> tuple[dict, int]:

@@ -146,6 +146,32 @@ def test_first_jacobian_takes_the_estimates_secant_and_perturbs_across_it():
         assert calls == [("fd", n)]
 
 
+def test_fitted_jacobian_is_the_plane_through_the_sets_seen():
+    """Exact on strengths linear in log space (any sets that span the parameters); ``J`` kept where they do not.
+    On a UCS that bends (it stops rising with tau_c once tension-limited), the plane through sets on either side of
+    the target gives a step towards it from the best set, which lies on the flat part."""
+    from jaxbpm.calibrate.lab import _fitted_jacobian
+
+    rng = np.random.default_rng(1)
+    A, b = rng.normal(size=(2, 2)), rng.normal(size=2)
+    pts = rng.normal(size=(4, 2))
+    np.testing.assert_allclose(_fitted_jacobian([(p, p @ A.T + b) for p in pts], None), A, rtol=1e-9, atol=1e-12)
+    J0 = np.eye(2)
+    line = [(np.array([t, 2 * t]), np.array([t, t])) for t in (0.0, 1.0, 2.0)]
+    assert _fitted_jacobian(line, J0) is J0 and _fitted_jacobian(line[:2], J0) is J0
+
+    def r(x):  # log strength / target: flexural ~ sigma_c; the UCS rises with tau_c below a knee, flat above it
+        return np.array([x[0], 0.1 + np.minimum(x[1], 0.0)])
+
+    # the best set (flat part, UCS +10 %), the perturbed set across, a step far down (UCS -60 %), one back up
+    sets = [np.array(p) for p in ([0.0, 0.3], [0.1, 0.35], [0.02, -0.7], [0.01, 0.1])]
+    J = _fitted_jacobian([(p, r(p)) for p in sets], J0)
+    x = sets[0] + np.linalg.solve(J, -r(sets[0]))  # the Gauss-Newton step from the best set
+    # a step of tau_c down towards the UCS target (at -0.1), not past the set below it (the flat part's own slope,
+    # 0, gives no step at all)
+    assert -0.7 < x[1] < sets[0][1] - 0.1 and abs(x[0]) < 0.05, (J, x)
+
+
 def test_conventions_of_a_2d_sample():
     """A 2D sample's answer in other codes: LAMMPS (dimension 2) from the 2 r_b x t rectangle (A = 2 r_b t,
     I = (2 r_b)^3 t / 12), PFC2D's per-area values, and no numbers for the codes without a 2D form."""
