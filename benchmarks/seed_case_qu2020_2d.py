@@ -24,6 +24,7 @@ printed beside Tables 4 and 5, and jaxbpm's own scheme (``--schemes lab``: the s
     python benchmarks/seed_case_qu2020.py --2d --quick          # ~2,250 + ~6,700 discs
     python benchmarks/seed_case_qu2020.py --2d                  # 22,507 + 66,743 discs
     python benchmarks/seed_case_qu2020.py --2d --parts paper-beam --seeds 0   # one timed 22,507-disc beam run
+    python benchmarks/seed_case_qu2020.py --2d --quick --parts ucs-rate --seeds 0   # the UCS against the rate
 """
 
 from __future__ import annotations
@@ -227,6 +228,19 @@ def _calibrate(args, out: dict) -> None:
                                       "qu2020_models": QU2020_MODELS.get(scheme, QU2020_MODELS["original"])}
 
 
+def _ucs_rate(args, out: dict) -> None:
+    """The UCS of one packing at Table 4 row 0 against the loading time (``--rates``, in elastic-wave transits)."""
+    cyl, ucs = ucs_specimen(args.ucs_n, args.seeds[0])
+    ten, coh, _, u_paper = TABLE4[0]
+    rows = []
+    for transits in args.rates:
+        u, wall, stats = strength(cyl, ucs, ten, coh, transits)
+        rows.append({"transits": transits, "ucs": u, "ucs_vs_paper": u / u_paper - 1, "wall_s": wall, **stats})
+        print(f"UCS at {transits:g} transits: {u / 1e9:.4f} GPa (paper {u_paper / 1e9:.3f}, "
+              f"{100 * (u / u_paper - 1):+.1f} %), {stats['steps']} steps, {wall:.0f} s, {stats}", flush=True)
+    out["ucs_rate"] = {"discs": cyl.n_particles, "bonds": cyl.n_bonds, "seed": args.seeds[0], "rows": rows}
+
+
 def _paper_beam(args, out: dict) -> None:
     """One forward failure run of the paper-size beam (Table 4 row 0), timed."""
     t0 = time.perf_counter()
@@ -264,7 +278,9 @@ def main(argv=None):
                     choices=["original", "simplified", "lab"], help="Qu et al.'s two schemes, and jaxbpm's own (the "
                     "strength stage of calibrate.lab: Gauss-Newton steps)")
     ap.add_argument("--parts", nargs="+", default=["forward", "calibrate"],
-                    choices=["forward", "calibrate", "paper-beam"])
+                    choices=["forward", "calibrate", "paper-beam", "ucs-rate"])
+    ap.add_argument("--rates", type=float, nargs="+", default=[30.0, 90.0, 270.0, 810.0],
+                    help="the loading times of --parts ucs-rate, in elastic-wave transits")
     ap.add_argument("--out", default=None)
     args = ap.parse_args(argv)
     if args.quick:
@@ -276,7 +292,8 @@ def main(argv=None):
     out = {"benchmark": "seed_case_qu2020_2d", "machine": machine_info(), "settings": vars(args), "targets": TARGETS,
            "qu2020": {"table4": TABLE4, "table5": TABLE5, "models": QU2020_MODELS}}
     for part in args.parts:
-        {"forward": _forward, "calibrate": _calibrate, "paper-beam": _paper_beam}[part](args, out)
+        parts = {"forward": _forward, "calibrate": _calibrate, "paper-beam": _paper_beam, "ucs-rate": _ucs_rate}
+        parts[part](args, out)
     out["total_time_s"] = time.perf_counter() - t0
     write_json(out_path, out)
     print(f"wrote {out_path}")

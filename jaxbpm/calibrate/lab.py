@@ -8,8 +8,9 @@ tensile strength and flexural strength.
    bond modulus and Poisson ratio then hold for every specimen.
 2. **Strength** (``ucs``, ``bts``, ``flexural``): the bond tensile strength ``sigma_c`` and shear strength ``tau_c`` by
    DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space (the Jacobian from the estimates'
-   secant and finite differences across it, then the plane through every set seen; one parameter set per iteration): ``tau_c`` is tied to the
-   UCS (compression fails the bonds in shear), ``sigma_c`` to the BTS where given, else to the flexural strength (both
+   secant and finite differences across it, then the plane through every set seen; one parameter set per
+   iteration): ``tau_c`` is tied to the UCS (compression fails the bonds in shear), ``sigma_c`` to the BTS where
+   given, else to the flexural strength (both
    fail in tension). A strength target without its tied parameter's partner leaves the other at its current value. The
    failure runs of one iteration go to ``executor`` when given (:mod:`jaxbpm.parallel`).
 3. **Translation**: the answer as the parameters of LAMMPS, PFC, Yade and MUSEN (:mod:`jaxbpm.interop.conventions`)
@@ -363,8 +364,9 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
     """Bond strengths by DEM failure runs: Qu et al.'s two estimates, then Gauss-Newton steps in log space on a
     Jacobian from the two estimates' secant along their direction and finite differences across it
     (:func:`_first_jacobian`; its perturbed runs batched: one task each on ``executor``), then by the plane fitted
-    to every set seen (:func:`_fitted_jacobian`) after every step (one parameter set per iteration). ``kept`` (a dict) receives the observations of the answer's
-    own runs by scene, where they are still held (:attr:`Problem.observed`). Elastic-brittle strengths are close to
+    to every set seen (:func:`_fitted_jacobian`) after every step (one parameter set per iteration). ``kept`` (a
+    dict) receives the observations of the answer's own runs by scene, where they are still held
+    (:attr:`Problem.observed`). Elastic-brittle strengths are close to
     homogeneous of degree one in (sigma_c, tau_c) together, so log strengths are close to linear in log strengths of
     the bonds: the steps converge in a few iterations where Adam's fixed learning rate crawls (a BTS is ~0.1
     sigma_c, so Qu et al.'s scaling by the target makes Adam's steps 10x too short)."""
