@@ -418,7 +418,7 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
         r = run(x[None], "estimate-2")[0]
         best = min(best, (np.max(np.abs(np.expm1(r))), x, r), key=lambda b: b[0])
     J = None
-    iterations, length, stalled = 0, 1.0, None
+    iterations, length, stalled, probed = 0, 1.0, None, set()
     while best[0] > tol and iterations < max_iterations:
         iterations += 1
         x, r = best[1], best[2]  # every step starts from the best set so far
@@ -431,11 +431,15 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
         # directions the strengths barely follow (singular values under 5 % of the largest) are left alone
         dx = np.linalg.lstsq(J, -r, rcond=0.05)[0]
         dx = length * np.clip(dx, -1.0, 1.0)  # at most a factor e per step, shortened after a step that did worse
+        kind = "newton"
         if np.max(np.abs(dx)) < 0.01:
-            stalled = np.expm1(r + J @ dx)
-            break
+            dx = _probe_step(J, r, tied, probed, tol)
+            if dx is None:
+                stalled = np.expm1(r + J @ np.linalg.lstsq(J, -r, rcond=0.05)[0])
+                break
+            kind = "probe"
         x_new = np.clip(x + dx, lo, hi)
-        r_new = run(x_new[None], "newton")[0]
+        r_new = run(x_new[None], kind)[0]
         J = _fitted_jacobian(seen, J)  # the plane through every set seen: it learns from the step just taken
         error = np.max(np.abs(np.expm1(r_new)))
         length = 1.0 if error < best[0] else 0.5 * length  # a worse set is not kept: the next step is half as long
@@ -445,7 +449,8 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
         kept.update(problem.observed.get(tuple(np.exp(x).tolist()), {}))
     notes = ["estimates 1 and 2 of Qu et al. 2020 (Eq. 14-15), then Gauss-Newton steps in log space from the best "
              "set so far (Jacobian by the estimates' secant and finite differences across it, then the plane "
-             "through every set seen; a step that does worse halves the next)"]
+             "through every set seen; a step that does worse halves the next; a bond strength the strengths do not "
+             "follow is probed by a factor 2 before the stage stops)"]
     if stalled is not None:
         notes.append("stopped: no step of 1 % or more is left to take from the best set; these targets are not "
                      "reached together by the bond strengths on these specimens (the linearised model's best: "
@@ -483,6 +488,24 @@ def _first_jacobian(run, x, r, seen, step):
         moves, changes = moves + list(across), changes + list(rs - r[None, :])
     # J @ moves^T = changes^T
     return np.linalg.solve(np.asarray(moves), np.asarray(changes)).T
+
+
+def _probe_step(J, r, tied, probed: set, tol: float):
+    """A step of a factor 2 in one bond strength that the strengths barely follow where it stands (its column of
+    ``J`` under 0.05) while its tied target is missed, in the direction that target asks for (strengths rise with
+    bond strengths); ``None`` when there is none left to probe (each is probed once; ``probed`` is updated).
+
+    A strength can be flat in a bond strength over a range and follow it beyond (a UCS limited by tension does not
+    move with ``tau_c`` until ``tau_c`` falls far enough for the bonds to fail in shear): the Gauss-Newton step sees
+    only the flat part and stops; the probe reaches past it, and the plane through the sets then bridges the two.
+    """
+    for j, k in enumerate(tied):
+        if j not in probed and np.max(np.abs(J[:, j])) < 0.05 and abs(np.expm1(r[k])) > tol:
+            probed.add(j)
+            dx = np.zeros(J.shape[1])
+            dx[j] = -np.sign(r[k]) * np.log(2.0)
+            return dx
+    return None
 
 
 def _fitted_jacobian(seen, J):

@@ -172,6 +172,22 @@ def test_fitted_jacobian_is_the_plane_through_the_sets_seen():
     assert -0.7 < x[1] < sets[0][1] - 0.1 and abs(x[0]) < 0.05, (J, x)
 
 
+def test_probe_step_reaches_past_a_flat_part():
+    """A bond strength the strengths barely follow, with its tied target missed, is probed once by a factor 2 in
+    the direction the target asks for; a followed one, a met target or a second time: no probe."""
+    from jaxbpm.calibrate.lab import _probe_step
+
+    J = np.array([[1.0, 0.01], [0.9, 0.02]])  # flexural and UCS against (log sigma_c, log tau_c)
+    tied = [0, 1]  # sigma_c to the flexural strength, tau_c to the UCS
+    probed = set()
+    dx = _probe_step(J, np.log1p(np.array([-0.06, 0.10])), tied, probed, 0.05)
+    np.testing.assert_allclose(dx, [0.0, -np.log(2.0)])  # the UCS 10 % high: tau_c halved
+    assert probed == {1} and _probe_step(J, np.log1p(np.array([-0.06, 0.10])), tied, probed, 0.05) is None
+    assert _probe_step(J, np.log1p(np.array([-0.06, 0.03])), tied, set(), 0.05) is None  # the UCS within tol
+    dx = _probe_step(J, np.log1p(np.array([-0.06, -0.2])), tied, set(), 0.05)
+    np.testing.assert_allclose(dx, [0.0, np.log(2.0)])  # the UCS low: tau_c doubled
+
+
 def test_conventions_of_a_2d_sample():
     """A 2D sample's answer in other codes: LAMMPS (dimension 2) from the 2 r_b x t rectangle (A = 2 r_b t,
     I = (2 r_b)^3 t / 12), PFC2D's per-area values, and no numbers for the codes without a 2D form."""
