@@ -274,6 +274,8 @@ def main(argv=None):
                     help="the beam is loaded this many times slower (its strength still moves at 30 transits)")
     ap.add_argument("--learning-rate", type=float, default=0.01, dest="learning_rate", help="Adam's (the paper's)")
     ap.add_argument("--tol", type=float, default=0.05)
+    ap.add_argument("--max-iterations", type=int, default=None, dest="budget",
+                    help="every scheme's max_iterations (default: original 3, simplified 5, lab 6)")
     ap.add_argument("--schemes", nargs="*", default=["original", "simplified", "lab"],
                     choices=["original", "simplified", "lab"], help="Qu et al.'s two schemes, and jaxbpm's own (the "
                     "strength stage of calibrate.lab: Gauss-Newton steps)")
@@ -286,6 +288,8 @@ def main(argv=None):
     if args.quick:
         args.ucs_n, args.tpb_n = PAPER_COUNTS["ucs"] // 10, PAPER_COUNTS["tpb"] // 10
     args.max_iterations = {"original": 3, "simplified": 5, "lab": 6}
+    if args.budget is not None:
+        args.max_iterations = dict.fromkeys(args.max_iterations, args.budget)
     out_path = args.out or f"results/seed_case_qu2020_2d{'_quick' if args.quick else ''}_{'_'.join(args.parts)}.json"
     enable_x64()
     t0 = time.perf_counter()
