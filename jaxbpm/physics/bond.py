@@ -373,7 +373,10 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
     q_t = _disc_turns(orientations, positions.shape[1])
     rows, out, intact, mode, aux = _bond_pass(x_t, q_t, bonds[:, 0], bonds[:, 1], r0, k, intact, strength, rule,
                                               extra, lambda a: a)
-    total = jax.ops.segment_sum(rows, jnp.concatenate([bonds[:, 0], bonds[:, 1]]), positions.shape[0])
+    ends = jnp.concatenate([bonds[:, 0], bonds[:, 1]])
+    total = jax.ops.segment_sum(rows[0], ends, positions.shape[0])
+    for more in rows[1:]:
+        total = total.at[ends].add(more)
     result = _split(total) + (stack(out), intact, mode)
     return result if extra is None else result + (aux,)
 
@@ -415,10 +418,12 @@ def _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take):
         # own copy of the law (the 2D bond pass ran 2.6x slower with a mask than without)
         total = jnp.where(jnp.concatenate([intact, intact])[:, None], total, 0.0)
         out = jax.tree_util.tree_map(lambda a: _mask(a, intact), out)
-    aux = None
+    aux, total = None, (total,)
     if extra is not None:
+        # extra's rows scattered on their own: added to the bond's rows before the scatter, XLA fused both laws
+        # into the one loop that writes the rows, computing them again for each of the 16 columns of a bond
         e_f, e_mi, e_mj, aux = extra(i, j, tuple(d), take)
-        total = total + rows(e_f, e_mi, e_mj)
+        total = total + (rows(e_f, e_mi, e_mj),)
     return total, out, intact, mode, aux
 
 
@@ -441,8 +446,9 @@ def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extr
         i, j = pair[:, 0], pair[:, 1]
         rows, _, new_intact, mode, aux = _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take)
         fresh = start + jnp.arange(block) >= b * block
-        rows = jnp.where(jnp.concatenate([fresh, fresh])[:, None], rows, 0.0)
-        total = total.at[jnp.concatenate([i, j])].add(rows)
+        ends = jnp.concatenate([i, j])
+        for part in rows:
+            total = total.at[ends].add(jnp.where(jnp.concatenate([fresh, fresh])[:, None], part, 0.0))
         put = functools.partial(jax.lax.dynamic_update_slice_in_dim, start_index=start, axis=0)
         per_bond = jax.tree_util.tree_map(lambda whole, part: put(whole, part), per_bond, (new_intact, mode, aux))
         return total, per_bond
