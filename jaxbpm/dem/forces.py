@@ -15,8 +15,8 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from jaxbpm.dem.neighbors import (_contact_pairs, _Near, _remap_springs, near_build, near_springs, near_stale,
-                                  pack)
+from jaxbpm.dem.neighbors import (_contact_pairs, _Near, _remap_springs, near_apart, near_build, near_springs,
+                                  near_stale, pack)
 from jaxbpm.dem.state import DEMState
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics.loading import Loading
@@ -123,7 +123,9 @@ def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMSta
         spring = near_springs(near, capacity)
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, spring, new.nbrs.idx.T, model.n),
                               lambda: spring)
-        found = near_build(model, new.positions, new.nbrs, spring, margin, near.slot.shape[0])
+        # the candidates that are not bonded pairs: the same as before unless the candidate list was built again
+        apart = jax.lax.cond(rebuilt, lambda: near_apart(model, new.nbrs), lambda: near.apart)
+        found = near_build(model, new.positions, new.nbrs, spring, margin, near.slot.shape[0], apart)
         return found._replace(overflow=found.overflow | near.overflow, count=jnp.maximum(found.count, near.count),
                               found=near.found + 1)
 
