@@ -167,9 +167,12 @@ def _remap_springs(old_pairs, old_spring, new_pairs, n):
     return jnp.where(found[:, None], old_spring[take], 0.0)
 
 
+@functools.partial(jax.jit, static_argnames=("n",))
 def _remap_history(old_pairs, new_pairs, n, spring, cohesion):
     """Carry the per-contact state (springs and, with the cohesive law, the cohesion history) across a rebuild; a
-    pair new to the list starts with an empty spring and zero cohesion (a new contact)."""
+    pair new to the list starts with an empty spring and zero cohesion (a new contact). One compiled program (the
+    run calls it between chunks at every rebuild of a host-built list: op by op, it compiled some twenty programs
+    in the first run and dispatched them one by one after)."""
     take, found = _remap_index(old_pairs, new_pairs, n)
     spring = jnp.where(found[:, None], spring[take], 0.0)
     return spring, (None if cohesion is None else jnp.where(found, cohesion[take], 0.0))
