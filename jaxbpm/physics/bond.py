@@ -355,9 +355,9 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
         rule: the failure rule (see :func:`bond_failure`).
         extra: ``None``, or a function ``extra(i, j, d, take)`` of the bonds' particle indices ``i, j`` and vectors
             ``d = x_j - x_i`` (an ``(x, y, z)`` tuple) returning ``(f_i, m_i, m_j, aux)``: more forces and moments
-            on the same pairs (component tuples; the contact law of the bonded pairs), added to the bonds' before the
-            one scatter to the particles (whatever the bond's state); ``take(a)`` gives the rows of a per-bond array
-            ``[nb, ...]`` that ``i, j, d`` are for.
+            on the same pairs (component tuples; the contact law of the bonded pairs), computed in the same pass and
+            scattered to the particles after the bonds' (whatever the bond's state); ``take(a)`` gives the rows of a
+            per-bond array ``[nb, ...]`` that ``i, j, d`` are for.
         block: ``None`` (one pass over all bonds), or pass over the bonds in blocks of this many: the same forces to
             round-off with less memory traffic on large samples; the per-bond forces are then ``None``.
 
