@@ -441,7 +441,15 @@ def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extr
     def run(b, carry):
         total, per_bond = carry
         start = jnp.minimum(b * block, nb - block)
-        take = _taker(nb, lambda a: jax.lax.dynamic_slice_in_dim(a, start, block))
+        # the block's per-bond floats divided by a run-time one, so that XLA slices each once: left to its
+        # consumers, the slice (and the break test) was computed again for every column of the block's rows
+        one = (start + 1) / (start + 1)
+
+        def piece(a):
+            a = jax.lax.dynamic_slice_in_dim(a, start, block)
+            return a / one.astype(a.dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a
+
+        take = _taker(nb, piece)
         pair = take(bonds)
         i, j = pair[:, 0], pair[:, 1]
         rows, _, new_intact, mode, aux = _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take)
