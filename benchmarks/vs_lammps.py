@@ -1025,6 +1025,27 @@ def _curve_summary(strain, stress, broken=None, points: int = 200) -> dict:
     return out
 
 
+def _timed_solve(jaxbpm, sample, scene, args):
+    """jaxbpm's run of the contact scene and its marks after each chunk: (steps done, elapsed, CPU time, seconds
+    spent compiling so far)."""
+    marks = []
+    with jaxbpm.count_compilations() as clock:
+        r = jaxbpm.solve(sample, scene, "dem", transits=args.ucs_transits, damping=args.damping, safety=args.safety,
+                         progress=lambda done, total, el: marks.append((done, el, time.process_time(),
+                                                                        clock.seconds)))
+    return r, marks
+
+
+def _cpu_rate(marks) -> float | None:
+    """Steps per CPU second over the chunks after the first that compiled nothing (a program compiled between two
+    marks, e.g. at the first rebuild of the candidate list, leaves that stretch out), or ``None`` without any."""
+    steps = cpu = 0.0
+    for (d0, _, c0, k0), (d1, _, c1, k1) in zip(marks, marks[1:]):
+        if k1 == k0:
+            steps, cpu = steps + d1 - d0, cpu + c1 - c0
+    return steps / cpu if cpu > 0 else None
+
+
 def _ucs_scene(args) -> int:
     """Uniaxial compression to failure of a bonded cylinder with Hertz-Mindlin contacts, both codes."""
     t_start = time.perf_counter()
@@ -1074,15 +1095,12 @@ def _ucs_scene(args) -> int:
           f"core {cpu}", file=sys.stderr, flush=True)
 
     # ---------------------------------------------------------------- jaxbpm
-    marks = []
-    r = jaxbpm.solve(sample, scene, "dem", transits=args.ucs_transits, damping=args.damping, safety=args.safety,
-                     progress=lambda done, total, el: marks.append((done, el, time.process_time())))
+    r, marks = _timed_solve(jaxbpm, sample, scene, args)
     st = r.stats
     steps, dt, speed = int(st["steps"]), float(st["dt"]), float(st["speed"])
-    chunk_sps = [(d1 - d0) / (t1 - t0) for (d0, t0, _), (d1, t1, _) in zip(marks, marks[1:])]
-    # CPU time of this process over the chunks after the first (no compilation): the least noisy rate
-    jx_cpu = ((marks[-1][0] - marks[0][0]) / (marks[-1][2] - marks[0][2]) if len(marks) > 1
-              else float(st["steps_per_second"]))
+    chunk_sps = [(d1 - d0) / (t1 - t0) for (d0, t0, *_), (d1, t1, *_) in zip(marks, marks[1:])]
+    # CPU time of this process over the chunks after the first that compiled nothing: the least noisy rate
+    jx_cpu = _cpu_rate(marks) or float(st["steps_per_second"])
     jx_strain = np.asarray(r.displacement) / length
     jx_stress = np.asarray(r.force) / area
     jx_broken = np.asarray(st["broken_curve"]).sum(axis=1)
@@ -1105,16 +1123,18 @@ def _ucs_scene(args) -> int:
           f"{r.compile_time:.2f} s, wall {r.wall_time:.2f} s", file=sys.stderr, flush=True)
 
     if args.ucs_bonds_only:  # the same run without contacts: what the contacts cost
-        rb = jaxbpm.solve(sample, dataclasses.replace(scene, contacts=False), "dem", transits=args.ucs_transits,
-                          damping=args.damping, safety=args.safety)
+        rb, marks_b = _timed_solve(jaxbpm, sample, dataclasses.replace(scene, contacts=False), args)
         sps_b = float(rb.stats["steps_per_second"])
+        cpu_b = _cpu_rate(marks_b) or sps_b
         jx["bonds_only"] = {"steps": int(rb.stats["steps"]), "run_time": rb.run_time, "wall_time": rb.wall_time,
                             "compile_time": rb.compile_time, "steps_per_second": sps_b,
-                            "bond_steps_per_second": sps_b * nb, "ucs": float(rb.stats["strength"]),
-                            "contacts_over_bonds_only": jx["steps_per_second"] / sps_b}
+                            "bond_steps_per_second": sps_b * nb, "steps_per_second_cpu": cpu_b,
+                            "ucs": float(rb.stats["strength"]),
+                            "contacts_over_bonds_only": jx["steps_per_second"] / sps_b,
+                            "contacts_over_bonds_only_cpu": jx_cpu / cpu_b}
         print(f"  jaxbpm bonds only: {rb.stats['steps']} steps, UCS = {rb.stats['strength']:.5g} Pa; run "
               f"{rb.run_time:.2f} s; with contacts at {100 * jx['steps_per_second'] / sps_b:.0f} % of its "
-              f"bond-steps/s", file=sys.stderr, flush=True)
+              f"bond-steps/s ({100 * jx_cpu / cpu_b:.0f} % by CPU time)", file=sys.stderr, flush=True)
 
     # ---------------------------------------------------------------- LAMMPS
     lm = None
@@ -1194,7 +1214,8 @@ def _ucs_scene(args) -> int:
                      "threads": 1, "cpu": cpu, "xla_flags": os.environ.get("XLA_FLAGS", ""),
                      "throughput": "steps/s: median over jitted chunks (jaxbpm, compilation excluded) or over ~20 "
                                    "'run N pre no post no' segments (LAMMPS); CPU time: steps over the process's "
-                                   "CPU seconds (jaxbpm: chunks after the first; LAMMPS: all segments), the least "
+                                   "CPU seconds (jaxbpm: chunks after the first that compiled nothing; LAMMPS: all "
+                                   "segments), the least "
                                    "noisy on a loaded machine; bond-steps/s with the initial bond count"},
         "jaxbpm": {"version": getattr(jaxbpm, "__version__", "?"), "jax": jax.__version__, "git": _git_state(), **jx},
         "lammps": None if lm is None else {

@@ -311,7 +311,7 @@ def _forces_at(model, params, x, q, bond_spring, pairs):
     sliding = active = jnp.zeros((), jnp.int32)
     on = None
     if model.contacts:
-        def still(i, j, d):
+        def still(i, j, d, *radii):
             zero = (jnp.zeros_like(d[0]),) * 3
             return zero, zero
 

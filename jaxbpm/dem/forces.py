@@ -1,8 +1,9 @@
 """The forces of a DEM step: the Model's forces at a state, with the contact law on the pairs that need it.
 
 Contacts: the candidate list (:mod:`jaxbpm.dem.neighbors`) gives the candidate pairs. The bonded pairs have their
-contact law evaluated on the bond list, in one pass with the bond law and one scatter to the particles (superimposed on
-every bonded pair, or on broken bonds only where bonds replace contacts; springs by bond: ``DEMState.bond_spring``).
+contact law evaluated on the bond list, in one pass with the bond law, their rows scattered to the particles after the
+bonds' (superimposed on every bonded pair, or on broken bonds only where bonds replace contacts; springs by bond:
+``DEMState.bond_spring``).
 The other pairs within reach (surfaces closer than a margin, :class:`jaxbpm.dem.neighbors._Near`) are found again when
 a particle has moved half that margin, and each step runs the contact law on those only. Without pairs within reach
 (the cohesive law), each step packs the touching candidates into a third of the list when they fit there.
@@ -15,8 +16,8 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
-from jaxbpm.dem.neighbors import (_contact_pairs, _Near, _remap_springs, near_build, near_springs, near_stale,
-                                  pack)
+from jaxbpm.dem.neighbors import (_contact_pairs, _Near, _remap_springs, near_apart, near_build, near_springs,
+                                  near_stale, pack)
 from jaxbpm.dem.state import DEMState
 from jaxbpm.physics import contact as contact_mod
 from jaxbpm.physics.loading import Loading
@@ -95,7 +96,7 @@ def _near_forces(model: Model, params, load: Loading, state: DEMState, pairs, va
     on ``pairs`` (skipped in a step where none is within reach). Returns the same and the bonded pairs' new
     springs."""
     on = jnp.ones_like(state.intact) if model.bond_contact != "replace" else ~state.intact
-    bonded = (state.bond_spring, lambda i, j, d: _motion(model, state, i, j, d, dt), on)
+    bonded = (state.bond_spring, lambda i, j, d, r_i, r_j: _motion(model, state, i, j, d, dt, r_i, r_j), on)
     force, moment, parts = _forces(model, params, state, load, None, bonded)
 
     def others():
@@ -112,9 +113,9 @@ def _near_forces(model: Model, params, load: Loading, state: DEMState, pairs, va
 
 def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMState, near: _Near, rebuilt, dt,
                margin):
-    """The contact law on the bonded pairs (on the bond list, with the bond law: one pass, one scatter) and on the
-    other pairs within reach (:class:`jaxbpm.dem.neighbors._Near`), found again when stale (the candidate list was
-    rebuilt, a particle moved more than ``margin / 2``). Returns the step's forces, moments, wall reactions, intact
+    """The contact law on the bonded pairs (on the bond list, in the bond law's pass) and on the other pairs
+    within reach (:class:`jaxbpm.dem.neighbors._Near`), found again when stale (the candidate list was rebuilt, a
+    particle moved more than ``margin / 2``). Returns the step's forces, moments, wall reactions, intact
     mask and break modes, the pairs within reach (their ``overflow`` set when they did not fit their slots: the chunk
     is then run again with more) and the bonded pairs' new springs."""
     capacity = new.nbrs.idx.shape[1]
@@ -123,7 +124,9 @@ def _near_step(model: Model, params, load: Loading, state: DEMState, new: DEMSta
         spring = near_springs(near, capacity)
         spring = jax.lax.cond(rebuilt, lambda: _remap_springs(state.nbrs.idx.T, spring, new.nbrs.idx.T, model.n),
                               lambda: spring)
-        found = near_build(model, new.positions, new.nbrs, spring, margin, near.slot.shape[0])
+        # the candidates that are not bonded pairs: the same as before unless the candidate list was built again
+        apart = jax.lax.cond(rebuilt, lambda: near_apart(model, new.nbrs), lambda: near.apart)
+        found = near_build(model, new.positions, new.nbrs, spring, margin, near.slot.shape[0], apart)
         return found._replace(overflow=found.overflow | near.overflow, count=jnp.maximum(found.count, near.count),
                               found=near.found + 1)
 
@@ -189,11 +192,13 @@ def _length(d):
     return jnp.sqrt(sum(c * c for c in d))
 
 
-def _motion(model: Model, state: DEMState, i, j, d, dt):
-    """:func:`_contact_motion` of the pairs ``i, j`` whose vectors are ``d`` (``|d| > 0``); discs (two components,
-    one rotation each): ``v_rel = v_j - v_i - (r_j w_j + r_i w_i) (-n_y, n_x)``."""
+def _motion(model: Model, state: DEMState, i, j, d, dt, r_i=None, r_j=None):
+    """:func:`_contact_motion` of the pairs ``i, j`` whose vectors are ``d`` (``|d| > 0``) and radii ``r_i, r_j``
+    (``None``: gathered here); discs (two components, one rotation each): ``v_rel = v_j - v_i - (r_j w_j + r_i w_i)
+    (-n_y, n_x)``."""
     dist = _length(d)
-    v_t, w_t, r_i, r_j = state.velocities.T, state.omegas.T, model.radii[i], model.radii[j]
+    v_t, w_t = state.velocities.T, state.omegas.T
+    r_i, r_j = (model.radii[i], model.radii[j]) if r_i is None else (r_i, r_j)
     s = tuple(r_j * w_t[k][j] + r_i * w_t[k][i] for k in range(w_t.shape[0]))
     if len(d) == 2:
         spin = (-s[0] * d[1], s[0] * d[0])

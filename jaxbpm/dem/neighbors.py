@@ -167,9 +167,12 @@ def _remap_springs(old_pairs, old_spring, new_pairs, n):
     return jnp.where(found[:, None], old_spring[take], 0.0)
 
 
+@functools.partial(jax.jit, static_argnames=("n",))
 def _remap_history(old_pairs, new_pairs, n, spring, cohesion):
     """Carry the per-contact state (springs and, with the cohesive law, the cohesion history) across a rebuild; a
-    pair new to the list starts with an empty spring and zero cohesion (a new contact)."""
+    pair new to the list starts with an empty spring and zero cohesion (a new contact). One compiled program (the
+    run calls it between chunks at every rebuild of a host-built list: op by op, it compiled some twenty programs
+    in the first run and dispatched them one by one after)."""
     take, found = _remap_index(old_pairs, new_pairs, n)
     spring = jnp.where(found[:, None], spring[take], 0.0)
     return spring, (None if cohesion is None else jnp.where(found, cohesion[take], 0.0))
@@ -198,7 +201,9 @@ class _Near(NamedTuple):
     ``pairs [S, 2]`` (padding: ``n``), ``slot [S]`` (their index in the candidate list; padding: its capacity),
     ``spring [S, 3]`` (their tangential springs), ``ref [n, 3]`` (positions when built), ``overflow`` (more pairs
     within reach than ``S``: the run needs more slots), ``count`` (the most pairs within reach found so far),
-    ``found`` (how often they were found: passes over the candidate list)."""
+    ``found`` (how often they were found: passes over the candidate list), ``apart [C]`` (the candidates that are
+    not padding and not bonded pairs: the same until the candidate list is built again, so that finding the pairs
+    again does not search the bonds)."""
 
     pairs: jnp.ndarray
     slot: jnp.ndarray
@@ -207,6 +212,7 @@ class _Near(NamedTuple):
     overflow: jnp.ndarray
     count: jnp.ndarray
     found: jnp.ndarray
+    apart: jnp.ndarray
 
 
 def near_size(count: int, capacity: int) -> int:
@@ -267,7 +273,7 @@ def pack(mask, size: int):
     return take, slot[-1] + 1
 
 
-def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Near:
+def near_build(model: Model, positions, nbrs, spring, margin, size: int, apart=None) -> _Near:
     """Find the pairs within reach.
 
     Args:
@@ -277,6 +283,8 @@ def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Nea
       spring: ``[C, 3]`` the springs in the candidate list's layout.
       margin: [m] the reach.
       size: the slots.
+      apart: ``[C]`` bool, the candidates that are neither padding nor bonded pairs (``_Near.apart`` of the same
+        candidate list), or ``None``: found here (a search of the bonds for every candidate).
 
     Returns:
       The candidate pairs that are not bonded pairs within ``margin`` of touching, with their springs
@@ -285,14 +293,28 @@ def near_build(model: Model, positions, nbrs, spring, margin, size: int) -> _Nea
     from jaxbpm.physics.contact import pair_vectors
 
     pairs = nbrs.idx.T
-    valid = pairs[:, 0] < model.n
-    valid = valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0))
+    valid = near_apart(model, nbrs) if apart is None else apart
     i, j, d = pair_vectors(positions, pairs, valid)
     close = valid & (model.radii[i] + model.radii[j] + margin - jnp.sqrt(sum(c * c for c in d)) > 0)
     take, count = pack(close, size)
     return _Near(pairs=pairs.at[take].get(mode="fill", fill_value=model.n), slot=take,
                  spring=spring.at[take].get(mode="fill", fill_value=0.0), ref=positions, overflow=count > size,
-                 count=count, found=jnp.ones((), jnp.int32))
+                 count=count, found=jnp.ones((), jnp.int32), apart=valid)
+
+
+def near_apart(model: Model, nbrs):
+    """The candidates that are neither padding nor bonded pairs.
+
+    Args:
+      model: the run's model (its bonds).
+      nbrs: the candidate list.
+
+    Returns:
+      ``[C]`` bool.
+    """
+    pairs = nbrs.idx.T
+    valid = pairs[:, 0] < model.n
+    return valid & ~model.bonded(jnp.where(valid[:, None], pairs, 0))
 
 
 def near_springs(near: _Near, capacity: int):

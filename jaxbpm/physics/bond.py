@@ -355,9 +355,9 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
         rule: the failure rule (see :func:`bond_failure`).
         extra: ``None``, or a function ``extra(i, j, d, take)`` of the bonds' particle indices ``i, j`` and vectors
             ``d = x_j - x_i`` (an ``(x, y, z)`` tuple) returning ``(f_i, m_i, m_j, aux)``: more forces and moments
-            on the same pairs (component tuples; the contact law of the bonded pairs), added to the bonds' before the
-            one scatter to the particles (whatever the bond's state); ``take(a)`` gives the rows of a per-bond array
-            ``[nb, ...]`` that ``i, j, d`` are for.
+            on the same pairs (component tuples; the contact law of the bonded pairs), computed in the same pass and
+            scattered to the particles after the bonds' (whatever the bond's state); ``take(a)`` gives the rows of a
+            per-bond array ``[nb, ...]`` that ``i, j, d`` are for.
         block: ``None`` (one pass over all bonds), or pass over the bonds in blocks of this many: the same forces to
             round-off with less memory traffic on large samples; the per-bond forces are then ``None``.
 
@@ -373,7 +373,10 @@ def bond_forces_breaking(positions, orientations, bonds, r0, k: BondStiffness, i
     q_t = _disc_turns(orientations, positions.shape[1])
     rows, out, intact, mode, aux = _bond_pass(x_t, q_t, bonds[:, 0], bonds[:, 1], r0, k, intact, strength, rule,
                                               extra, lambda a: a)
-    total = jax.ops.segment_sum(rows, jnp.concatenate([bonds[:, 0], bonds[:, 1]]), positions.shape[0])
+    ends = jnp.concatenate([bonds[:, 0], bonds[:, 1]])
+    total = jax.ops.segment_sum(rows[0], ends, positions.shape[0])
+    for more in rows[1:]:
+        total = total.at[ends].add(more)
     result = _split(total) + (stack(out), intact, mode)
     return result if extra is None else result + (aux,)
 
@@ -415,10 +418,12 @@ def _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take):
         # own copy of the law (the 2D bond pass ran 2.6x slower with a mask than without)
         total = jnp.where(jnp.concatenate([intact, intact])[:, None], total, 0.0)
         out = jax.tree_util.tree_map(lambda a: _mask(a, intact), out)
-    aux = None
+    aux, total = None, (total,)
     if extra is not None:
+        # extra's rows scattered on their own: added to the bond's rows before the scatter, XLA fused both laws
+        # into the one loop that writes the rows, computing them again for each of the 16 columns of a bond
         e_f, e_mi, e_mj, aux = extra(i, j, tuple(d), take)
-        total = total + rows(e_f, e_mi, e_mj)
+        total = total + (rows(e_f, e_mi, e_mj),)
     return total, out, intact, mode, aux
 
 
@@ -436,13 +441,22 @@ def _blocked(positions, orientations, bonds, r0, k, intact, strength, rule, extr
     def run(b, carry):
         total, per_bond = carry
         start = jnp.minimum(b * block, nb - block)
-        take = _taker(nb, lambda a: jax.lax.dynamic_slice_in_dim(a, start, block))
+        # the block's per-bond floats divided by a run-time one, so that XLA slices each once: left to its
+        # consumers, the slice (and the break test) was computed again for every column of the block's rows
+        one = (start + 1) / (start + 1)
+
+        def piece(a):
+            a = jax.lax.dynamic_slice_in_dim(a, start, block)
+            return a / one.astype(a.dtype) if jnp.issubdtype(a.dtype, jnp.floating) else a
+
+        take = _taker(nb, piece)
         pair = take(bonds)
         i, j = pair[:, 0], pair[:, 1]
         rows, _, new_intact, mode, aux = _bond_pass(x_t, q_t, i, j, r0, k, intact, strength, rule, extra, take)
         fresh = start + jnp.arange(block) >= b * block
-        rows = jnp.where(jnp.concatenate([fresh, fresh])[:, None], rows, 0.0)
-        total = total.at[jnp.concatenate([i, j])].add(rows)
+        ends = jnp.concatenate([i, j])
+        for part in rows:
+            total = total.at[ends].add(jnp.where(jnp.concatenate([fresh, fresh])[:, None], part, 0.0))
         put = functools.partial(jax.lax.dynamic_update_slice_in_dim, start_index=start, axis=0)
         per_bond = jax.tree_util.tree_map(lambda whole, part: put(whole, part), per_bond, (new_intact, mode, aux))
         return total, per_bond

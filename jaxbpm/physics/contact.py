@@ -185,13 +185,15 @@ def law_components(d, r_i, r_j, m_i, m_j, spring, dxi, v_rel, p: ContactParams, 
     ft_len = safe_sqrt(dot(ft_j, ft_j))
     limit = p.friction * fn
     sliding = (ft_len > limit) & active
-    # scale by limit / |ft| when sliding, by 1 when sticking, by 0 out of contact, in one division per component
-    num = jnp.where(active, jnp.where(sliding, limit, 1.0), 0.0)
-    den = jnp.where(sliding, ft_len, 1.0)
-    ft_j = tuple(c * num / den for c in ft_j)
-    # a sliding spring is shortened to match the Coulomb force: -ft_j / kt
-    back = jnp.where(sliding, kt, 1.0)
-    xi = tuple(jnp.where(sliding, -ft_j[k], jnp.where(active, xi[k], 0.0)) / back for k in range(3))
+    # scale by limit / |ft| when sliding, by 1 when sticking, by 0 out of contact (one division, computed once)
+    scale = jnp.where(active, jnp.where(sliding, limit, 1.0), 0.0) / jnp.where(sliding, ft_len, 1.0)
+    ft_j = tuple(c * scale for c in ft_j)
+    # a sliding spring is shortened to match the Coulomb force, -ft_j / kt: without damping that is xi scaled alike
+    if p.beta is None:
+        xi = tuple(once(c * scale, one) for c in xi)
+    else:
+        back = jnp.where(sliding, kt, 1.0)
+        xi = tuple(jnp.where(sliding, -ft_j[k], jnp.where(active, xi[k], 0.0)) / back for k in range(3))
 
     f_i = tuple(-fn * n[k] - ft_j[k] for k in range(3))
     # moments (r_i - delta/2) n x (-ft_j) on i and -(r_j - delta/2) n x ft_j on j

@@ -237,7 +237,8 @@ class Model:
         return c._replace(E_star=e / (2.0 * (1.0 - nu ** 2)), G_star=g / (2.0 * (2.0 - nu)))
 
     def precompute(self, params) -> dict:
-        """Per-bond stiffnesses and strengths (and the contact laws' scalars) computed once.
+        """Per-bond stiffnesses and strengths (and the contact laws' scalars, and with Hertz or linear contacts the
+        bonded pairs' radii) computed once.
 
         Args:
             params: the parameter dict.
@@ -249,6 +250,8 @@ class Model:
                "_contact": self.hertz_params(params)}
         if self.contact_law == "cohesive":
             out["_cohesive"] = self.cohesive_params(params)
+        elif self.contacts:
+            out["_bond_radii"] = self.radii[self.bonds.T]  # [2, nb]: the bonded pairs' radii, read in order
         return out
 
     def bonded(self, pairs, intact=None):
@@ -287,10 +290,10 @@ class Model:
             wall_points: ``[W, 3]`` when the model has walls.
             wall_normals: ``[W, 3]`` when the model has walls.
             bond_contacts: ``None`` or ``(spring [nb, 3], motion, valid [nb])``: the Hertz-Mindlin law also on the
-                bonded pairs (``valid``: where it applies), evaluated with the bond law and summed with it before the
-                scatter to the particles (the DEM's contacts of bonded pairs); ``motion(i, j, d)`` gives the pairs'
-                ``(dxi, v_rel)`` from their particle indices and vectors ``d = x_j - x_i`` (component tuples);
-                ``contacts`` then hold the other pairs.
+                bonded pairs (``valid``: where it applies), evaluated in the bond law's pass over the bonds (their
+                rows scattered to the particles after the bond law's; the DEM's contacts of bonded pairs);
+                ``motion(i, j, d, r_i, r_j)`` gives the pairs' ``(dxi, v_rel)`` from their particle indices, vectors
+                ``d = x_j - x_i`` (component tuples) and radii; ``contacts`` then hold the other pairs.
             block: pass over the bonds in blocks of this many (see :func:`jaxbpm.physics.bond.bond_forces_breaking`;
                 ``parts["bonds"]`` is then ``None``).
 
@@ -332,10 +335,12 @@ class Model:
         """The ``extra`` of :func:`jaxbpm.physics.bond.bond_forces_breaking`: the Hertz-Mindlin law on the bonded
         pairs (their new springs as aux)."""
         p = self.hertz_params(params)
+        radii = params.get("_bond_radii") if isinstance(params, dict) else None
 
         def law(i, j, d, take):
-            dxi, v_rel = motion(i, j, d)
-            cf = contact_mod.law_components(d, self.radii[i], self.radii[j], self.mass[i], self.mass[j],
+            r_i, r_j = (self.radii[i], self.radii[j]) if radii is None else (take(radii[0]), take(radii[1]))
+            dxi, v_rel = motion(i, j, d, r_i, r_j)
+            cf = contact_mod.law_components(d, r_i, r_j, self.mass[i], self.mass[j],
                                             contact_mod._components(take(spring)), dxi, v_rel, p, take(valid))
             return cf.f_i, cf.m_i, cf.m_j, cf.spring
 

@@ -96,3 +96,44 @@ def test_bond_pass_in_blocks_is_the_one_pass(rule):
     np.testing.assert_array_equal(in2, in1)
     np.testing.assert_array_equal(mode2, mode1)
     np.testing.assert_array_equal(aux2[0], aux1[0])
+
+
+@pytest.mark.parametrize("block", [None, 50])
+def test_extra_law_is_added_on_every_bond_whatever_its_state(block):
+    """The ``extra`` law's forces and moments (scattered apart from the bond law's) are the bond pass's without
+    ``extra`` plus their own sums per particle, on intact and broken bonds alike (summed in NumPy here)."""
+    s = jaxbpm.generate.box(200, seed=2, materials={"E": 1e9, "nu": 0.25, "tensile_strength": 1e6,
+                                                    "shear_strength": 1e6})
+    m = build_model(s, breakage=True)
+    params = default_params(s)
+    nb, n = m.bonds.shape[0], m.n
+    key = jax.random.PRNGKey(5)
+    x = m.positions0 + 0.01 * float(np.mean(s.radii)) * jax.random.normal(key, m.positions0.shape)
+    q = jax.vmap(lambda k: rotation.from_rotation_vector(0.01 * jax.random.normal(k, (3,))))(
+        jax.random.split(key, n))
+    intact = jnp.arange(nb) % 5 != 0
+    weight = jnp.linspace(1.0, 3.0, nb)
+
+    def extra(i, j, d, take):
+        w = take(weight)
+        f = tuple(w * c for c in d)
+        return f, tuple(0.25 * c for c in f), tuple(-0.5 * c for c in f[::-1]), ()
+
+    def run(law):
+        return bond.bond_forces_breaking(x, q, m.bonds, m.r0, m.stiffness(params), intact, m.strength(params),
+                                         "separate", law, block)
+
+    f0, m0, *_ = run(None)
+    f1, m1, _, in1, mode1, _ = run(extra)
+    b = np.asarray(m.bonds)
+    d = np.asarray(x)[b[:, 1]] - np.asarray(x)[b[:, 0]]
+    fe = np.asarray(weight)[:, None] * d
+    force, moment = np.array(f0), np.array(m0)
+    np.add.at(force, b[:, 0], fe)
+    np.add.at(force, b[:, 1], -fe)
+    np.add.at(moment, b[:, 0], 0.25 * fe)
+    np.add.at(moment, b[:, 1], -0.5 * fe[:, ::-1])
+    np.testing.assert_allclose(f1, force, rtol=0, atol=1e-12 * np.abs(force).max())
+    np.testing.assert_allclose(m1, moment, rtol=0, atol=1e-12 * np.abs(moment).max())
+    assert np.abs(f1 - f0).max() > 1e-3 * np.abs(f0).max()  # the extra forces are not negligible
+    assert int(jnp.sum(~in1)) >= nb // 5  # broken bonds among them

@@ -44,3 +44,30 @@ def test_mindlin_tangential_spring_and_coulomb_limit():
     out = contact.hertz_mindlin(d, R, R, 1.0, 1.0, zero, big, zero, p)
     np.testing.assert_allclose(jnp.linalg.norm(out.f_i[1:]), 0.5 * out.normal, rtol=1e-10)
     assert bool(out.sliding)
+
+
+def test_sliding_spring_without_damping_terms_equals_the_damped_law_at_zero_damping():
+    # the undamped law scales the spring with the force when a contact slides; the damped one computes -F_t / k_t:
+    # at zero damping both give the same forces and springs, and a sliding spring carries exactly mu F_n
+    rng = np.random.default_rng(3)
+    c = 64
+    d = np.array([2 * R, 0.0, 0.0]) + rng.normal(0.0, 2e-5, (c, 3))
+    spring = rng.normal(0.0, 3e-6, (c, 3))
+    spring[:8] = 0.0  # new contacts
+    dxi, v_rel = rng.normal(0.0, 1e-6, (c, 3)), rng.normal(0.0, 1e-2, (c, 3))
+    plain = contact.contact_params(1e9, 0.25, 0.4, 0.5)
+    damped = contact.contact_params(1e9, 0.25, 0.4, 0.5, damping=jnp.asarray(False))
+    assert plain.beta is None and float(damped.beta) == 0.0
+    args = [tuple(jnp.asarray(a.T)) for a in (d, spring, dxi, v_rel)]
+    a = contact.law_components(args[0], R, R, 1.0, 1.0, *args[1:], plain)
+    b = contact.law_components(args[0], R, R, 1.0, 1.0, *args[1:], damped)
+    a_f, b_f, a_s, b_s = (np.stack(v) for v in (a.f_i, b.f_i, a.spring, b.spring))
+    np.testing.assert_allclose(a_f, b_f, rtol=0, atol=1e-13 * np.abs(b_f).max())
+    np.testing.assert_allclose(a_s, b_s, rtol=0, atol=1e-13 * np.abs(b_s).max())
+    sliding, active = np.asarray(a.sliding), np.asarray(a.active)
+    assert sliding.sum() > 5 and (active & ~sliding).sum() > 5 and (~active).sum() > 5
+    delta = 2 * R - np.linalg.norm(d, axis=1)
+    kt = 8 * float(plain.G_star) * np.sqrt(R / 2 * np.maximum(delta, 0.0))
+    np.testing.assert_allclose((kt * np.linalg.norm(a_s, axis=0))[sliding], 0.4 * np.asarray(a.normal)[sliding],
+                               rtol=1e-12)
+    assert np.all(a_s[:, ~active] == 0.0)
