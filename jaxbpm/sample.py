@@ -449,8 +449,12 @@ class Sample:
         b = np.asarray(self.bonds)
         return np.bincount(b.ravel(), minlength=self.n_particles)
 
-    def clusters(self) -> np.ndarray:
+    def clusters(self, joined=None) -> np.ndarray:
         """The cluster label of each particle: particles joined by bonds share a label.
+
+        Args:
+          joined: ``[k, 2]`` more pairs of particle indices joined as by bonds (particles in contact, say), or
+            ``None``.
 
         Returns:
           ``[n]`` integer labels, 0 to the number of clusters - 1.
@@ -458,7 +462,9 @@ class Sample:
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
-        n, b = self.n_particles, np.asarray(self.bonds)
+        n, b = self.n_particles, np.asarray(self.bonds, np.int64).reshape(-1, 2)
+        if joined is not None:
+            b = np.concatenate([b, np.asarray(joined, np.int64).reshape(-1, 2)])
         graph = coo_matrix((np.ones(len(b)), (b[:, 0], b[:, 1])), shape=(n, n))
         return connected_components(graph, directed=False)[1]
 

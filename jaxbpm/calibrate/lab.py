@@ -429,13 +429,13 @@ def _strength_stage(samples, scene_of, targets, wanted, params, *, tol, max_iter
             if best[0] <= tol:
                 break
         # directions the strengths barely follow (singular values under 5 % of the largest) are left alone
-        dx = np.linalg.lstsq(J, -r, rcond=0.05)[0]
-        dx = length * np.clip(dx, -1.0, 1.0)  # at most a factor e per step, shortened after a step that did worse
+        newton = np.linalg.lstsq(J, -r, rcond=0.05)[0]
+        dx = length * np.clip(newton, -1.0, 1.0)  # at most a factor e per step, shortened after a step that did worse
         kind = "newton"
         if np.max(np.abs(dx)) < 0.01:
             dx = _probe_step(J, r, tied, probed, tol)
             if dx is None:
-                stalled = np.expm1(r + J @ np.linalg.lstsq(J, -r, rcond=0.05)[0])
+                stalled = np.expm1(r + J @ newton)
                 break
             kind = "probe"
         x_new = np.clip(x + dx, lo, hi)

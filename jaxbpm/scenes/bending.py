@@ -9,13 +9,12 @@ E = K S^3 / (48 I) and the flexural strength sigma_f = 3 F_peak S / (2 b h^2).
 
 from __future__ import annotations
 
-import collections
 import dataclasses
-import weakref
 from typing import Any
 
 import numpy as np
 
+from jaxbpm._compile import SetupCache
 from jaxbpm.errors import SceneError
 from jaxbpm.physics.cohesive import CohesiveLaw, resolve_contact_law
 from jaxbpm.physics.linear import LinearLaw
@@ -30,7 +29,7 @@ __all__ = ["ThreePointBending", "ROLLER_RADII"]
 #: the rollers' default radius, in mean particle radii
 ROLLER_RADII = 5.0
 
-_STAGED: collections.OrderedDict = collections.OrderedDict()  # (id(beam), scene) -> (weakref, staged, bound scene)
+_STAGED = SetupCache(maxsize=16)  # (beam, scene) -> (the beam with its rollers, the scene bound to it)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -265,20 +264,8 @@ class ThreePointBending(BaseScene):
             if sample.n_particles > self.beam_particles:
                 return sample, self
             return dataclasses.replace(self, beam_particles=None).stage(sample)
-        key = (id(sample), self)
-        try:
-            hit = _STAGED.get(key)
-        except TypeError:  # a field that cannot be hashed: no cache
-            key, hit = None, None
-        if hit is not None and hit[0]() is sample:
-            return hit[1], hit[2]
-        staged = _with_rollers(sample, self)
-        bound = dataclasses.replace(self, beam_particles=sample.n_particles)
-        if key is not None:
-            _STAGED[key] = (weakref.ref(sample), staged, bound)
-            while len(_STAGED) > 16:
-                _STAGED.popitem(last=False)
-        return staged, bound
+        return _STAGED.get(sample, self, lambda: (_with_rollers(sample, self),
+                                                  dataclasses.replace(self, beam_particles=sample.n_particles)))
 
     def _beam_extent(self, sample: Sample) -> tuple[np.ndarray, np.ndarray]:
         """The bounding box of the beam: the sample's, less the rollers of a bound scene."""
@@ -420,12 +407,8 @@ def _with_rollers(sample: Sample, scene: ThreePointBending) -> Sample:
                         for x, below in rows for wa, w in across])
     types = np.ones(sample.n_particles, np.int64) if sample.types is None else np.asarray(sample.types, np.int64)
     m = len(centres)
-    return Sample.from_arrays(np.vstack([pos, centres]), np.concatenate([rad, np.full(m, radius)]),
-                              np.asarray(sample.bonds), np.asarray(sample.bond_radius),
-                              bond_material=np.asarray(sample.bond_material), materials=sample.materials,
-                              particle_material=sample.particle_material, bond_contact=sample.bond_contact,
-                              domain=sample.domain, types=np.concatenate([types, np.full(m, types.max() + 1)]),
-                              wide_bonds=True, thickness=sample.thickness)
+    return sample.replace(positions=np.vstack([pos, centres]), radii=np.concatenate([rad, np.full(m, radius)]),
+                          types=np.concatenate([types, np.full(m, types.max() + 1)]), wide_bonds=True)
 
 
 def _touching(pos: np.ndarray, rad: np.ndarray, radius: float, axis: int, at: dict, below: bool) -> np.ndarray:

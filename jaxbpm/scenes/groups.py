@@ -424,23 +424,10 @@ def touching_pairs(sample: Sample, group: np.ndarray, tol: float | None = None) 
     return pairs[gap <= tol]
 
 
-def _labels(sample: Sample, touching) -> np.ndarray:
-    """The clusters of particles joined by bonds and by the ``touching`` pairs (``None``: by bonds alone)."""
-    if touching is None or not len(touching):
-        return sample.clusters()
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    edges = np.concatenate([np.asarray(sample.bonds, np.int64).reshape(-1, 2), np.asarray(touching, np.int64)])
-    n = sample.n_particles
-    return connected_components(coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n)),
-                                directed=False)[1]
-
-
 def _connection(sample: Sample, group: np.ndarray, other: np.ndarray, names: tuple[str, str], touching=None) -> None:
     """Raise where particles of ``group`` lie in clusters (of bonds, and of the ``touching`` pairs) that hold no
     particle of ``other``."""
-    labels = _labels(sample, touching)
+    labels = sample.clusters(touching)
     path = "bond path" if touching is None else "path of bonds or contacts"
     reaches = np.zeros(labels.max() + 1, bool)
     reaches[labels[other]] = True
